@@ -1,0 +1,3 @@
+"""A fast, PyTorch-native driving simulator and RL framework."""
+
+__version__ = "0.1.0"

@@ -1,0 +1,220 @@
+"""Turn a scenario's mission specs into arrays the step loop can use.
+
+A mission is resolved once per reset into: a start pose on its lane, a lane-level route, a dense route
+path (~1 m spacing) with the paths of the lanes left and right of it, and a goal test. The step loop
+then only gathers from these padded per-agent arrays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from smarts.maps import RoadMap, extend_route, project, route_polyline, shortest_route
+from smarts.maps.errors import MapError
+
+GOAL_NONE, GOAL_POSITION, GOAL_ROAD = 0, 1, 2
+ENDLESS_ROUTE_LENGTH = 2000.0  # metres of route planned ahead for missions without a goal
+
+
+@dataclass
+class ResolvedMission:
+    agent_id: str
+    start_lane: int
+    start_xy: np.ndarray  # float64[2]
+    start_heading: float
+    start_speed: float
+    route: np.ndarray  # int32 lane sequence
+    path_xy: np.ndarray  # float64[n, 2] along the route
+    path_heading: np.ndarray  # float64[n]
+    path_s: np.ndarray  # float64[n] arc length from the path start
+    path_lane: np.ndarray  # int32[n]
+    goal_kind: int
+    goal_xy: np.ndarray  # float64[2] (zeros when there is no goal)
+    goal_radius: float
+    goal_road: int  # -1 unless a road goal
+    goal_lane: int  # -1 for any lane of the goal road
+    goal_s: float  # road goals are reached at or past this offset on the goal lane
+
+
+def lane_pose_at(road_map: RoadMap, lane: int, s: float) -> tuple[np.ndarray, float]:
+    """Position and heading on a lane centre line at arc length ``s`` (clamped to the lane)."""
+    pts = road_map.lane_polyline(lane)
+    a, b = road_map.lane_point_offsets[lane], road_map.lane_point_offsets[lane + 1]
+    ps = road_map.point_s[a:b]
+    s = float(np.clip(s, 0.0, ps[-1]))
+    i = int(np.clip(np.searchsorted(ps, s, side="right") - 1, 0, len(ps) - 2))
+    seg = pts[i + 1] - pts[i]
+    seg_len = max(ps[i + 1] - ps[i], 1e-9)
+    xy = pts[i] + seg * ((s - ps[i]) / seg_len)
+    return xy, float(np.arctan2(seg[1], seg[0]))
+
+
+def _lane_of(road_map: RoadMap, road_id: str, lane_index: int, where: str) -> int:
+    try:
+        road = road_map.road(road_id)
+    except KeyError:
+        raise MapError(f"{where}: map {road_map.source!r} has no road {road_id!r}") from None
+    lanes = road_map.road_lanes(road)
+    if not 0 <= lane_index < len(lanes):
+        raise MapError(
+            f"{where}: road {road_id!r} has {len(lanes)} lane(s) (0..{len(lanes) - 1}), got {lane_index}"
+        )
+    return int(lanes[lane_index])
+
+
+def _best_route(road_map: RoadMap, start: int, candidates: np.ndarray, where: str) -> np.ndarray:
+    """Shortest route from ``start`` to any lane in ``candidates``."""
+    best, best_len = None, np.inf
+    errors = []
+    for lane in candidates:
+        try:
+            route = shortest_route(road_map, start, int(lane))
+        except MapError as err:
+            errors.append(str(err))
+            continue
+        length = float(road_map.lane_length[route].sum())
+        if length < best_len:
+            best, best_len = route, length
+    if best is None:
+        raise MapError(f"{where}: no route: {'; '.join(errors)}")
+    return best
+
+
+def resolve_mission(road_map: RoadMap, agent_id: str, mission, where: str) -> ResolvedMission:
+    """Resolve one agent's ``MissionSpec`` against the map; errors name ``where`` (the spec path)."""
+    start = mission.start
+    start_lane = _lane_of(road_map, start.road, start.lane, f"{where}.start")
+    lane_len = float(road_map.lane_length[start_lane])
+    if not 0.0 <= start.offset <= lane_len:
+        raise MapError(
+            f"{where}.start.offset: lane {road_map.lane_ids[start_lane]!r} is {lane_len:.1f} m long, "
+            f"got {start.offset}"
+        )
+    start_xy, heading = lane_pose_at(road_map, start_lane, start.offset)
+    if getattr(start, "heading", None) is not None:
+        heading = float(start.heading)
+
+    goal = mission.goal
+    goal_kind, goal_xy, goal_radius = GOAL_NONE, np.zeros(2), 0.0
+    goal_road, goal_lane, goal_s = -1, -1, 0.0
+    # Legs: start lane -> each via road -> goal.
+    legs_from = start_lane
+    route_parts: list[np.ndarray] = []
+    for k, via in enumerate(getattr(mission, "route_via", None) or []):
+        try:
+            via_road = road_map.road(via)
+        except KeyError:
+            raise MapError(f"{where}.route_via[{k}]: map has no road {via!r}") from None
+        leg = _best_route(road_map, legs_from, road_map.road_lanes(via_road), f"{where}.route_via[{k}]")
+        route_parts.append(leg if not route_parts else leg[1:])
+        legs_from = int(leg[-1])
+
+    if getattr(goal, "endless", False):
+        tail = extend_route(road_map, legs_from, ENDLESS_ROUTE_LENGTH)
+    elif getattr(goal, "position", None) is not None:
+        goal_kind = GOAL_POSITION
+        goal_xy = np.asarray(goal.position, dtype=np.float64)
+        goal_radius = float(goal.radius)
+        proj = project(road_map, goal_xy[None, :])
+        if proj.lane[0] < 0:
+            raise MapError(f"{where}.goal.position: {list(goal_xy)} is not near any lane")
+        tail = _best_route(road_map, legs_from, np.array([proj.lane[0]]), f"{where}.goal")
+    else:
+        goal_kind = GOAL_ROAD
+        try:
+            goal_road = road_map.road(goal.road)
+        except KeyError:
+            raise MapError(f"{where}.goal.road: map has no road {goal.road!r}") from None
+        lanes = road_map.road_lanes(goal_road)
+        if goal.lane is not None:
+            goal_lane = _lane_of(road_map, goal.road, goal.lane, f"{where}.goal")
+            lanes = np.array([goal_lane])
+        tail = _best_route(road_map, legs_from, lanes, f"{where}.goal")
+        goal_s = float(getattr(goal, "offset", None) or 0.0)
+        goal_xy, _ = lane_pose_at(road_map, int(tail[-1]), goal_s)
+        goal_radius = float(road_map.lane_width[int(tail[-1])])
+    route = np.concatenate(route_parts + [tail if not route_parts else tail[1:]]).astype(np.int32)
+    path = route_polyline(road_map, route, start_s=float(start.offset))
+    return ResolvedMission(
+        agent_id=agent_id,
+        start_lane=start_lane,
+        start_xy=start_xy,
+        start_heading=heading,
+        start_speed=float(start.speed),
+        route=route,
+        path_xy=path.xy,
+        path_heading=path.heading,
+        path_s=path.s,
+        path_lane=path.lane.astype(np.int32),
+        goal_kind=goal_kind,
+        goal_xy=goal_xy,
+        goal_radius=goal_radius,
+        goal_road=goal_road,
+        goal_lane=goal_lane,
+        goal_s=goal_s,
+    )
+
+
+@dataclass
+class MissionArrays:
+    """All agents' route paths padded to one length, plus the parallel paths on adjacent lanes.
+
+    ``paths[a, p, i]`` is point i of path p for agent a, with p = 0 the route itself, 1 the lane to
+    its left and 2 the lane to its right (shifted by the mean of both lane widths); ``path_valid``
+    masks padding and missing neighbour lanes.
+    """
+
+    paths: np.ndarray  # float64[A, 3, M, 3] (x, y, heading)
+    path_valid: np.ndarray  # bool[A, 3, M]
+    path_s: np.ndarray  # float64[A, M]
+    path_len: np.ndarray  # int64[A] number of valid route points
+    route_length: np.ndarray  # float64[A] arc length of the route path
+    on_route_road: np.ndarray  # bool[A, R]
+    goal_kind: np.ndarray  # int8[A]
+    goal_xy: np.ndarray  # float64[A, 2]
+    goal_radius: np.ndarray
+    goal_road: np.ndarray  # int32[A]
+    goal_lane: np.ndarray  # int32[A]
+    goal_s: np.ndarray
+
+
+def stack_missions(road_map: RoadMap, missions: list[ResolvedMission]) -> MissionArrays:
+    n_agents = len(missions)
+    m = max(len(ms.path_s) for ms in missions)
+    paths = np.zeros((n_agents, 3, m, 3))
+    valid = np.zeros((n_agents, 3, m), dtype=bool)
+    path_s = np.zeros((n_agents, m))
+    on_route_road = np.zeros((n_agents, len(road_map.road_ids)), dtype=bool)
+    for a, ms in enumerate(missions):
+        n = len(ms.path_s)
+        paths[a, 0, :n, :2] = ms.path_xy
+        paths[a, 0, :n, 2] = ms.path_heading
+        valid[a, 0, :n] = True
+        path_s[a, :n] = ms.path_s
+        path_s[a, n:] = ms.path_s[-1]
+        normal = np.stack([-np.sin(ms.path_heading), np.cos(ms.path_heading)], axis=1)
+        own_width = road_map.lane_width[ms.path_lane]
+        for p, side, sign in ((1, road_map.lane_left, 1.0), (2, road_map.lane_right, -1.0)):
+            neighbour = side[ms.path_lane]
+            has = neighbour >= 0
+            shift = 0.5 * (own_width + road_map.lane_width[np.maximum(neighbour, 0)])
+            paths[a, p, :n, :2] = ms.path_xy + sign * shift[:, None] * normal
+            paths[a, p, :n, 2] = ms.path_heading
+            valid[a, p, :n] = has
+        on_route_road[a, road_map.lane_road[ms.route]] = True
+    return MissionArrays(
+        paths=paths,
+        path_valid=valid,
+        path_s=path_s,
+        path_len=np.array([len(ms.path_s) for ms in missions], dtype=np.int64),
+        route_length=np.array([ms.path_s[-1] for ms in missions]),
+        on_route_road=on_route_road,
+        goal_kind=np.array([ms.goal_kind for ms in missions], dtype=np.int8),
+        goal_xy=np.stack([ms.goal_xy for ms in missions]),
+        goal_radius=np.array([ms.goal_radius for ms in missions]),
+        goal_road=np.array([ms.goal_road for ms in missions], dtype=np.int32),
+        goal_lane=np.array([ms.goal_lane for ms in missions], dtype=np.int32),
+        goal_s=np.array([ms.goal_s for ms in missions]),
+    )

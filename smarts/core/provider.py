@@ -1,0 +1,64 @@
+"""The provider protocol: whoever moves vehicles owns rows of the vehicle table.
+
+The agent provider (controllers for action spaces), traffic engines, replay and signals all plug into
+the step loop through this protocol. Providers write their rows of the table in place; there is no
+merge copy. Ownership is the ``owner`` column: a hand-over rewrites it and tells both providers.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from smarts.core.simulation import Simulation
+
+
+@runtime_checkable
+class Provider(Protocol):
+    name: str
+    provider_id: int  # assigned by the simulation when the provider is added
+
+    def reset(self, sim: "Simulation") -> None:
+        """Create this provider's vehicles for a new episode (the table is empty of its rows)."""
+
+    def step(self, sim: "Simulation", dt: float) -> None:
+        """Advance the rows this provider owns by ``dt`` seconds, writing the table in place."""
+
+    def can_accept(self, sim: "Simulation", rows: np.ndarray) -> np.ndarray:
+        """bool per row: whether this provider can take the vehicle over."""
+
+    def accept(self, sim: "Simulation", rows: np.ndarray) -> None:
+        """Start driving rows that were just handed to this provider."""
+
+    def release(self, sim: "Simulation", rows: np.ndarray) -> None:
+        """Stop driving rows that are being handed to another provider or removed."""
+
+    def close(self) -> None:
+        """Free external resources (processes, physics clients)."""
+
+
+class ProviderBase:
+    """Defaults for optional parts of the protocol: accept nothing, hold no resources."""
+
+    name = "provider"
+    provider_id = -1
+
+    def reset(self, sim: "Simulation") -> None:
+        pass
+
+    def step(self, sim: "Simulation", dt: float) -> None:
+        pass
+
+    def can_accept(self, sim: "Simulation", rows: np.ndarray) -> np.ndarray:
+        return np.zeros(len(rows), dtype=bool)
+
+    def accept(self, sim: "Simulation", rows: np.ndarray) -> None:
+        raise NotImplementedError(f"provider {self.name!r} does not accept vehicles")
+
+    def release(self, sim: "Simulation", rows: np.ndarray) -> None:
+        pass
+
+    def close(self) -> None:
+        pass

@@ -1,0 +1,140 @@
+"""``python -m smarts.diagnostic``: time simulator steps at full load and write a table and JSON.
+
+Cases: 1/10/20/50 RelativeTargetPose agents on the 455 m six-lane highway, every agent building the
+full basic observation each step. Agents start spread over the six lanes and cruise straight, so all
+of them stay live for the measured steps (full load). Three timings per step are reported:
+``sim`` (actions, dynamics, map projection, events, route progress), ``obs`` (batched observation) and
+``env`` (a whole PettingZoo ``step`` including both, rewards and the per-agent dicts).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from smarts.scenario import ScenarioSpec
+
+PERF_MAP = "builtin:highway_6lane_ramp"
+PERF_ROAD = "main_0"
+LANES = 6
+SPACING = 12.0  # metres between agents in the same lane
+CRUISE_SPEED = 10.0
+
+
+def perf_scenario(n_agents: int, steps: int) -> ScenarioSpec:
+    """``n_agents`` endless agents, six abreast, ``SPACING`` apart, cruising at 10 m/s."""
+    agents = []
+    for i in range(n_agents):
+        start = {"road": PERF_ROAD, "lane": i % LANES, "offset": 5.0 + SPACING * (i // LANES), "speed": CRUISE_SPEED}
+        agents.append({"id": f"agent_{i}", "mission": {"start": start, "goal": {"endless": True}}})
+    return ScenarioSpec.from_dict(
+        {
+            "name": f"diagnostic_{n_agents}_agents",
+            "map": PERF_MAP,
+            "episode_steps": steps + 10,
+            "agents": agents,
+            "events": {"terminate_on": ["collision", "off_road", "max_steps"]},
+        },
+        source="smarts.diagnostic",
+    )
+
+
+def time_case(n_agents: int, steps: int, warmup: int) -> dict:
+    from smarts.env import DrivingParallelEnv
+
+    env = DrivingParallelEnv(perf_scenario(n_agents, steps + warmup))
+    sim, builder = env.sim, env.builder
+    step_dx = np.array([CRUISE_SPEED * sim.dt, 0.0, 0.0], dtype=np.float32)
+    actions = {a: step_dx for a in env.possible_agents}
+
+    def run(mode: str) -> np.ndarray:
+        env.reset(seed=0)
+        out = np.empty(steps)
+        for k in range(warmup + steps):
+            t0 = time.perf_counter()
+            if mode == "env":
+                env.step(actions)
+            elif mode == "sim":
+                sim.step(actions)
+            else:
+                sim.step(actions)
+                t0 = time.perf_counter()
+                builder.build(sim, sim.active_agents)
+            if k >= warmup:
+                out[k - warmup] = (time.perf_counter() - t0) * 1e3
+        live = int(sim.agent_active.sum())
+        if live != n_agents:
+            raise RuntimeError(f"{n_agents}-agent case lost agents during timing ({live} live at the end)")
+        return out
+
+    timings = {mode: run(mode) for mode in ("sim", "obs", "env")}
+    env.close()
+    row = {"agents": n_agents, "steps": steps}
+    for mode, ms in timings.items():
+        row[f"{mode}_ms_mean"] = float(ms.mean())
+        row[f"{mode}_ms_median"] = float(np.median(ms))
+    row["env_steps_per_s"] = 1e3 / row["env_ms_mean"]
+    row["agent_steps_per_s"] = n_agents * row["env_steps_per_s"]
+    return row
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m smarts.diagnostic", description=__doc__.splitlines()[0])
+    parser.add_argument("--agents", default="1,10,20,50", help="comma-separated agent counts (default 1,10,20,50)")
+    parser.add_argument("--steps", type=int, default=300, help="timed steps per case (default 300)")
+    parser.add_argument("--warmup", type=int, default=20, help="untimed steps first (default 20)")
+    parser.add_argument("--out", type=Path, default=Path("reports/diagnostic.json"), help="JSON output file")
+    args = parser.parse_args(argv)
+    try:
+        counts = [int(c) for c in args.agents.split(",") if c.strip()]
+    except ValueError:
+        parser.error(f"--agents: expected comma-separated integers, got {args.agents!r}")
+    if not counts or min(counts) < 1:
+        parser.error(f"--agents: expected positive integers, got {args.agents!r}")
+    max_agents = LANES * int((455.0 - 60.0 - CRUISE_SPEED * (args.steps + args.warmup) * 0.1) // SPACING)
+    if max(counts) > max_agents:
+        parser.error(f"--agents: at most {max_agents} agents stay on the 455 m highway for {args.steps} steps")
+    if args.steps < 1 or args.warmup < 0:
+        parser.error("--steps must be >= 1 and --warmup >= 0")
+
+    from rich.console import Console
+    from rich.progress import track
+    from rich.table import Table
+
+    console = Console()
+    rows = [time_case(n, args.steps, args.warmup) for n in track(counts, description="timing cases", console=console)]
+
+    table = Table(title=f"Simulator step time, {args.steps} steps per case (ms per step, mean / median)")
+    for col in ("agents", "sim", "obs", "env step", "env steps/s", "agent-steps/s"):
+        table.add_column(col, justify="right")
+    for r in rows:
+        table.add_row(
+            str(r["agents"]),
+            f"{r['sim_ms_mean']:.3f} / {r['sim_ms_median']:.3f}",
+            f"{r['obs_ms_mean']:.3f} / {r['obs_ms_median']:.3f}",
+            f"{r['env_ms_mean']:.3f} / {r['env_ms_median']:.3f}",
+            f"{r['env_steps_per_s']:.0f}",
+            f"{r['agent_steps_per_s']:.0f}",
+        )
+    console.print(table)
+    report = {
+        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "machine": {"python": sys.version.split()[0], "platform": platform.platform(), "processor": platform.processor()},
+        "map": PERF_MAP,
+        "cases": rows,
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(report, indent=2))
+    console.print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

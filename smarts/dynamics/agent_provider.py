@@ -1,0 +1,140 @@
+"""The agent provider: owns the agents' vehicles and turns their actions into motion.
+
+Agents are grouped by action space once at construction, so a step runs one vectorised controller
+call per group (pose limiting, lane control) and one pybullet step for all Continuous agents.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from smarts.core.geometry import wrap_angle
+from smarts.core.provider import ProviderBase
+from smarts.core.simulation import Simulation
+from smarts.core.vehicle_table import Role, VehicleType
+from smarts.dynamics.action_spaces import ACTION_COMPONENTS, ActionSpaceType, check_actions, lane_command
+from smarts.dynamics.bicycle import wheelbase_for_length
+from smarts.dynamics.lane_control import lane_control_step
+from smarts.dynamics.limits import ReachLimits
+from smarts.dynamics.pose_control import apply_relative_pose, apply_target_pose
+from smarts.dynamics.pybullet_chassis import PhysicsWorld, apply_continuous
+
+LANE_LOOKAHEAD_TIME = 1.0  # s of travel to the pure-pursuit point of the lane controller
+LANE_MIN_LOOKAHEAD = 6.0  # m
+
+
+@dataclass(frozen=True)
+class AgentVehicle:
+    """What the provider needs to know about one agent's vehicle."""
+
+    agent_id: str
+    action_space: ActionSpaceType
+    vtype: VehicleType
+    length: float
+    width: float
+    height: float
+    mass: float
+
+
+class AgentProvider(ProviderBase):
+    name = "agents"
+
+    def __init__(self, vehicles: list[AgentVehicle], limits: ReachLimits, dt: float):
+        self.vehicles = vehicles
+        self.limits = limits
+        self.dt = dt
+        self.groups: dict[ActionSpaceType, np.ndarray] = {}
+        for kind in ActionSpaceType:
+            members = [i for i, v in enumerate(vehicles) if v.action_space is kind]
+            if members:
+                self.groups[kind] = np.array(members, dtype=np.int64)
+        self._zero = {kind: np.zeros(len(ACTION_COMPONENTS[kind])) for kind in ActionSpaceType}
+        self.world: PhysicsWorld | None = None
+        self.handles = np.full(len(vehicles), -1, dtype=np.int64)
+        self.lane_offset = np.zeros(len(vehicles), dtype=np.int64)  # lane agents: 0 route, +1 left, -1 right
+        self.wheelbase = np.array([wheelbase_for_length(v.length) for v in vehicles])
+
+    # ------------------------------------------------------------------ episode
+    def reset(self, sim: Simulation) -> None:
+        if ActionSpaceType.CONTINUOUS in self.groups:
+            if self.world is None:
+                self.world = PhysicsWorld(dt=self.dt)
+            else:
+                self.world.reset()
+        self.handles[:] = -1
+        self.lane_offset[:] = 0
+        for i, (vehicle, mission) in enumerate(zip(self.vehicles, sim.missions)):
+            x, y = mission.start_xy
+            row = sim.table.add(
+                vehicle.agent_id,
+                owner=self.provider_id,
+                role=Role.AGENT,
+                x=float(x),
+                y=float(y),
+                heading=mission.start_heading,
+                speed=mission.start_speed,
+                vtype=vehicle.vtype,
+                length=vehicle.length,
+                width=vehicle.width,
+                height=vehicle.height,
+            )
+            sim.register_agent_vehicle(vehicle.agent_id, row)
+            if vehicle.action_space is ActionSpaceType.CONTINUOUS:
+                self.handles[i] = self.world.add_vehicle(
+                    float(x), float(y), mission.start_heading, mission.start_speed,
+                    vehicle.length, vehicle.width, vehicle.height, vehicle.mass,
+                )
+
+    def release(self, sim: Simulation, rows: np.ndarray) -> None:
+        if self.world is None:
+            return
+        for row in np.asarray(rows).tolist():
+            agent = sim.agent_index.get(sim.table.ids[row])
+            if agent is not None and self.handles[agent] >= 0:
+                self.world.remove_vehicle(int(self.handles[agent]))
+                self.handles[agent] = -1
+
+    def close(self) -> None:
+        if self.world is not None:
+            self.world.close()
+            self.world = None
+
+    # ------------------------------------------------------------------ step
+    def step(self, sim: Simulation, dt: float) -> None:
+        for kind, members in self.groups.items():
+            members = members[sim.agent_active[members]]
+            if members.size == 0:
+                continue
+            ids = [sim.agent_ids[i] for i in members]
+            zero = self._zero[kind]
+            actions = check_actions(kind, np.stack([sim.actions.get(a, zero) for a in ids]), ids)
+            rows = sim.agent_row[members]
+            if kind is ActionSpaceType.RELATIVE_TARGET_POSE:
+                apply_relative_pose(sim.table, rows, actions, dt, self.limits)
+            elif kind is ActionSpaceType.TARGET_POSE:
+                apply_target_pose(sim.table, rows, actions, dt, self.limits)
+            elif kind is ActionSpaceType.CONTINUOUS:
+                apply_continuous(self.world, sim.table, rows, self.handles[members], actions, dt)
+            else:
+                self._lane_step(sim, members, rows, actions, dt)
+            sim.table.heading[rows] = wrap_angle(sim.table.heading[rows])
+
+    def _lane_step(self, sim: Simulation, members, rows, actions, dt) -> None:
+        """Follow the route path or the path one lane left/right of it (see ``MissionArrays``)."""
+        target_speed, change = lane_command(actions, self.limits)
+        ma = sim.mission_arrays
+        offset = np.clip(self.lane_offset[members] + change, -1, 1)
+        path = np.where(offset > 0, 1, np.where(offset < 0, 2, 0))
+        ahead = np.maximum(sim.table.speed[rows] * LANE_LOOKAHEAD_TIME, LANE_MIN_LOOKAHEAD)
+        idx = np.minimum(sim.route_index[members] + np.ceil(ahead).astype(np.int64), ma.path_len[members] - 1)
+        feasible = ma.path_valid[members, path, idx]
+        kept = self.lane_offset[members]
+        kept_path = np.where(kept > 0, 1, np.where(kept < 0, 2, 0))
+        kept = np.where(ma.path_valid[members, kept_path, idx], kept, 0)  # that lane ended: route lane
+        offset = np.where(feasible, offset, kept)
+        path = np.where(offset > 0, 1, np.where(offset < 0, 2, 0))
+        self.lane_offset[members] = offset
+        target = ma.paths[members, path, idx, :2]
+        lane_control_step(sim.table, rows, target_speed, target, dt, self.limits, self.wheelbase[members])
