@@ -1,0 +1,109 @@
+"""``smarts scenario ...`` and ``smarts map ...`` commands."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from rich.console import Console
+from rich.table import Table
+
+from smarts.scenario.builtin_maps import BUILTIN_MAPS, builtin_map_path
+from smarts.scenario.errors import NetconvertError, ScenarioError
+from smarts.scenario.library import list_scenarios, load_scenario
+
+
+def add_commands(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``scenario`` and ``map`` command groups on the top-level parser."""
+    scenario = subparsers.add_parser("scenario", help="list and inspect scenarios")
+    scenario_sub = scenario.add_subparsers(dest="scenario_command", metavar="COMMAND")
+    scenario_sub.required = True
+    p = scenario_sub.add_parser("list", help="list the built-in scenarios")
+    p.set_defaults(run=_scenario_list)
+    p = scenario_sub.add_parser("show", help="print a scenario's validated spec as YAML")
+    p.add_argument("name", help="built-in scenario name or path to a scenario .yaml file")
+    p.add_argument(
+        "--build", action="store_true", help="also build and load its map, and check the missions"
+    )
+    p.set_defaults(run=_scenario_show)
+
+    maps = subparsers.add_parser("map", help="list and build the built-in maps")
+    map_sub = maps.add_subparsers(dest="map_command", metavar="COMMAND")
+    map_sub.required = True
+    p = map_sub.add_parser("list", help="list the built-in maps")
+    p.set_defaults(run=_map_list)
+    p = map_sub.add_parser("build", help="build a built-in map with netconvert; print its path")
+    p.add_argument("name", help="built-in map name")
+    p.set_defaults(run=_map_build)
+
+
+def _console() -> Console:
+    # Piped output (files, tests) gets a wide console so table cells are not cut.
+    return Console(width=None if sys.stdout.isatty() else 200, highlight=False)
+
+
+def _fail(message: str) -> int:
+    print(f"error: {message}", file=sys.stderr)
+    return 1
+
+
+def _scenario_list(args: argparse.Namespace) -> int:
+    table = Table(title="Built-in scenarios")
+    for column in ("name", "map", "agents", "episode steps"):
+        table.add_column(column, no_wrap=True)
+    for name in list_scenarios():
+        spec = load_scenario(name)
+        table.add_row(name, spec.map, str(len(spec.agents)), str(spec.episode_steps))
+    _console().print(table)
+    return 0
+
+
+def _scenario_show(args: argparse.Namespace) -> int:
+    try:
+        spec = load_scenario(args.name)
+    except ScenarioError as exc:
+        return _fail(str(exc))
+    sys.stdout.write(spec.to_yaml())
+    if not args.build:
+        return 0
+    try:
+        path = spec.map_path()
+    except (ScenarioError, NetconvertError) as exc:
+        return _fail(str(exc))
+    print(f"# map file: {path}")
+    try:
+        from smarts.maps import load_map
+    except ImportError:
+        print("# map compiler (smarts.maps.load_map) is not available; roads and lanes not counted")
+        return 0
+    road_map = load_map(path)
+    internal = sum(1 for r in road_map.road_ids if r.startswith(":"))
+    print(
+        f"# roads: {len(road_map.road_ids) - internal} (+{internal} inside junctions), "
+        f"lanes: {road_map.num_lanes}"
+    )
+    try:
+        spec.check_map(road_map)
+    except ScenarioError as exc:
+        return _fail(str(exc))
+    print("# missions: all roads, lanes and offsets exist on the map")
+    return 0
+
+
+def _map_list(args: argparse.Namespace) -> int:
+    table = Table(title="Built-in maps")
+    table.add_column("name", no_wrap=True)
+    table.add_column("description")
+    for name in sorted(BUILTIN_MAPS):
+        table.add_row(name, BUILTIN_MAPS[name].description)
+    _console().print(table)
+    return 0
+
+
+def _map_build(args: argparse.Namespace) -> int:
+    try:
+        path = builtin_map_path(args.name)
+    except (ScenarioError, NetconvertError) as exc:
+        return _fail(str(exc))
+    print(path)
+    return 0

@@ -1,0 +1,732 @@
+"""The scenario spec: what a YAML scenario file may say, as dataclasses, strictly validated.
+
+Validation happens once, when the file is read, so the simulator can trust every field. Each error
+names the file and the dotted field path (``agents[1].mission.goal.radius``) and says what was
+expected, because a scenario author should never have to guess which line is wrong.
+"""
+
+from __future__ import annotations
+
+import copy
+import difflib
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from smarts.scenario.builtin_maps import BUILTIN_MAPS, builtin_map_path
+from smarts.scenario.errors import ScenarioError
+
+BUILTIN_PREFIX = "builtin:"
+MAP_FILE_SUFFIXES = (".net.xml", ".xodr")
+
+ACTION_SPACES = ("relative_target_pose", "target_pose", "continuous", "lane")
+TERMINATION_EVENTS = (
+    "collision",
+    "off_road",
+    "partial_off_road",
+    "wrong_way",
+    "off_route",
+    "reached_goal",
+    "not_moving",
+    "max_steps",
+)
+DEFAULT_TERMINATE_ON = ("collision", "off_road", "reached_goal", "max_steps")
+
+
+@dataclass(frozen=True)
+class VehicleDimensions:
+    length: float
+    width: float
+    height: float
+    mass: float
+
+
+VEHICLE_TYPES: dict[str, VehicleDimensions] = {
+    "passenger": VehicleDimensions(length=4.6, width=1.9, height=1.5, mass=1500.0),
+    "bus": VehicleDimensions(length=12.0, width=2.55, height=3.2, mass=12000.0),
+    "truck": VehicleDimensions(length=10.0, width=2.5, height=3.6, mass=10000.0),
+    "motorcycle": VehicleDimensions(length=2.2, width=0.8, height=1.4, mass=250.0),
+}
+"""Typical dimensions (m) and mass (kg) per vehicle type; a scenario may override each one."""
+
+
+# ---------------------------------------------------------------------------- dataclasses
+@dataclass
+class VehicleSpec:
+    type: str = "passenger"
+    length: float | None = None
+    width: float | None = None
+    height: float | None = None
+    mass: float | None = None
+
+    def dimensions(self) -> VehicleDimensions:
+        """The type's defaults with this spec's overrides applied."""
+        base = VEHICLE_TYPES[self.type]
+        return VehicleDimensions(
+            length=base.length if self.length is None else self.length,
+            width=base.width if self.width is None else self.width,
+            height=base.height if self.height is None else self.height,
+            mass=base.mass if self.mass is None else self.mass,
+        )
+
+
+@dataclass
+class StartSpec:
+    road: str
+    lane: int = 0
+    offset: float = 0.0
+    """Metres along the lane from its start."""
+    speed: float = 0.0
+    heading: float | None = None
+    """Radians; None means along the lane."""
+
+
+@dataclass
+class GoalSpec:
+    """Exactly one kind of goal: a position with a radius, a road (and lane), or endless driving."""
+
+    position: tuple[float, float] | None = None
+    radius: float = 3.0
+    road: str | None = None
+    lane: int | None = None
+    """None: any lane of the road."""
+    offset: float | None = None
+    """Metres along the goal lane that must be reached; None: entering the road is enough."""
+    endless: bool = False
+
+    @property
+    def kind(self) -> str:
+        if self.endless:
+            return "endless"
+        return "position" if self.position is not None else "road"
+
+
+@dataclass
+class MissionSpec:
+    start: StartSpec
+    goal: GoalSpec
+    route_via: list[str] = field(default_factory=list)
+
+
+@dataclass
+class AgentSpec:
+    id: str
+    mission: MissionSpec
+    action_space: str = "relative_target_pose"
+    vehicle: VehicleSpec = field(default_factory=VehicleSpec)
+
+
+@dataclass
+class EventsSpec:
+    terminate_on: list[str] = field(default_factory=lambda: list(DEFAULT_TERMINATE_ON))
+    not_moving_seconds: float = 60.0
+    not_moving_distance: float = 1.0
+    """A vehicle that moved less than this many metres in ``not_moving_seconds`` is not moving."""
+
+
+@dataclass
+class RewardSpec:
+    progress_weight: float = 1.0
+    """Reward per metre of progress along the route."""
+    collision_penalty: float = 10.0
+    off_road_penalty: float = 10.0
+    goal_bonus: float = 10.0
+    step_penalty: float = 0.0
+    """Subtracted every step, to favour reaching the goal sooner."""
+
+
+@dataclass
+class ScenarioSpec:
+    name: str
+    map: str
+    """``builtin:<name>`` or a .net.xml/.xodr path relative to the scenario file's folder."""
+    agents: list[AgentSpec]
+    step_length: float = 0.1
+    episode_steps: int = 1000
+    seed: int = 42
+    vehicle_capacity: int = 256
+    events: EventsSpec = field(default_factory=EventsSpec)
+    reward: RewardSpec = field(default_factory=RewardSpec)
+    traffic: dict[str, Any] | None = None
+    """Reserved for traffic settings; kept as an opaque mapping."""
+    source: str = field(default="<dict>", compare=False, repr=False)
+    """Where the spec was read from; prefixes every error message."""
+    base_dir: Path | None = field(default=None, compare=False, repr=False)
+    """Folder that relative map paths are resolved against (the scenario file's folder)."""
+
+    # ------------------------------------------------------------------ reading
+    @classmethod
+    def from_yaml(cls, path: str | os.PathLike) -> ScenarioSpec:
+        path = Path(path)
+        source = str(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise ScenarioError(
+                f"{source}: cannot read scenario file: {exc.strerror or exc}"
+            ) from None
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None)
+            where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+            problem = getattr(exc, "problem", None) or str(exc)
+            raise ScenarioError(f"{source}: invalid YAML{where}: {problem}") from None
+        if isinstance(data, dict) and "name" not in data:
+            data = {"name": path.name.split(".")[0], **data}
+        return cls.from_dict(data, source=source, base_dir=path.parent)
+
+    @classmethod
+    def from_dict(
+        cls,
+        data: Mapping[str, Any],
+        source: str = "<dict>",
+        base_dir: str | os.PathLike | None = None,
+    ) -> ScenarioSpec:
+        """Validate a plain mapping (as loaded from YAML) into a spec.
+
+        ``source`` prefixes error messages; a relative map path is resolved against ``base_dir``
+        (the current directory when None).
+        """
+        return _Reader(source, None if base_dir is None else Path(base_dir)).scenario(data)
+
+    # ------------------------------------------------------------------ writing
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (lists, dicts, scalars) that ``from_dict`` turns back into an equal spec."""
+        return {
+            "name": self.name,
+            "map": self.map,
+            "step_length": self.step_length,
+            "episode_steps": self.episode_steps,
+            "seed": self.seed,
+            "vehicle_capacity": self.vehicle_capacity,
+            "agents": [_agent_dict(a) for a in self.agents],
+            "events": {
+                "terminate_on": list(self.events.terminate_on),
+                "not_moving_seconds": self.events.not_moving_seconds,
+                "not_moving_distance": self.events.not_moving_distance,
+            },
+            "reward": {
+                "progress_weight": self.reward.progress_weight,
+                "collision_penalty": self.reward.collision_penalty,
+                "off_road_penalty": self.reward.off_road_penalty,
+                "goal_bonus": self.reward.goal_bonus,
+                "step_penalty": self.reward.step_penalty,
+            },
+            "traffic": copy.deepcopy(self.traffic),
+        }
+
+    def to_yaml(self) -> str:
+        return yaml.dump(self.to_dict(), Dumper=_SpecDumper, sort_keys=False)
+
+    # ------------------------------------------------------------------ map
+    @property
+    def agent_ids(self) -> list[str]:
+        return [a.id for a in self.agents]
+
+    @property
+    def builtin_map(self) -> str | None:
+        """Name of the built-in map, or None when the map is a file."""
+        return self.map[len(BUILTIN_PREFIX) :] if self.map.startswith(BUILTIN_PREFIX) else None
+
+    def map_path(self, cache_dir: str | os.PathLike | None = None) -> Path:
+        """The map file to load: a built-in map is compiled (and cached) by netconvert first."""
+        if self.builtin_map is not None:
+            return builtin_map_path(self.builtin_map, cache_dir)
+        return _resolve_map_file(self.map, self.base_dir)
+
+    def check_map(self, road_map: Any) -> None:
+        """Check every mission's roads, lanes and offsets against the compiled map.
+
+        ``road_map`` needs ``road_index_of``, ``road_lanes(road)`` and ``lane_length`` (and uses
+        ``lane_internal`` and ``bounds`` when present), as on :class:`smarts.maps.road_map.RoadMap`.
+        """
+        checker = _MapChecker(self.source, road_map)
+        for i, agent in enumerate(self.agents):
+            where = f"agents[{i}].mission"
+            start = agent.mission.start
+            checker.road_lane(f"{where}.start", start.road, start.lane, start.offset)
+            goal = agent.mission.goal
+            if goal.kind == "road":
+                checker.road_lane(f"{where}.goal", goal.road, goal.lane, goal.offset)
+            elif goal.kind == "position":
+                checker.position(f"{where}.goal.position", goal.position, goal.radius)
+            for j, road in enumerate(agent.mission.route_via):
+                checker.road(f"{where}.route_via[{j}]", road)
+
+
+def _agent_dict(agent: AgentSpec) -> dict[str, Any]:
+    vehicle: dict[str, Any] = {"type": agent.vehicle.type}
+    for key in ("length", "width", "height", "mass"):
+        if getattr(agent.vehicle, key) is not None:
+            vehicle[key] = getattr(agent.vehicle, key)
+    start = agent.mission.start
+    start_d: dict[str, Any] = {
+        "road": start.road,
+        "lane": start.lane,
+        "offset": start.offset,
+        "speed": start.speed,
+    }
+    if start.heading is not None:
+        start_d["heading"] = start.heading
+    goal = agent.mission.goal
+    goal_d: dict[str, Any]
+    if goal.kind == "endless":
+        goal_d = {"endless": True}
+    elif goal.kind == "position":
+        goal_d = {"position": list(goal.position), "radius": goal.radius}
+    else:
+        goal_d = {"road": goal.road}
+        if goal.lane is not None:
+            goal_d["lane"] = goal.lane
+        if goal.offset is not None:
+            goal_d["offset"] = goal.offset
+    mission: dict[str, Any] = {"start": start_d, "goal": goal_d}
+    if agent.mission.route_via:
+        mission["route_via"] = list(agent.mission.route_via)
+    return {
+        "id": agent.id,
+        "action_space": agent.action_space,
+        "vehicle": vehicle,
+        "mission": mission,
+    }
+
+
+class _SpecDumper(yaml.SafeDumper):
+    """Writes short lists of scalars (positions, event names) inline, everything else as blocks."""
+
+    def increase_indent(self, flow: bool = False, indentless: bool = False) -> None:
+        # Indent list items under their key, as people write them by hand.
+        return super().increase_indent(flow, False)
+
+
+def _represent_list(dumper: yaml.SafeDumper, data: list) -> yaml.Node:
+    flow = all(not isinstance(v, (dict, list)) for v in data) and len(data) <= 8
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flow)
+
+
+_SpecDumper.add_representer(list, _represent_list)
+
+
+def _resolve_map_file(map_value: str, base_dir: Path | None) -> Path:
+    path = Path(map_value).expanduser()
+    if not path.is_absolute():
+        path = (base_dir if base_dir is not None else Path.cwd()) / path
+    return path
+
+
+# ---------------------------------------------------------------------------- validation
+_REQUIRED = object()
+
+
+def _describe(value: Any) -> str:
+    if isinstance(value, (dict, list)):
+        text = repr(value)
+        if len(text) <= 60:
+            return text
+        return f"a {'mapping' if isinstance(value, dict) else 'list'} of {len(value)} items"
+    if value is None:
+        return "nothing (null)"
+    return repr(value)
+
+
+def _join(path: str, key: str) -> str:
+    return f"{path}.{key}" if path else key
+
+
+class _Reader:
+    """Turns loaded YAML data into spec dataclasses, raising on the first invalid field."""
+
+    def __init__(self, source: str, base_dir: Path | None) -> None:
+        self.source = source
+        self.base_dir = base_dir
+
+    def error(self, path: str, message: str) -> ScenarioError:
+        return ScenarioError(
+            f"{self.source}: {path}: {message}" if path else f"{self.source}: {message}"
+        )
+
+    # ---------------------------------------------------------------- primitives
+    def mapping(self, value: Any, path: str, allowed: tuple[str, ...]) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            what = "a mapping of scenario fields" if not path else "a mapping"
+            raise self.error(path, f"expected {what}, got {_describe(value)}")
+        for key in value:
+            if not isinstance(key, str) or key not in allowed:
+                hint = difflib.get_close_matches(str(key), allowed, n=1)
+                suggestion = f" (did you mean {hint[0]!r}?)" if hint else ""
+                raise self.error(
+                    _join(path, str(key)),
+                    f"unknown field{suggestion}; allowed fields: {', '.join(allowed)}",
+                )
+        return value
+
+    def string(self, d: dict, key: str, path: str, default: Any = _REQUIRED) -> Any:
+        p = _join(path, key)
+        if key not in d:
+            if default is _REQUIRED:
+                raise self.error(p, "missing required field (a string)")
+            return default
+        value = d[key]
+        if not isinstance(value, str) or not value.strip():
+            raise self.error(p, f"expected a non-empty string, got {_describe(value)}")
+        return value
+
+    def number(
+        self,
+        d: dict,
+        key: str,
+        path: str,
+        default: Any = _REQUIRED,
+        *,
+        positive: bool = False,
+        non_negative: bool = False,
+        maximum: float | None = None,
+        optional: bool = False,
+    ) -> Any:
+        p = _join(path, key)
+        if key not in d:
+            if default is _REQUIRED:
+                raise self.error(p, "missing required field (a number)")
+            return default
+        value = d[key]
+        if optional and value is None:
+            return None
+        return self.check_number(
+            value, p, positive=positive, non_negative=non_negative, maximum=maximum
+        )
+
+    def check_number(
+        self,
+        value: Any,
+        path: str,
+        *,
+        positive: bool = False,
+        non_negative: bool = False,
+        maximum: float | None = None,
+    ) -> float:
+        kind = (
+            "a positive number"
+            if positive
+            else "a non-negative number"
+            if non_negative
+            else "a number"
+        )
+        if maximum is not None:
+            kind += f" <= {maximum:g}"
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not math.isfinite(value)
+        ):
+            raise self.error(path, f"expected {kind}, got {_describe(value)}")
+        if (
+            (positive and value <= 0)
+            or (non_negative and value < 0)
+            or (maximum is not None and value > maximum)
+        ):
+            raise self.error(path, f"expected {kind}, got {value:g}")
+        return float(value)
+
+    def integer(
+        self,
+        d: dict,
+        key: str,
+        path: str,
+        default: Any = _REQUIRED,
+        *,
+        minimum: int | None = None,
+        optional: bool = False,
+    ) -> Any:
+        p = _join(path, key)
+        if key not in d:
+            if default is _REQUIRED:
+                raise self.error(p, "missing required field (an integer)")
+            return default
+        value = d[key]
+        if optional and value is None:
+            return None
+        kind = "an integer" if minimum is None else f"an integer >= {minimum}"
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(p, f"expected {kind}, got {_describe(value)}")
+        if minimum is not None and value < minimum:
+            raise self.error(p, f"expected {kind}, got {value}")
+        return value
+
+    def choice(self, d: dict, key: str, path: str, choices: tuple[str, ...], default: str) -> str:
+        value = d.get(key, default)
+        if value not in choices or not isinstance(value, str):
+            raise self.error(
+                _join(path, key), f"expected one of {', '.join(choices)}; got {_describe(value)}"
+            )
+        return value
+
+    def string_list(self, d: dict, key: str, path: str, default: list[str]) -> list[str]:
+        p = _join(path, key)
+        value = d.get(key, default)
+        if not isinstance(value, list):
+            raise self.error(p, f"expected a list of strings, got {_describe(value)}")
+        for i, item in enumerate(value):
+            if not isinstance(item, str) or not item.strip():
+                raise self.error(f"{p}[{i}]", f"expected a non-empty string, got {_describe(item)}")
+        return list(value)
+
+    # ---------------------------------------------------------------- spec parts
+    def scenario(self, data: Any) -> ScenarioSpec:
+        allowed = (
+            "name", "map", "step_length", "episode_steps", "seed", "vehicle_capacity",
+            "agents", "events", "reward", "traffic",
+        )  # fmt: skip
+        d = self.mapping(data, "", allowed)
+        name = self.string(d, "name", "")
+        map_value = self.map_field(d)
+        step_length = self.number(d, "step_length", "", 0.1, positive=True, maximum=1.0)
+        episode_steps = self.integer(d, "episode_steps", "", 1000, minimum=1)
+        seed = self.integer(d, "seed", "", 42, minimum=0)
+        capacity = self.integer(d, "vehicle_capacity", "", 256, minimum=1)
+        agents = self.agents(d.get("agents", _REQUIRED))
+        if capacity < len(agents):
+            raise self.error(
+                "vehicle_capacity",
+                f"expected at least the number of agents ({len(agents)}), got {capacity}",
+            )
+        events = self.events(d.get("events", {}))
+        reward = self.reward(d.get("reward", {}))
+        traffic = d.get("traffic")
+        if traffic is not None and not isinstance(traffic, dict):
+            raise self.error("traffic", f"expected a mapping or nothing, got {_describe(traffic)}")
+        return ScenarioSpec(
+            name=name,
+            map=map_value,
+            agents=agents,
+            step_length=step_length,
+            episode_steps=episode_steps,
+            seed=seed,
+            vehicle_capacity=capacity,
+            events=events,
+            reward=reward,
+            traffic=copy.deepcopy(traffic),
+            source=self.source,
+            base_dir=self.base_dir,
+        )
+
+    def map_field(self, d: dict) -> str:
+        value = self.string(d, "map", "")
+        if value.startswith(BUILTIN_PREFIX):
+            name = value[len(BUILTIN_PREFIX) :]
+            if name not in BUILTIN_MAPS:
+                hint = difflib.get_close_matches(name, BUILTIN_MAPS, n=1)
+                suggestion = f" (did you mean {hint[0]!r}?)" if hint else ""
+                raise self.error(
+                    "map",
+                    f"unknown built-in map {name!r}{suggestion}; "
+                    f"known: {', '.join(sorted(BUILTIN_MAPS))}",
+                )
+            return value
+        if not value.endswith(MAP_FILE_SUFFIXES):
+            raise self.error(
+                "map",
+                f"expected 'builtin:<name>' or a path ending in {' or '.join(MAP_FILE_SUFFIXES)}, "
+                f"got {value!r}",
+            )
+        path = _resolve_map_file(value, self.base_dir)
+        if not path.is_file():
+            raise self.error("map", f"map file {str(path)!r} does not exist")
+        return value
+
+    def agents(self, value: Any) -> list[AgentSpec]:
+        if value is _REQUIRED:
+            raise self.error("agents", "missing required field (a list of at least one agent)")
+        if not isinstance(value, list) or not value:
+            raise self.error(
+                "agents", f"expected a list of at least one agent, got {_describe(value)}"
+            )
+        agents = [self.agent(item, f"agents[{i}]", i) for i, item in enumerate(value)]
+        seen: dict[str, int] = {}
+        for i, agent in enumerate(agents):
+            if agent.id in seen:
+                raise self.error(
+                    f"agents[{i}].id",
+                    f"duplicate agent id {agent.id!r} (also agents[{seen[agent.id]}])",
+                )
+            seen[agent.id] = i
+        return agents
+
+    def agent(self, value: Any, path: str, index: int) -> AgentSpec:
+        d = self.mapping(value, path, ("id", "action_space", "vehicle", "mission"))
+        agent_id = self.string(d, "id", path, f"agent_{index}")
+        action_space = self.choice(d, "action_space", path, ACTION_SPACES, "relative_target_pose")
+        vehicle = self.vehicle(d.get("vehicle", {}), _join(path, "vehicle"))
+        if "mission" not in d:
+            raise self.error(_join(path, "mission"), "missing required field (start and goal)")
+        mission = self.mission(d["mission"], _join(path, "mission"))
+        return AgentSpec(id=agent_id, mission=mission, action_space=action_space, vehicle=vehicle)
+
+    def vehicle(self, value: Any, path: str) -> VehicleSpec:
+        d = self.mapping(value, path, ("type", "length", "width", "height", "mass"))
+        return VehicleSpec(
+            type=self.choice(d, "type", path, tuple(VEHICLE_TYPES), "passenger"),
+            **{
+                key: self.number(d, key, path, None, positive=True, optional=True)
+                for key in ("length", "width", "height", "mass")
+            },
+        )
+
+    def mission(self, value: Any, path: str) -> MissionSpec:
+        d = self.mapping(value, path, ("start", "goal", "route_via"))
+        if "start" not in d:
+            raise self.error(
+                _join(path, "start"), "missing required field (road, lane, offset, ...)"
+            )
+        start = self.start(d["start"], _join(path, "start"))
+        if "goal" not in d:
+            raise self.error(
+                _join(path, "goal"), "missing required field (position, road or endless: true)"
+            )
+        goal = self.goal(d["goal"], _join(path, "goal"))
+        route_via = self.string_list(d, "route_via", path, [])
+        return MissionSpec(start=start, goal=goal, route_via=route_via)
+
+    def start(self, value: Any, path: str) -> StartSpec:
+        d = self.mapping(value, path, ("road", "lane", "offset", "speed", "heading"))
+        return StartSpec(
+            road=self.string(d, "road", path),
+            lane=self.integer(d, "lane", path, 0, minimum=0),
+            offset=self.number(d, "offset", path, 0.0, non_negative=True),
+            speed=self.number(d, "speed", path, 0.0, non_negative=True),
+            heading=self.number(d, "heading", path, None, optional=True),
+        )
+
+    def goal(self, value: Any, path: str) -> GoalSpec:
+        d = self.mapping(value, path, ("position", "radius", "road", "lane", "offset", "endless"))
+        kinds = [k for k in ("position", "road", "endless") if k in d]
+        if len(kinds) != 1:
+            got = " and ".join(kinds) if kinds else "none"
+            raise self.error(
+                path, f"expected exactly one goal kind (position, road or endless: true), got {got}"
+            )
+        kind = kinds[0]
+        for key, needs in (("radius", "position"), ("lane", "road"), ("offset", "road")):
+            if key in d and kind != needs:
+                raise self.error(
+                    _join(path, key), f"only allowed with a {needs} goal, not a {kind} goal"
+                )
+        if kind == "endless":
+            if d["endless"] is not True:
+                raise self.error(
+                    _join(path, "endless"),
+                    "expected true (or give a position or road goal instead), "
+                    f"got {_describe(d['endless'])}",
+                )
+            return GoalSpec(endless=True)
+        if kind == "position":
+            p = _join(path, "position")
+            pos = d["position"]
+            if not isinstance(pos, list) or len(pos) != 2:
+                raise self.error(p, f"expected [x, y] in metres, got {_describe(pos)}")
+            xy = tuple(self.check_number(v, f"{p}[{i}]") for i, v in enumerate(pos))
+            radius = self.number(d, "radius", path, 3.0, positive=True)
+            return GoalSpec(position=xy, radius=radius)
+        return GoalSpec(
+            road=self.string(d, "road", path),
+            lane=self.integer(d, "lane", path, None, minimum=0, optional=True),
+            offset=self.number(d, "offset", path, None, non_negative=True, optional=True),
+        )
+
+    def events(self, value: Any) -> EventsSpec:
+        path = "events"
+        d = self.mapping(value, path, ("terminate_on", "not_moving_seconds", "not_moving_distance"))
+        terminate_on = self.string_list(d, "terminate_on", path, list(DEFAULT_TERMINATE_ON))
+        for i, name in enumerate(terminate_on):
+            if name not in TERMINATION_EVENTS:
+                raise self.error(
+                    f"{path}.terminate_on[{i}]",
+                    f"expected one of {', '.join(TERMINATION_EVENTS)}; got {name!r}",
+                )
+            if name in terminate_on[:i]:
+                raise self.error(f"{path}.terminate_on[{i}]", f"{name!r} is listed twice")
+        return EventsSpec(
+            terminate_on=terminate_on,
+            not_moving_seconds=self.number(d, "not_moving_seconds", path, 60.0, positive=True),
+            not_moving_distance=self.number(d, "not_moving_distance", path, 1.0, non_negative=True),
+        )
+
+    def reward(self, value: Any) -> RewardSpec:
+        path = "reward"
+        keys = (
+            "progress_weight",
+            "collision_penalty",
+            "off_road_penalty",
+            "goal_bonus",
+            "step_penalty",
+        )
+        d = self.mapping(value, path, keys)
+        defaults = RewardSpec()
+        return RewardSpec(
+            **{k: self.number(d, k, path, getattr(defaults, k), non_negative=True) for k in keys}
+        )
+
+
+class _MapChecker:
+    """Checks mission references against a compiled map, with errors naming the field."""
+
+    def __init__(self, source: str, road_map: Any) -> None:
+        self.source = source
+        self.map = road_map
+        self.map_name = Path(str(getattr(road_map, "source", "") or "map")).name
+
+    def error(self, path: str, message: str) -> ScenarioError:
+        return ScenarioError(f"{self.source}: {path}: {message}")
+
+    def road(self, path: str, road: str) -> Any:
+        index = self.map.road_index_of.get(road)
+        if index is None:
+            normal = sorted(r for r in self.map.road_index_of if not r.startswith(":"))
+            hint = difflib.get_close_matches(road, normal, n=1)
+            suggestion = f" (did you mean {hint[0]!r}?)" if hint else ""
+            shown = ", ".join(normal[:30]) + (", ..." if len(normal) > 30 else "")
+            raise self.error(
+                path, f"map {self.map_name!r} has no road {road!r}{suggestion}; roads: {shown}"
+            )
+        lanes = self.map.road_lanes(index)
+        internal = getattr(self.map, "lane_internal", None)
+        if road.startswith(":") or (
+            internal is not None and len(lanes) and bool(internal[lanes[0]])
+        ):
+            raise self.error(path, f"road {road!r} lies inside a junction; name a normal road")
+        return lanes
+
+    def road_lane(self, path: str, road: str, lane: int | None, offset: float | None) -> None:
+        lanes = self.road(f"{path}.road", road)
+        n = len(lanes)
+        if lane is not None and lane >= n:
+            raise self.error(
+                f"{path}.lane", f"road {road!r} has {n} lanes (0..{n - 1}), got {lane}"
+            )
+        if offset is None:
+            return
+        candidates = [lanes[lane]] if lane is not None else list(lanes)
+        length = min(float(self.map.lane_length[i]) for i in candidates)
+        if offset > length:
+            which = f"lane {lane} of road {road!r}" if lane is not None else f"road {road!r}"
+            raise self.error(
+                f"{path}.offset", f"{which} is {length:.1f} m long, got offset {offset:g}"
+            )
+
+    def position(self, path: str, xy: tuple[float, float], radius: float) -> None:
+        bounds = getattr(self.map, "bounds", None)
+        if bounds is None:
+            return
+        xmin, ymin, xmax, ymax = (float(b) for b in bounds)
+        x, y = xy
+        if not (xmin - radius <= x <= xmax + radius and ymin - radius <= y <= ymax + radius):
+            raise self.error(
+                path,
+                f"({x:g}, {y:g}) lies outside the map bounds x {xmin:.1f}..{xmax:.1f}, "
+                f"y {ymin:.1f}..{ymax:.1f}",
+            )

@@ -1,0 +1,328 @@
+"""The scenario spec: defaults, YAML round trip, strict validation, checks against a real map."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import pytest
+import yaml
+
+from smarts.scenario import (
+    GoalSpec,
+    ScenarioError,
+    ScenarioSpec,
+    VehicleSpec,
+    list_scenarios,
+    load_scenario,
+)
+
+BASE = {
+    "name": "intersection",
+    "map": "builtin:intersection_4way_2lane",
+    "agents": [
+        {
+            "mission": {
+                "start": {"road": "west_in", "lane": 1, "offset": 20.0, "speed": 5.0},
+                "goal": {"road": "north_out"},
+            }
+        },
+        {
+            "action_space": "target_pose",
+            "vehicle": {"type": "truck", "length": 8.0},
+            "mission": {
+                "start": {"road": "east_in"},
+                "goal": {"position": [-60.0, 4.8], "radius": 2.5},
+                "route_via": ["west_out"],
+            },
+        },
+    ],
+}
+
+
+def write_yaml(folder: Path, data, name: str = "intersection.yaml") -> Path:
+    path = folder / name
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    return path
+
+
+def test_defaults_are_filled_in(tmp_path):
+    spec = ScenarioSpec.from_yaml(write_yaml(tmp_path, BASE))
+    assert spec.name == "intersection"
+    assert (spec.step_length, spec.episode_steps, spec.seed, spec.vehicle_capacity) == (
+        0.1,
+        1000,
+        42,
+        256,
+    )
+    assert spec.agent_ids == ["agent_0", "agent_1"]
+    a0, a1 = spec.agents
+    assert a0.action_space == "relative_target_pose" and a0.vehicle == VehicleSpec()
+    assert a0.mission.goal == GoalSpec(road="north_out") and a0.mission.goal.kind == "road"
+    assert a1.mission.goal.kind == "position" and a1.mission.goal.position == (-60.0, 4.8)
+    assert a1.mission.start.lane == 0 and a1.mission.start.offset == 0.0
+    assert spec.events.terminate_on == ["collision", "off_road", "reached_goal", "max_steps"]
+    assert spec.events.not_moving_seconds == 60.0
+    assert spec.reward.progress_weight == 1.0 and spec.reward.step_penalty == 0.0
+    assert spec.traffic is None and spec.builtin_map == "intersection_4way_2lane"
+    dims = a1.vehicle.dimensions()
+    assert dims.length == 8.0 and dims.width == 2.5  # override and truck default
+    assert a0.vehicle.dimensions().length == 4.6
+
+
+def test_name_defaults_to_the_file_name(tmp_path):
+    data = {k: v for k, v in BASE.items() if k != "name"}
+    assert ScenarioSpec.from_yaml(write_yaml(tmp_path, data, "my_run.yaml")).name == "my_run"
+
+
+def test_dict_and_yaml_round_trip(tmp_path):
+    data = copy.deepcopy(BASE)
+    data["traffic"] = {"flows": [{"route": ["west_in", "east_out"], "rate": 300}]}
+    data["events"] = {"terminate_on": ["collision", "wrong_way"], "not_moving_distance": 0.5}
+    data["agents"][0]["mission"]["start"]["heading"] = 0.25
+    data["agents"][0]["mission"]["goal"] = {"road": "north_out", "lane": 1, "offset": 12.5}
+    data["agents"].append(
+        {"id": "cruiser", "mission": {"start": {"road": "south_in"}, "goal": {"endless": True}}}
+    )
+    spec = ScenarioSpec.from_yaml(write_yaml(tmp_path, data))
+    assert ScenarioSpec.from_dict(spec.to_dict()) == spec
+    assert ScenarioSpec.from_dict(yaml.safe_load(spec.to_yaml())) == spec
+    again = ScenarioSpec.from_yaml(
+        write_yaml(tmp_path, yaml.safe_load(spec.to_yaml()), "again.yaml")
+    )
+    assert again == spec and again.to_dict() == spec.to_dict()
+    assert spec.to_dict()["agents"][2]["mission"]["goal"] == {"endless": True}
+
+
+@pytest.mark.parametrize("name", list_scenarios())
+def test_library_scenarios_round_trip(name):
+    spec = load_scenario(name)
+    assert ScenarioSpec.from_dict(spec.to_dict()) == spec
+
+
+def _set(data: dict, dotted: str, value) -> dict:
+    """Copy of data with one field set; dotted path with [i] for list items."""
+    data = copy.deepcopy(data)
+    node = data
+    parts = dotted.replace("[", ".").replace("]", "").split(".")
+    for part in parts[:-1]:
+        node = node[int(part)] if part.isdigit() else node.setdefault(part, {})
+    last = parts[-1]
+    if value is _DELETE:
+        del node[last]
+    else:
+        node[int(last) if last.isdigit() else last] = value
+    return data
+
+
+_DELETE = object()
+
+BAD_SPECS = [
+    # (field to set, value, dotted path expected in the message, fragment expected)
+    ("colour", "red", "colour", "unknown field"),
+    ("agents[0].vehicle.colour", "red", "agents[0].vehicle.colour", "unknown field"),
+    (
+        "agents[1].mission.goal.radius",
+        -2,
+        "agents[1].mission.goal.radius",
+        "expected a positive number, got -2",
+    ),
+    ("agents[1].id", "agent_0", "agents[1].id", "duplicate agent id 'agent_0'"),
+    ("agents[0].mission.goal.endless", True, "agents[0].mission.goal", "exactly one goal kind"),
+    ("agents[1].mission.goal.road", "west_out", "agents[1].mission.goal", "position and road"),
+    ("agents[0].action_space", "joystick", "agents[0].action_space", "relative_target_pose"),
+    ("map", "builtin:no_such_map", "map", "unknown built-in map 'no_such_map'"),
+    ("map", "roads.osm", "map", ".net.xml"),
+    ("map", "missing.net.xml", "map", "does not exist"),
+    ("episode_steps", "100", "episode_steps", "expected an integer >= 1, got '100'"),
+    ("episode_steps", 0, "episode_steps", "expected an integer >= 1, got 0"),
+    ("step_length", 2.0, "step_length", "<= 1"),
+    ("seed", 1.5, "seed", "expected an integer"),
+    ("agents[0].mission.start.lane", 1.5, "agents[0].mission.start.lane", "expected an integer"),
+    (
+        "agents[0].mission.start.speed",
+        True,
+        "agents[0].mission.start.speed",
+        "expected a non-negative number",
+    ),
+    ("agents[0].mission.start.offset", -1.0, "agents[0].mission.start.offset", "non-negative"),
+    (
+        "agents[0].mission.start.road",
+        _DELETE,
+        "agents[0].mission.start.road",
+        "missing required field",
+    ),
+    ("agents[0].mission.goal", _DELETE, "agents[0].mission.goal", "missing required field"),
+    (
+        "agents[0].mission.goal.radius",
+        3.0,
+        "agents[0].mission.goal.radius",
+        "only allowed with a position goal",
+    ),
+    (
+        "agents[1].mission.goal.position",
+        [1.0],
+        "agents[1].mission.goal.position",
+        "expected [x, y]",
+    ),
+    (
+        "agents[1].mission.goal.position",
+        [1.0, "a"],
+        "agents[1].mission.goal.position[1]",
+        "expected a number",
+    ),
+    ("agents[1].vehicle.type", "tank", "agents[1].vehicle.type", "passenger"),
+    ("agents[1].vehicle.mass", 0, "agents[1].vehicle.mass", "positive"),
+    ("agents[1].mission.route_via", "west_out", "agents[1].mission.route_via", "list of strings"),
+    ("agents", [], "agents", "at least one agent"),
+    ("agents", _DELETE, "agents", "missing required field"),
+    ("vehicle_capacity", 1, "vehicle_capacity", "number of agents (2)"),
+    ("events.terminate_on", ["collision", "exploded"], "events.terminate_on[1]", "off_road"),
+    ("events.terminate_on", ["collision", "collision"], "events.terminate_on[1]", "listed twice"),
+    ("events.not_moving_seconds", 0, "events.not_moving_seconds", "positive"),
+    ("reward.goal_bonus", -1, "reward.goal_bonus", "non-negative"),
+    ("reward.speed_bonus", 1, "reward.speed_bonus", "unknown field"),
+    ("traffic", ["flow"], "traffic", "expected a mapping"),
+    ("name", "", "name", "non-empty string"),
+]
+
+
+@pytest.mark.parametrize(
+    "dotted,value,path,fragment", BAD_SPECS, ids=[f"{b[0]}={b[1]!r}" for b in BAD_SPECS]
+)
+def test_bad_spec_names_file_and_field(tmp_path, dotted, value, path, fragment):
+    file = write_yaml(tmp_path, _set(BASE, dotted, value))
+    with pytest.raises(ScenarioError) as info:
+        ScenarioSpec.from_yaml(file)
+    message = str(info.value)
+    assert message.startswith(f"{file}: {path}: "), message
+    assert fragment in message, message
+
+
+def test_error_message_matches_documented_form(tmp_path):
+    file = write_yaml(tmp_path, _set(BASE, "agents[1].mission.goal.radius", -2))
+    with pytest.raises(
+        ValueError,
+        match=r"intersection\.yaml: agents\[1\]\.mission\.goal\.radius: "
+        r"expected a positive number, got -2$",
+    ):
+        ScenarioSpec.from_yaml(file)
+
+
+def test_unknown_field_suggests_the_close_name(tmp_path):
+    file = write_yaml(tmp_path, _set(BASE, "episode_step", 10))
+    with pytest.raises(ScenarioError, match="did you mean 'episode_steps'"):
+        ScenarioSpec.from_yaml(file)
+
+
+def test_invalid_yaml_and_missing_file_name_the_file(tmp_path):
+    bad = tmp_path / "broken.yaml"
+    bad.write_text("name: x\nagents: [\n", encoding="utf-8")
+    with pytest.raises(ScenarioError, match=r"broken\.yaml: invalid YAML at line \d+"):
+        ScenarioSpec.from_yaml(bad)
+    with pytest.raises(ScenarioError, match=r"absent\.yaml: cannot read"):
+        ScenarioSpec.from_yaml(tmp_path / "absent.yaml")
+    scalar = tmp_path / "scalar.yaml"
+    scalar.write_text("42\n", encoding="utf-8")
+    with pytest.raises(
+        ScenarioError, match=r"scalar\.yaml: expected a mapping of scenario fields, got 42"
+    ):
+        ScenarioSpec.from_yaml(scalar)
+
+
+def test_from_dict_names_its_source():
+    with pytest.raises(ScenarioError, match=r"^inline: seed: expected an integer >= 0, got -1$"):
+        ScenarioSpec.from_dict(_set(BASE, "seed", -1), source="inline")
+
+
+def test_map_file_is_resolved_next_to_the_scenario(tmp_path, built_maps):
+    folder = tmp_path / "scenarios"
+    (folder / "maps").mkdir(parents=True)
+    net = folder / "maps" / "cross.net.xml"
+    net.write_bytes(built_maps["intersection_4way_2lane"].read_bytes())
+    spec = ScenarioSpec.from_yaml(write_yaml(folder, _set(BASE, "map", "maps/cross.net.xml")))
+    assert spec.builtin_map is None
+    assert spec.map_path() == net
+    assert spec.to_dict()["map"] == "maps/cross.net.xml"
+
+
+def test_builtin_map_path_compiles_the_map(map_cache_dir, built_maps):
+    spec = ScenarioSpec.from_dict(BASE)
+    assert spec.map_path(map_cache_dir) == built_maps["intersection_4way_2lane"]
+
+
+# ---------------------------------------------------------------------------- check_map
+def test_check_map_accepts_valid_missions(lane_table_maps):
+    ScenarioSpec.from_dict(BASE, source="intersection.yaml").check_map(
+        lane_table_maps["intersection_4way_2lane"]
+    )
+
+
+MAP_ERRORS = [
+    (
+        "agents[0].mission.start.lane",
+        3,
+        "agents[0].mission.start.lane: road 'west_in' has 2 lanes (0..1), got 3",
+    ),
+    (
+        "agents[0].mission.start.road",
+        "west_inn",
+        "agents[0].mission.start.road: map 'intersection_4way_2lane.net.xml' has no road "
+        "'west_inn' (did you mean 'west_in'?)",
+    ),
+    (
+        "agents[0].mission.start.road",
+        ":center_0",
+        "agents[0].mission.start.road: road ':center_0' lies inside a junction",
+    ),
+    (
+        "agents[0].mission.start.offset",
+        150.0,
+        "agents[0].mission.start.offset: lane 1 of road 'west_in' is 99.6 m long, got offset 150",
+    ),
+    (
+        "agents[0].mission.goal.lane",
+        2,
+        "agents[0].mission.goal.lane: road 'north_out' has 2 lanes (0..1), got 2",
+    ),
+    (
+        "agents[0].mission.goal.offset",
+        120.0,
+        "agents[0].mission.goal.offset: road 'north_out' is 99.6 m long",
+    ),
+    (
+        "agents[1].mission.route_via",
+        ["nowhere"],
+        "agents[1].mission.route_via[0]: map 'intersection_4way_2lane.net.xml' "
+        "has no road 'nowhere'",
+    ),
+    (
+        "agents[1].mission.goal.position",
+        [500.0, 0.0],
+        "agents[1].mission.goal.position: (500, 0) lies outside the map bounds",
+    ),
+]
+
+
+@pytest.mark.parametrize("dotted,value,expected", MAP_ERRORS, ids=[m[0] for m in MAP_ERRORS])
+def test_check_map_names_agent_and_field(lane_table_maps, dotted, value, expected):
+    spec = ScenarioSpec.from_dict(_set(BASE, dotted, value), source="intersection.yaml")
+    with pytest.raises(ScenarioError) as info:
+        spec.check_map(lane_table_maps["intersection_4way_2lane"])
+    assert str(info.value).startswith(f"intersection.yaml: {expected}"), str(info.value)
+
+
+def test_check_map_with_the_map_compiler(built_maps, map_cache_dir):
+    """Runs once smarts.maps.load_map exists (it is written separately)."""
+    maps = pytest.importorskip("smarts.maps")
+    if not hasattr(maps, "load_map"):
+        pytest.skip("smarts.maps.load_map is not available yet")
+    road_map = maps.load_map(
+        built_maps["intersection_4way_2lane"], cache_dir=map_cache_dir / "maps"
+    )
+    spec = ScenarioSpec.from_dict(BASE, source="intersection.yaml")
+    spec.check_map(road_map)
+    with pytest.raises(
+        ScenarioError, match=r"agents\[0\]\.mission\.start\.lane: road 'west_in' has 2 lanes"
+    ):
+        ScenarioSpec.from_dict(_set(BASE, "agents[0].mission.start.lane", 3)).check_map(road_map)
