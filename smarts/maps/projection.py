@@ -1,0 +1,176 @@
+"""Batched projection of points onto lanes: nearest lane and lane coordinates (s, t).
+
+This runs every step for every vehicle: grid cell -> candidate segments -> per-point best
+candidate, in one compiled loop over the points (a handful of numpy calls per point would cost more
+than the whole loop).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from smarts.maps.road_map import RoadMap
+
+ALIGNMENT_DISTANCE_WEIGHT = 0.02
+"""Among lanes a point is on, each metre from the centre line costs as much as 1 - cos(11 deg) of
+heading misalignment: heading decides between overlapping junction lanes, distance breaks ties."""
+_OFF_LANE_RANK = 4.0
+"""Added to off-lane candidates' squared distance so they rank after every on-lane candidate
+(on-lane keys are at most 2 + weight * half width)."""
+
+# Rows of the per-segment table, gathered for candidates with one ``take``.
+_AX, _AY, _VX, _VY, _INV_LEN2, _HALF_W2, _COS, _SIN = range(8)
+_FIRST, _LAST, _LANE, _S0, _LEN, _HEADING = range(8, 14)
+
+
+class LaneProjection(NamedTuple):
+    """Per-point result; lane is -1 (distance inf, s = t = 0) where no lane is near."""
+
+    lane: np.ndarray  # int32[N]
+    s: np.ndarray  # float64[N] arc length along the lane (extrapolated before/after its ends)
+    t: np.ndarray  # float64[N] signed lateral offset, positive to the left
+    lane_heading: np.ndarray  # float64[N] heading of the lane at s
+    distance: np.ndarray  # float64[N] distance to the lane's centre line
+
+
+class _Index:
+    """Arrays derived once per map for the projection (kept on the RoadMap instance)."""
+
+    def __init__(self, m: RoadMap) -> None:
+        vec = m.seg_vec
+        len2 = (vec * vec).sum(axis=1)
+        inv_len2 = np.divide(1.0, len2, out=np.zeros_like(len2), where=len2 > 0)
+        half_w = m.lane_width[m.seg_lane] / 2
+        lane_of_seg = np.arange(m.num_lanes)
+        first = np.zeros(len(vec))
+        last = np.zeros(len(vec))
+        first[m.lane_point_offsets[:-1] - lane_of_seg] = 1.0
+        last[m.lane_point_offsets[1:] - lane_of_seg - 2] = 1.0
+        self.table = np.ascontiguousarray(
+            np.stack(
+                [
+                    m.seg_start[:, 0],
+                    m.seg_start[:, 1],
+                    vec[:, 0],
+                    vec[:, 1],
+                    inv_len2,
+                    half_w * half_w,
+                    np.cos(m.seg_heading),
+                    np.sin(m.seg_heading),
+                    first,
+                    last,
+                    m.seg_lane.astype(np.float64),
+                    m.seg_s0,
+                    m.seg_len,
+                    m.seg_heading,
+                ]
+            )
+        )
+        # The grid gains an empty border of cells so clamped outside (or NaN) points find nothing.
+        nx, ny = m.grid_shape
+        counts = np.zeros((nx + 2, ny + 2), dtype=np.int64)
+        counts[1:-1, 1:-1] = np.diff(m.grid_offsets).reshape(nx, ny)
+        self.offsets = np.concatenate([[0], np.cumsum(counts.ravel())]).astype(np.intp)
+        self.ny = ny + 2
+        self.origin = np.asarray(m.grid_origin, dtype=np.float64) - m.grid_cell
+        self.inv_cell = 1.0 / m.grid_cell
+        self.cell_max = np.array([nx + 1, ny + 1], dtype=np.float64)
+        self.origin_x, self.origin_y = (float(v) for v in self.origin)
+        self.cell_max_x, self.cell_max_y = float(nx + 1), float(ny + 1)
+        self.grid_segs = m.grid_segs.astype(np.intp)
+
+
+def projection_index(road_map: RoadMap) -> _Index:
+    index = road_map.__dict__.get("_projection_index")
+    if index is None:
+        index = _Index(road_map)
+        road_map.__dict__["_projection_index"] = index
+    return index
+
+
+def project(
+    road_map: RoadMap, xy: np.ndarray, heading: np.ndarray | None = None
+) -> LaneProjection:
+    """Project points ``xy[N, 2]`` onto their lanes.
+
+    A point is *on* a lane when it is within half the lane's width of its centre line. Among the
+    lanes a point is on, the one best aligned with ``heading`` wins (this separates overlapping
+    junction lanes); a point on no lane takes the nearest centre line. Without ``heading`` the
+    nearest centre line always wins. Points farther than ``road_map.grid_margin`` from every lane,
+    and NaN positions or headings, get lane -1.
+    """
+    ix = road_map.__dict__.get("_projection_index") or projection_index(road_map)
+    xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
+    n = xy.shape[0]
+    out = LaneProjection(np.empty(n, dtype=np.int32), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
+    use_heading = heading is not None
+    h = np.ascontiguousarray(heading, dtype=np.float64).reshape(-1) if use_heading else xy[:, 0]
+    _project_kernel(
+        ix.table, ix.offsets, ix.grid_segs, ix.ny, ix.origin_x, ix.origin_y, ix.inv_cell,
+        ix.cell_max_x, ix.cell_max_y, xy, h, use_heading, *out,
+    )
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _project_kernel(
+    table, offsets, grid_segs, ny, origin_x, origin_y, inv_cell, cell_max_x, cell_max_y,
+    xy, heading, use_heading, out_lane, out_s, out_t, out_heading, out_distance,
+):  # pragma: no cover - compiled
+    for p in range(xy.shape[0]):
+        x, y = xy[p, 0], xy[p, 1]
+        gx = min(max((x - origin_x) * inv_cell, 0.0), cell_max_x)  # NaN -> empty border cell
+        gy = min(max((y - origin_y) * inv_cell, 0.0), cell_max_y)
+        cell = int(gx) * ny + int(gy)
+        ch = cs = 0.0
+        if use_heading:
+            ch, cs = math.cos(heading[p]), math.sin(heading[p])
+        best, best_key = -1, np.inf
+        first, last = offsets[cell], offsets[cell + 1]
+        if x != x or y != y or (use_heading and heading[p] != heading[p]):
+            last = first  # NaN: no lane
+        for k in range(first, last):
+            seg = grid_segs[k]
+            rx = x - table[_AX, seg]
+            ry = y - table[_AY, seg]
+            vx, vy = table[_VX, seg], table[_VY, seg]
+            u = min(max((rx * vx + ry * vy) * table[_INV_LEN2, seg], 0.0), 1.0)
+            dx, dy = rx - u * vx, ry - u * vy
+            dist2 = dx * dx + dy * dy
+            if not use_heading:
+                key = dist2
+            elif dist2 > table[_HALF_W2, seg]:
+                key = dist2 + _OFF_LANE_RANK
+            else:
+                key = 1.0 - (ch * table[_COS, seg] + cs * table[_SIN, seg])
+                key += ALIGNMENT_DISTANCE_WEIGHT * math.sqrt(dist2)
+            if key < best_key:
+                best, best_key = seg, key
+        if best < 0:
+            out_lane[p] = -1
+            out_s[p] = out_t[p] = out_heading[p] = 0.0
+            out_distance[p] = np.inf
+            continue
+        rx = x - table[_AX, best]
+        ry = y - table[_AY, best]
+        vx, vy = table[_VX, best], table[_VY, best]
+        raw_u = (rx * vx + ry * vy) * table[_INV_LEN2, best]
+        u = min(max(raw_u, 0.0), 1.0)
+        dist = math.hypot(rx - u * vx, ry - u * vy)
+        # Before a lane's first point or past its last, continue the end segment's line so s keeps
+        # growing and t stays the lateral offset rather than a distance to the end point.
+        if (raw_u < 0.0 and table[_FIRST, best] > 0.0) or (raw_u > 1.0 and table[_LAST, best] > 0.0):
+            u = raw_u
+        cross = vx * ry - vy * rx
+        side = 1.0 if cross > 0.0 else (-1.0 if cross < 0.0 else 0.0)
+        out_lane[p] = int(table[_LANE, best])
+        out_s[p] = table[_S0, best] + u * table[_LEN, best]
+        out_t[p] = side * math.hypot(rx - u * vx, ry - u * vy)
+        out_heading[p] = table[_HEADING, best]
+        out_distance[p] = dist
+
+

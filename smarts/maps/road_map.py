@@ -1,0 +1,179 @@
+"""A road network compiled to flat arrays.
+
+Every per-step map query (nearest lane, lane coordinates, on-road test) runs on these arrays for all
+vehicles at once, so the map is stored as a struct of arrays rather than as Python lane objects.
+
+Conventions (used across the whole simulator):
+- Units are SI; positions are metres in the map frame (the SUMO network frame after its netOffset).
+- Heading is in radians, 0 along +x (east), counter-clockwise positive, wrapped to (-pi, pi].
+- Lane index 0 is the rightmost lane of its road.
+- Lane coordinates: ``s`` is the arc length along the lane centre line, ``t`` the signed lateral
+  offset from it (positive to the left).
+
+Variable-length per-lane data is stored CSR-style: ``X_offsets[i]:X_offsets[i + 1]`` slices the
+flat array ``X`` for lane ``i``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass
+class RoadMap:
+    """Arrays describing lanes, their topology, a segment index and a drivable-area raster."""
+
+    source: str
+    """Path of the file the map was compiled from."""
+    content_hash: str
+    """SHA-256 of the source file's bytes (the cache key)."""
+
+    # --- lanes (L of them) ---
+    lane_ids: list[str]
+    road_ids: list[str]
+    lane_road: np.ndarray  # int32[L] index into road_ids
+    lane_index: np.ndarray  # int16[L] 0 = rightmost on its road
+    lane_width: np.ndarray  # float64[L]
+    lane_speed_limit: np.ndarray  # float64[L] m/s
+    lane_length: np.ndarray  # float64[L] arc length of the centre polyline
+    lane_internal: np.ndarray  # bool[L] lane lies inside a junction
+    lane_left: np.ndarray  # int32[L] neighbour lane to the left on the same road, -1 if none
+    lane_right: np.ndarray  # int32[L] neighbour lane to the right, -1 if none
+
+    # centre polylines, CSR over lanes
+    lane_point_offsets: np.ndarray  # int64[L + 1]
+    points: np.ndarray  # float64[P, 2]
+    point_s: np.ndarray  # float64[P] arc length of each point within its lane
+
+    # topology through junctions (normal lane -> internal lane(s) -> normal lane), CSR over lanes
+    succ_offsets: np.ndarray  # int64[L + 1]
+    succ: np.ndarray  # int32[E]
+    pred_offsets: np.ndarray  # int64[L + 1]
+    pred: np.ndarray  # int32[E]
+
+    # segments of all centre polylines (S of them) for projection
+    seg_start: np.ndarray  # float64[S, 2]
+    seg_vec: np.ndarray  # float64[S, 2] end - start
+    seg_len: np.ndarray  # float64[S]
+    seg_heading: np.ndarray  # float64[S]
+    seg_lane: np.ndarray  # int32[S]
+    seg_s0: np.ndarray  # float64[S] arc length at the segment start within its lane
+
+    # uniform grid over segments: cell (ix, iy) lists segments within ``grid_margin`` of the cell
+    grid_origin: np.ndarray  # float64[2]
+    grid_cell: float
+    grid_shape: tuple[int, int]  # (nx, ny)
+    grid_margin: float
+    grid_offsets: np.ndarray  # int64[nx * ny + 1], cell id = ix * ny + iy
+    grid_segs: np.ndarray  # int32[...]
+
+    # drivable-area raster: raster[iy, ix] is True where the road surface is
+    raster_origin: np.ndarray  # float64[2] map position of the corner of cell (0, 0)
+    raster_resolution: float  # metres per cell
+    drivable: np.ndarray  # bool[H, W]
+
+    # lane points resampled at ~1 m spacing for waypoints, CSR over lanes
+    lanepoint_offsets: np.ndarray  # int64[L + 1]
+    lanepoints: np.ndarray  # float64[Q, 2]
+    lanepoint_s: np.ndarray  # float64[Q]
+    lanepoint_heading: np.ndarray  # float64[Q]
+
+    bounds: np.ndarray  # float64[4] xmin, ymin, xmax, ymax
+
+    junction_shapes: list[np.ndarray] = field(default_factory=list)
+    """Junction outlines (float64[k, 2]) drawn into the drivable raster and the renderer."""
+
+    lane_index_of: dict[str, int] = field(default_factory=dict, repr=False)
+    road_index_of: dict[str, int] = field(default_factory=dict, repr=False)
+
+    def __post_init__(self) -> None:
+        if not self.lane_index_of:
+            self.lane_index_of = {lane: i for i, lane in enumerate(self.lane_ids)}
+        if not self.road_index_of:
+            self.road_index_of = {road: i for i, road in enumerate(self.road_ids)}
+
+    # ------------------------------------------------------------------ accessors
+    @property
+    def num_lanes(self) -> int:
+        return len(self.lane_ids)
+
+    def lane(self, lane_id: str) -> int:
+        """Index of a lane by its id, with an error that names the id when it is unknown."""
+        try:
+            return self.lane_index_of[lane_id]
+        except KeyError:
+            raise KeyError(f"map {self.source!r} has no lane {lane_id!r}") from None
+
+    def road(self, road_id: str) -> int:
+        try:
+            return self.road_index_of[road_id]
+        except KeyError:
+            raise KeyError(f"map {self.source!r} has no road {road_id!r}") from None
+
+    def road_lanes(self, road: int) -> np.ndarray:
+        """Lane indices of a road, rightmost first."""
+        lanes = np.flatnonzero(self.lane_road == road)
+        return lanes[np.argsort(self.lane_index[lanes], kind="stable")]
+
+    def successors(self, lane: int) -> np.ndarray:
+        return self.succ[self.succ_offsets[lane] : self.succ_offsets[lane + 1]]
+
+    def predecessors(self, lane: int) -> np.ndarray:
+        return self.pred[self.pred_offsets[lane] : self.pred_offsets[lane + 1]]
+
+    def lane_polyline(self, lane: int) -> np.ndarray:
+        return self.points[self.lane_point_offsets[lane] : self.lane_point_offsets[lane + 1]]
+
+    def lane_lanepoints(self, lane: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(xy[n, 2], s[n], heading[n]) of a lane's ~1 m lanepoints."""
+        a, b = self.lanepoint_offsets[lane], self.lanepoint_offsets[lane + 1]
+        return self.lanepoints[a:b], self.lanepoint_s[a:b], self.lanepoint_heading[a:b]
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, path: Path) -> None:
+        """Write every field to one ``.npz`` file (no pickles, so loading runs no code)."""
+        arrays: dict[str, np.ndarray] = {}
+        for f in fields(self):
+            if f.name in ("lane_index_of", "road_index_of"):
+                continue
+            value = getattr(self, f.name)
+            if f.name == "junction_shapes":
+                lengths = np.array([len(s) for s in value], dtype=np.int64)
+                arrays["junction_shape_offsets"] = np.concatenate([[0], np.cumsum(lengths)])
+                arrays["junction_shape_points"] = (
+                    np.concatenate(value) if value else np.zeros((0, 2))
+                )
+                continue
+            if isinstance(value, list):
+                value = np.array(value, dtype=np.str_)
+            arrays[f.name] = np.asarray(value)
+        tmp = path.with_name(path.name + ".tmp.npz")
+        np.savez(tmp, **arrays)
+        tmp.replace(path)
+
+    @classmethod
+    def load(cls, path: Path) -> "RoadMap":
+        with np.load(path, allow_pickle=False) as data:
+            kwargs = {}
+            for f in fields(cls):
+                if f.name in ("lane_index_of", "road_index_of", "junction_shapes"):
+                    continue
+                value = data[f.name]
+                if f.name in ("lane_ids", "road_ids"):
+                    value = [str(v) for v in value]
+                elif f.name in ("source", "content_hash"):
+                    value = str(value)
+                elif f.name in ("grid_cell", "grid_margin", "raster_resolution"):
+                    value = float(value)
+                elif f.name == "grid_shape":
+                    value = (int(value[0]), int(value[1]))
+                kwargs[f.name] = value
+            offsets = data["junction_shape_offsets"]
+            pts = data["junction_shape_points"]
+            kwargs["junction_shapes"] = [
+                pts[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)
+            ]
+        return cls(**kwargs)
