@@ -8,9 +8,14 @@ from __future__ import annotations
 
 from enum import IntEnum
 
+import math
+
+import numba
 import numpy as np
 
 from smarts.core.geometry import wrap_angle
+from smarts.core.vehicle_table import COLUMN
+from smarts.maps.drivable import on_road_at
 
 
 class Event(IntEnum):
@@ -35,33 +40,66 @@ def event_from_name(name: str) -> Event:
         raise ValueError(f"unknown event {name!r}; expected one of {list(EVENT_NAMES)}") from None
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _corners(x, y, heading, length, width, out):  # pragma: no cover - compiled
+    """Write a box's corners (front-left, front-right, rear-right, rear-left) into out[4, 2]."""
+    c, s = math.cos(heading), math.sin(heading)
+    fx, fy = 0.5 * length * c, 0.5 * length * s
+    lx, ly = -0.5 * width * s, 0.5 * width * c
+    out[0, 0], out[0, 1] = x + fx + lx, y + fy + ly
+    out[1, 0], out[1, 1] = x + fx - lx, y + fy - ly
+    out[2, 0], out[2, 1] = x - fx - lx, y - fy - ly
+    out[3, 0], out[3, 1] = x - fx + lx, y - fy + ly
+
+
+@numba.njit(cache=True, nogil=True)
+def _separated_on_axes(a, b):  # pragma: no cover - compiled
+    """Whether one of a's two edge directions separates boxes a and b (corners [4, 2])."""
+    for e in range(2):
+        ax, ay = a[e + 1, 0] - a[e, 0], a[e + 1, 1] - a[e, 1]
+        amin = amax = a[0, 0] * ax + a[0, 1] * ay
+        bmin = bmax = b[0, 0] * ax + b[0, 1] * ay
+        for k in range(1, 4):
+            pa = a[k, 0] * ax + a[k, 1] * ay
+            pb = b[k, 0] * ax + b[k, 1] * ay
+            amin, amax = min(amin, pa), max(amax, pa)
+            bmin, bmax = min(bmin, pb), max(bmax, pb)
+        if amax < bmin or bmax < amin:
+            return True
+    return False
+
+
+@numba.njit(cache=True, nogil=True)
+def boxes_overlap(a, b):  # pragma: no cover - compiled
+    """Separating axis test of two oriented boxes given by their corners [4, 2]."""
+    return not (_separated_on_axes(a, b) or _separated_on_axes(b, a))
+
+
+@numba.njit(cache=True, nogil=True)
+def _all_pairs(corners, x, y, radius, hit):  # pragma: no cover - compiled
+    n = x.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            dx, dy, reach = x[i] - x[j], y[i] - y[j], radius[i] + radius[j]
+            if dx * dx + dy * dy < reach * reach and boxes_overlap(corners[i], corners[j]):
+                hit[i] = True
+                hit[j] = True
+
+
 def box_collisions(corners: np.ndarray, x: np.ndarray, y: np.ndarray, radius: np.ndarray) -> np.ndarray:
-    """Which of n oriented boxes overlap another box, by the separating axis test.
+    """Which of n oriented boxes overlap another box. Returns bool[n].
 
     ``corners`` is float64[n, 4, 2] (from ``VehicleTable.corners``), ``radius`` each box's half
-    diagonal. A cheap circle test picks candidate pairs; the separating axis test on both boxes' two
-    edge directions decides. Returns bool[n].
+    diagonal: a circle test picks candidate pairs, the separating axis test decides.
     """
-    n = len(x)
-    hit = np.zeros(n, dtype=bool)
-    if n < 2:
-        return hit
-    dx = x[:, None] - x[None, :]
-    dy = y[:, None] - y[None, :]
-    reach = radius[:, None] + radius[None, :]
-    close = dx * dx + dy * dy < reach * reach
-    i, j = np.nonzero(np.triu(close, 1))
-    if i.size == 0:
-        return hit
-    a, b = corners[i], corners[j]  # [m, 4, 2]
-    # Edge directions of both boxes: 2 axes each (the other two edges are parallel).
-    axes = np.concatenate([a[:, 1:3] - a[:, 0:2], b[:, 1:3] - b[:, 0:2]], axis=1)  # [m, 4, 2]
-    pa = np.einsum("mkd,mad->mka", axes, a)  # projections [m, axis, corner]
-    pb = np.einsum("mkd,mad->mka", axes, b)
-    separated = (pa.max(axis=2) < pb.min(axis=2)) | (pb.max(axis=2) < pa.min(axis=2))
-    overlap = ~separated.any(axis=1)
-    hit[i[overlap]] = True
-    hit[j[overlap]] = True
+    hit = np.zeros(len(x), dtype=bool)
+    _all_pairs(
+        np.ascontiguousarray(corners, dtype=np.float64),
+        np.ascontiguousarray(x, dtype=np.float64),
+        np.ascontiguousarray(y, dtype=np.float64),
+        np.ascontiguousarray(radius, dtype=np.float64),
+        hit,
+    )
     return hit
 
 
@@ -91,11 +129,90 @@ class NotMovingTracker:
         self.anchor_time[rows] = time
 
     def update(self, rows: np.ndarray, x: np.ndarray, y: np.ndarray, time: float) -> np.ndarray:
-        ddx = x - self.anchor[rows, 0]
-        ddy = y - self.anchor[rows, 1]
-        moved = ddx * ddx + ddy * ddy > self.distance * self.distance
-        moved_rows = rows[moved]
-        self.anchor[moved_rows, 0] = x[moved]
-        self.anchor[moved_rows, 1] = y[moved]
-        self.anchor_time[moved_rows] = time
-        return time - self.anchor_time[rows] >= self.seconds - 1e-9
+        out = np.empty(len(rows), dtype=bool)
+        for i, r in enumerate(np.asarray(rows).tolist()):
+            out[i] = not_moving_step(self.anchor, self.anchor_time, r, x[i], y[i], time, self.seconds, self.distance)
+        return out
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def not_moving_step(anchor, anchor_time, row, x, y, time, seconds, distance):  # pragma: no cover
+    """Move the row's anchor if it got farther than ``distance``; True if stuck for ``seconds``."""
+    dx, dy = x - anchor[row, 0], y - anchor[row, 1]
+    if dx * dx + dy * dy > distance * distance:
+        anchor[row, 0], anchor[row, 1], anchor_time[row] = x, y, time
+    return anchor_time[row] <= time - seconds + 1e-9
+
+
+@numba.njit(cache=True, nogil=True)
+def agent_events(
+    data, lane, alive, agents, rows,
+    flat_raster, raster_width, raster_origin, inv_res, cell_max,
+    lane_internal, lane_road, on_route_road,
+    goal_kind, goal_xy, goal_radius, goal_road, goal_lane, goal_s,
+    anchor, anchor_time, not_moving_seconds, not_moving_distance, time, at_step_limit,
+    terminate_on, events, done,
+):  # pragma: no cover - compiled
+    """Every event of ``Event`` for the agents (rows of ``events``/``done`` indexed by agent).
+
+    Collisions are tested against all ``alive`` rows (circle pre-test, then separating axes).
+    Goal kinds: 1 = within ``goal_radius`` of ``goal_xy``; 2 = on ``goal_road`` (and ``goal_lane``
+    unless it is -1) at or past ``goal_s``.
+    """
+    own = np.empty((4, 2))
+    other = np.empty((4, 2))
+    for i in range(agents.shape[0]):
+        a, r = agents[i], rows[i]
+        ev = events[a]
+        ev[:] = False
+        x, y, h = data[_X, r], data[_Y, r], data[_H, r]
+        length, width = data[_LENGTH, r], data[_WIDTH, r]
+        _corners(x, y, h, length, width, own)
+        radius = 0.5 * math.hypot(length, width)
+        for j in alive:
+            if j == r:
+                continue
+            dx, dy = data[_X, j] - x, data[_Y, j] - y
+            reach = radius + 0.5 * math.hypot(data[_LENGTH, j], data[_WIDTH, j])
+            if dx * dx + dy * dy >= reach * reach:
+                continue
+            _corners(data[_X, j], data[_Y, j], data[_H, j], data[_LENGTH, j], data[_WIDTH, j], other)
+            if boxes_overlap(own, other):
+                ev[COLLISION] = True
+                break
+        ev[OFF_ROAD] = not on_road_at(flat_raster, raster_width, raster_origin, inv_res, cell_max, x, y)
+        for k in range(4):
+            if not on_road_at(flat_raster, raster_width, raster_origin, inv_res, cell_max, own[k, 0], own[k, 1]):
+                ev[PARTIAL_OFF_ROAD] = True
+        ln = lane[r]
+        road = lane_road[ln] if ln >= 0 else -1
+        if ln >= 0 and not lane_internal[ln]:  # junction lanes cross each other: no direction
+            ev[WRONG_WAY] = math.cos(h - data[_LANE_HEADING, r]) < 0.0
+            ev[OFF_ROUTE] = not on_route_road[a, road]
+        if goal_kind[a] == 1:
+            gx, gy = x - goal_xy[a, 0], y - goal_xy[a, 1]
+            ev[REACHED_GOAL] = gx * gx + gy * gy <= goal_radius[a] * goal_radius[a]
+        elif goal_kind[a] == 2:
+            ev[REACHED_GOAL] = (
+                ln >= 0
+                and road == goal_road[a]
+                and (goal_lane[a] < 0 or ln == goal_lane[a])
+                and data[_S, r] >= goal_s[a]
+            )
+        ev[NOT_MOVING] = not_moving_step(
+            anchor, anchor_time, r, x, y, time, not_moving_seconds, not_moving_distance
+        )
+        ev[MAX_STEPS] = at_step_limit
+        finished = at_step_limit
+        for e in range(ev.shape[0]):
+            finished |= ev[e] and terminate_on[e]
+        done[a] = finished
+
+
+_X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
+_LENGTH, _WIDTH = COLUMN["length"], COLUMN["width"]
+_S, _LANE_HEADING = COLUMN["s"], COLUMN["lane_heading"]
+# Plain ints for the compiled code (IntEnum members are Python objects).
+(COLLISION, OFF_ROAD, PARTIAL_OFF_ROAD, WRONG_WAY, OFF_ROUTE, REACHED_GOAL, NOT_MOVING, MAX_STEPS) = (
+    int(e) for e in Event
+)

@@ -2,14 +2,43 @@
 
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
 
 
-def wrap_angle(angle: np.ndarray | float) -> np.ndarray | float:
-    """Wrap radians to [-pi, pi)."""
-    return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
+_TWO_PI = 2.0 * np.pi
+_INV_TWO_PI = 1.0 / _TWO_PI
+
+
+def wrap_angle(angle):
+    """Wrap radians (scalar or array) to (-pi, pi]; angles already in range come back unchanged."""
+    return angle + _TWO_PI * np.floor((np.pi - angle) * _INV_TWO_PI)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def wrap_scalar(angle: float) -> float:  # pragma: no cover - compiled
+    """``wrap_angle`` for one float, for compiled kernels."""
+    return angle + _TWO_PI * math.floor((math.pi - angle) * _INV_TWO_PI)
 
 
 def to_local(dx: np.ndarray, dy: np.ndarray, cos_h: np.ndarray, sin_h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotate world-frame offsets into a frame with heading h (x forward, y left)."""
     return cos_h * dx + sin_h * dy, -sin_h * dx + cos_h * dy
+
+
+_FORWARD = np.array([1.0, 1.0, -1.0, -1.0])
+_LEFT = np.array([1.0, -1.0, -1.0, 1.0])
+
+
+def box_corners(x, y, heading, length, width) -> np.ndarray:
+    """Corners float64[n, 4, 2] of boxes centred at (x, y): front-left, front-right, rear-right,
+    rear-left."""
+    c, s = np.cos(heading)[:, None], np.sin(heading)[:, None]
+    f = (0.5 * length)[:, None] * _FORWARD
+    l = (0.5 * width)[:, None] * _LEFT
+    out = np.empty((len(x), 4, 2))
+    out[..., 0] = c * f - s * l + x[:, None]
+    out[..., 1] = s * f + c * l + y[:, None]
+    return out

@@ -161,13 +161,14 @@ def resolve_mission(road_map: RoadMap, agent_id: str, mission, where: str) -> Re
 class MissionArrays:
     """All agents' route paths padded to one length, plus the parallel paths on adjacent lanes.
 
-    ``paths[a, p, i]`` is point i of path p for agent a, with p = 0 the route itself, 1 the lane to
-    its left and 2 the lane to its right (shifted by the mean of both lane widths); ``path_valid``
-    masks padding and missing neighbour lanes.
+    ``paths[a, i, p]`` is point i of path p for agent a (x, y, heading), with p = 0 the route
+    itself, 1 the lane to its left and 2 the lane to its right (the route shifted by the mean of
+    both lanes' widths); ``path_valid`` masks padding and missing neighbour lanes. ``flat_paths``
+    is the same memory as [A * M, P, 3], so one ``take`` gathers any agents' points.
     """
 
-    paths: np.ndarray  # float64[A, 3, M, 3] (x, y, heading)
-    path_valid: np.ndarray  # bool[A, 3, M]
+    paths: np.ndarray  # float64[A, M, 3, 3]
+    path_valid: np.ndarray  # bool[A, M, 3]
     path_s: np.ndarray  # float64[A, M]
     path_len: np.ndarray  # int64[A] number of valid route points
     route_length: np.ndarray  # float64[A] arc length of the route path
@@ -179,30 +180,43 @@ class MissionArrays:
     goal_lane: np.ndarray  # int32[A]
     goal_s: np.ndarray
 
+    @property
+    def stride(self) -> int:
+        return self.paths.shape[1]
+
+    @property
+    def flat_paths(self) -> np.ndarray:
+        return self.paths.reshape(-1, 3, 3)
+
+    @property
+    def flat_valid(self) -> np.ndarray:
+        return self.path_valid.reshape(-1, 3)
+
 
 def stack_missions(road_map: RoadMap, missions: list[ResolvedMission]) -> MissionArrays:
     n_agents = len(missions)
-    m = max(len(ms.path_s) for ms in missions)
-    paths = np.zeros((n_agents, 3, m, 3))
-    valid = np.zeros((n_agents, 3, m), dtype=bool)
+    # One spare row past the longest path: clipping any index to the last row lands on padding.
+    m = max(len(ms.path_s) for ms in missions) + 1
+    paths = np.zeros((n_agents, m, 3, 3))
+    valid = np.zeros((n_agents, m, 3), dtype=bool)
     path_s = np.zeros((n_agents, m))
     on_route_road = np.zeros((n_agents, len(road_map.road_ids)), dtype=bool)
     for a, ms in enumerate(missions):
         n = len(ms.path_s)
-        paths[a, 0, :n, :2] = ms.path_xy
-        paths[a, 0, :n, 2] = ms.path_heading
-        valid[a, 0, :n] = True
+        paths[a, :n, 0, :2] = ms.path_xy
+        paths[a, :n, 0, 2] = ms.path_heading
+        valid[a, :n, 0] = True
         path_s[a, :n] = ms.path_s
         path_s[a, n:] = ms.path_s[-1]
         normal = np.stack([-np.sin(ms.path_heading), np.cos(ms.path_heading)], axis=1)
         own_width = road_map.lane_width[ms.path_lane]
         for p, side, sign in ((1, road_map.lane_left, 1.0), (2, road_map.lane_right, -1.0)):
             neighbour = side[ms.path_lane]
-            has = neighbour >= 0
             shift = 0.5 * (own_width + road_map.lane_width[np.maximum(neighbour, 0)])
-            paths[a, p, :n, :2] = ms.path_xy + sign * shift[:, None] * normal
-            paths[a, p, :n, 2] = ms.path_heading
-            valid[a, p, :n] = has
+            paths[a, :n, p, :2] = ms.path_xy + sign * shift[:, None] * normal
+            paths[a, :n, p, 2] = ms.path_heading
+            valid[a, :n, p] = neighbour >= 0
+        paths[a, n:] = paths[a, n - 1]  # padding repeats the last point (masked invalid)
         on_route_road[a, road_map.lane_road[ms.route]] = True
     return MissionArrays(
         paths=paths,

@@ -11,13 +11,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import math
+
+import numba
 import numpy as np
 
-from smarts.core.events import NUM_EVENTS, Event, NotMovingTracker, box_collisions, wrong_way
-from smarts.core.missions import GOAL_POSITION, GOAL_ROAD, MissionArrays, ResolvedMission, stack_missions
+from smarts.core.events import NUM_EVENTS, Event, NotMovingTracker, agent_events
+from smarts.core.missions import MissionArrays, ResolvedMission, stack_missions
 from smarts.core.provider import Provider
-from smarts.core.vehicle_table import VehicleTable
-from smarts.maps import RoadMap, on_road, project
+from smarts.core.vehicle_table import COLUMN, VehicleTable
+from smarts.maps import RoadMap, project
+from smarts.maps.drivable import raster_lookup
 
 ROUTE_WINDOW_BACK = 2  # route points searched behind the last match
 ROUTE_WINDOW_AHEAD = 10  # ... and ahead of it (more than the farthest one-step move at ~1 m spacing)
@@ -73,7 +77,9 @@ class Simulation:
         self.time = 0.0
         self.step_count = 0
         self.rng = np.random.default_rng(self.seed)
-        self._window = np.arange(-ROUTE_WINDOW_BACK, ROUTE_WINDOW_AHEAD + 1)
+        self.alive = np.zeros(0, dtype=np.int64)  # live rows after the last map update
+        self._active = np.zeros(0, dtype=np.int64)
+        self._active_rows = np.zeros(0, dtype=np.int64)
 
     # ------------------------------------------------------------------ providers
     def add_provider(self, provider: Provider) -> None:
@@ -117,6 +123,7 @@ class Simulation:
         if missing:
             raise RuntimeError(f"no provider created a vehicle for agents {missing}")
         self.agent_active[:] = True
+        self._refresh_active()
         rows = self.table.alive_rows
         self.not_moving.reset_rows(rows, self.table.x[rows], self.table.y[rows], 0.0)
         self._update_map_state()
@@ -147,6 +154,7 @@ class Simulation:
                     self.providers[owner].release(self, rows[self.table.owner[rows] == owner])
             self.table.remove(rows)
             self.agent_active[finished] = False
+            self._refresh_active()
         return finished
 
     def close(self) -> None:
@@ -156,90 +164,87 @@ class Simulation:
     # ------------------------------------------------------------------ per-step state
     @property
     def active_agents(self) -> np.ndarray:
-        return np.flatnonzero(self.agent_active)
+        """Indices of the agents still in the episode (cached; refreshed when agents leave)."""
+        return self._active
+
+    @property
+    def active_rows(self) -> np.ndarray:
+        """Table rows of ``active_agents``, in the same order."""
+        return self._active_rows
+
+    def _refresh_active(self) -> None:
+        self._active = np.flatnonzero(self.agent_active)
+        self._active_rows = self.agent_row[self._active]
 
     def _update_map_state(self) -> None:
         t = self.table
         rows = t.alive_rows
+        self.alive = rows
         if rows.size == 0:
             return
-        xy = np.stack([t.x[rows], t.y[rows]], axis=1)
-        proj = project(self.road_map, xy, t.heading[rows])
+        proj = project(self.road_map, t.data[_XY][:, rows].T, t.heading[rows])
         t.lane[rows] = proj.lane
-        t.s[rows] = proj.s
-        t.t[rows] = proj.t
-        t.lane_heading[rows] = proj.lane_heading
-        t.lane_distance[rows] = proj.distance
+        t.data[_LANE_STATE[:, None], rows] = (proj.s, proj.t, proj.lane_heading, proj.distance)
 
     def _update_route_progress(self, first: bool) -> None:
         """Track each agent's nearest point on its route path within a small moving window."""
-        agents = self.active_agents
-        if agents.size == 0:
-            self.route_progress_delta[:] = 0.0
-            return
-        ma = self.mission_arrays
-        rows = self.agent_row[agents]
-        x, y = self.table.x[rows], self.table.y[rows]
-        if first:
-            idx = np.zeros(len(agents), dtype=np.int64)
-            window = np.arange(0, min(ma.path_s.shape[1], 4 * ROUTE_WINDOW_AHEAD))[None, :]
-            cand = np.minimum(window, ma.path_len[agents, None] - 1)
-        else:
-            idx = self.route_index[agents]
-            cand = np.clip(idx[:, None] + self._window[None, :], 0, ma.path_len[agents, None] - 1)
-        pts = ma.paths[agents[:, None], 0, cand]  # [n, w, 3]
-        d2 = (pts[..., 0] - x[:, None]) ** 2 + (pts[..., 1] - y[:, None]) ** 2
-        best = cand[np.arange(len(agents)), d2.argmin(axis=1)]
-        p = ma.paths[agents, 0, best]
-        along = (x - p[:, 0]) * np.cos(p[:, 2]) + (y - p[:, 1]) * np.sin(p[:, 2])
-        progress = np.clip(ma.path_s[agents, best] + along, 0.0, ma.route_length[agents])
         self.route_progress_delta[:] = 0.0
-        if not first:
-            self.route_progress_delta[agents] = progress - self.route_progress[agents]
-        self.route_progress[agents] = progress
-        self.route_index[agents] = best
+        ma = self.mission_arrays
+        _route_progress(
+            self.table.data, self._active, self._active_rows, ma.flat_paths, ma.stride, ma.path_len,
+            ma.path_s, ma.route_length, self.route_index, self.route_progress,
+            self.route_progress_delta, first,
+        )
 
     def _update_events(self) -> None:
-        t = self.table
-        rm = self.road_map
-        ev = self.agent_events
-        ev[:] = False
-        agents = self.active_agents
-        if agents.size == 0:
-            return
-        rows = self.agent_row[agents]
-        alive = t.alive_rows
-        # Collisions against every live vehicle, pedestrians included.
-        corners = t.corners(alive)
-        radius = 0.5 * np.hypot(t.length[alive], t.width[alive])
-        hit = box_collisions(corners, t.x[alive], t.y[alive], radius)
-        row_pos = np.searchsorted(alive, rows)
-        ev[agents, Event.COLLISION] = hit[row_pos]
-        # Road surface: centre and four corners in one raster lookup.
-        agent_corners = corners[row_pos]
-        pts = np.concatenate([np.stack([t.x[rows], t.y[rows]], axis=1)[:, None], agent_corners], axis=1)
-        surface = on_road(rm, pts)  # [n, 5]
-        ev[agents, Event.OFF_ROAD] = ~surface[:, 0]
-        ev[agents, Event.PARTIAL_OFF_ROAD] = ~surface.all(axis=1)
-        lane = t.lane[rows]
-        ev[agents, Event.WRONG_WAY] = wrong_way(t.heading[rows], t.lane_heading[rows], lane, rm.lane_internal)
         ma = self.mission_arrays
-        safe_lane = np.maximum(lane, 0)
-        road = rm.lane_road[safe_lane]
-        on_route = ma.on_route_road[agents, road] | rm.lane_internal[safe_lane]
-        ev[agents, Event.OFF_ROUTE] = (lane >= 0) & ~on_route
-        # Goals.
-        kind = ma.goal_kind[agents]
-        gd = np.hypot(t.x[rows] - ma.goal_xy[agents, 0], t.y[rows] - ma.goal_xy[agents, 1])
-        reached_pos = (kind == GOAL_POSITION) & (gd <= ma.goal_radius[agents])
-        on_goal_road = (lane >= 0) & (road == ma.goal_road[agents])
-        lane_ok = (ma.goal_lane[agents] < 0) | (lane == ma.goal_lane[agents])
-        reached_road = (kind == GOAL_ROAD) & on_goal_road & lane_ok & (t.s[rows] >= ma.goal_s[agents])
-        ev[agents, Event.REACHED_GOAL] = reached_pos | reached_road
-        ev[agents, Event.NOT_MOVING] = self.not_moving.update(rows, t.x[rows], t.y[rows], self.time)
-        ev[agents, Event.MAX_STEPS] = self.step_count >= self.episode_steps
-        self.agent_done[agents] = (ev[agents] & self.event_config.terminate_on).any(axis=1)
-        self.agent_done[agents] |= ev[agents, Event.MAX_STEPS]
+        origin, inv_res, cell_max, width, flat = raster_lookup(self.road_map)
+        self.agent_events[~self.agent_active] = False
+        agent_events(
+            self.table.data, self.table.lane, self.alive, self._active, self._active_rows,
+            flat, width, origin, inv_res, cell_max,
+            self.road_map.lane_internal, self.road_map.lane_road, ma.on_route_road,
+            ma.goal_kind, ma.goal_xy, ma.goal_radius, ma.goal_road, ma.goal_lane, ma.goal_s,
+            self.not_moving.anchor, self.not_moving.anchor_time,
+            self.not_moving.seconds, self.not_moving.distance, self.time,
+            self.step_count >= self.episode_steps, self.event_config.terminate_on,
+            self.agent_events, self.agent_done,
+        )
+
+
+@numba.njit(cache=True, nogil=True)
+def _route_progress(
+    data, agents, rows, flat_paths, stride, path_len, path_s, route_length,
+    route_index, route_progress, delta, first,
+):  # pragma: no cover - compiled
+    """Nearest route point in a window around the last one, and the arc length reached."""
+    for i in range(agents.shape[0]):
+        a, r = agents[i], rows[i]
+        x, y = data[_X, r], data[_Y, r]
+        last = path_len[a] - 1
+        if first:
+            lo, hi = 0, min(4 * ROUTE_WINDOW_AHEAD, last)
+        else:
+            lo = max(route_index[a] - ROUTE_WINDOW_BACK, 0)
+            hi = min(route_index[a] + ROUTE_WINDOW_AHEAD, last)
+        best, best_d2 = lo, np.inf
+        for k in range(lo, hi + 1):
+            p = flat_paths[a * stride + k, 0]
+            d2 = (p[0] - x) ** 2 + (p[1] - y) ** 2
+            if d2 < best_d2:
+                best, best_d2 = k, d2
+        p = flat_paths[a * stride + best, 0]
+        along = (x - p[0]) * math.cos(p[2]) + (y - p[1]) * math.sin(p[2])
+        progress = min(max(path_s[a, best] + along, 0.0), route_length[a])
+        if not first:
+            delta[a] = progress - route_progress[a]
+        route_progress[a] = progress
+        route_index[a] = best
+
+
+_X, _Y = COLUMN["x"], COLUMN["y"]
+_XY = [COLUMN["x"], COLUMN["y"]]
+_LANE_STATE = np.array([COLUMN[c] for c in ("s", "t", "lane_heading", "lane_distance")])
 
 
 def _default_terminations() -> np.ndarray:

@@ -11,6 +11,8 @@ from enum import IntEnum
 
 import numpy as np
 
+from smarts.core.geometry import box_corners
+
 
 class Role(IntEnum):
     """Who a row belongs to, as seen by observations and metrics."""
@@ -50,7 +52,7 @@ class VehicleTable:
     and ``lane_heading`` are written by the simulation after every step from the map projection.
     """
 
-    FLOAT_COLUMNS = (
+    FLOAT_COLUMNS: tuple[str, ...] = (
         "x",
         "y",
         "heading",
@@ -73,8 +75,11 @@ class VehicleTable:
         if capacity <= 0:
             raise ValueError(f"vehicle table capacity must be positive, got {capacity}")
         self.capacity = capacity
-        for name in self.FLOAT_COLUMNS:
-            setattr(self, name, np.zeros(capacity, dtype=np.float64))
+        # One [columns, capacity] block: each column is a contiguous view (struct of arrays), and
+        # ``data[:, rows]`` gathers every column of some rows in a single call.
+        self.data = np.zeros((len(self.FLOAT_COLUMNS), capacity), dtype=np.float64)
+        for i, name in enumerate(self.FLOAT_COLUMNS):
+            setattr(self, name, self.data[i])
         self.lane = np.full(capacity, -1, dtype=np.int32)
         self.role = np.zeros(capacity, dtype=np.int8)
         self.vtype = np.zeros(capacity, dtype=np.int8)
@@ -117,8 +122,7 @@ class VehicleTable:
             )
         row = int(free[0])
         dl, dw, dh, _ = VEHICLE_DIMENSIONS[VehicleType(vtype)]
-        for name in self.FLOAT_COLUMNS:
-            getattr(self, name)[row] = 0.0
+        self.data[:, row] = 0.0
         self.x[row], self.y[row], self.heading[row], self.speed[row] = x, y, heading, speed
         self.length[row] = dl if length is None else length
         self.width[row] = dw if width is None else width
@@ -161,14 +165,10 @@ class VehicleTable:
     # ------------------------------------------------------------------ geometry
     def corners(self, rows: np.ndarray) -> np.ndarray:
         """Box corners float64[n, 4, 2] (front-left, front-right, rear-right, rear-left)."""
-        c, s = np.cos(self.heading[rows]), np.sin(self.heading[rows])
-        hl, hw = 0.5 * self.length[rows], 0.5 * self.width[rows]
-        fx, fy = c * hl, s * hl  # half-length along heading
-        lx, ly = -s * hw, c * hw  # half-width to the left
-        x, y = self.x[rows], self.y[rows]
-        out = np.empty((len(rows), 4, 2))
-        out[:, 0, 0], out[:, 0, 1] = x + fx + lx, y + fy + ly
-        out[:, 1, 0], out[:, 1, 1] = x + fx - lx, y + fy - ly
-        out[:, 2, 0], out[:, 2, 1] = x - fx - lx, y - fy - ly
-        out[:, 3, 0], out[:, 3, 1] = x - fx + lx, y - fy + ly
-        return out
+        d = self.data[_BOX_COLUMNS][:, rows]
+        return box_corners(d[0], d[1], d[2], d[3], d[4])
+
+
+COLUMN = {name: i for i, name in enumerate(VehicleTable.FLOAT_COLUMNS)}
+"""Row of each float column in ``VehicleTable.data``."""
+_BOX_COLUMNS = [COLUMN[c] for c in ("x", "y", "heading", "length", "width")]

@@ -10,11 +10,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from smarts.core.geometry import wrap_angle
 from smarts.core.provider import ProviderBase
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import Role, VehicleType
-from smarts.dynamics.action_spaces import ACTION_COMPONENTS, ActionSpaceType, check_actions, lane_command
+from smarts.dynamics.action_spaces import ActionError, ActionSpaceType, check_actions, lane_command
 from smarts.dynamics.bicycle import wheelbase_for_length
 from smarts.dynamics.lane_control import lane_control_step
 from smarts.dynamics.limits import ReachLimits
@@ -50,7 +49,6 @@ class AgentProvider(ProviderBase):
             members = [i for i, v in enumerate(vehicles) if v.action_space is kind]
             if members:
                 self.groups[kind] = np.array(members, dtype=np.int64)
-        self._zero = {kind: np.zeros(len(ACTION_COMPONENTS[kind])) for kind in ActionSpaceType}
         self.world: PhysicsWorld | None = None
         self.handles = np.full(len(vehicles), -1, dtype=np.int64)
         self.lane_offset = np.zeros(len(vehicles), dtype=np.int64)  # lane agents: 0 route, +1 left, -1 right
@@ -108,8 +106,7 @@ class AgentProvider(ProviderBase):
             if members.size == 0:
                 continue
             ids = [sim.agent_ids[i] for i in members]
-            zero = self._zero[kind]
-            actions = check_actions(kind, np.stack([sim.actions.get(a, zero) for a in ids]), ids)
+            actions = self._gather(kind, sim.actions, ids)
             rows = sim.agent_row[members]
             if kind is ActionSpaceType.RELATIVE_TARGET_POSE:
                 apply_relative_pose(sim.table, rows, actions, dt, self.limits)
@@ -119,7 +116,21 @@ class AgentProvider(ProviderBase):
                 apply_continuous(self.world, sim.table, rows, self.handles[members], actions, dt)
             else:
                 self._lane_step(sim, members, rows, actions, dt)
-            sim.table.heading[rows] = wrap_angle(sim.table.heading[rows])
+
+    @staticmethod
+    def _gather(kind: ActionSpaceType, actions: dict, ids: list[str]) -> np.ndarray:
+        """One float64 array of the group's actions; malformed ones raise ``ActionError`` by agent."""
+        try:
+            arr = np.array([actions[a] for a in ids], dtype=np.float64)
+        except (KeyError, TypeError, ValueError):
+            arr = None
+        if arr is None or arr.ndim != 2 or not np.isfinite(arr).all():
+            for a in ids:  # find the culprit(s) to name them
+                if a not in actions:
+                    raise ActionError(f"{a}: no action given this step", [a])
+                check_actions(kind, np.atleast_1d(np.asarray(actions[a], dtype=object))[None], [a])
+            check_actions(kind, arr, ids)
+        return arr
 
     def _lane_step(self, sim: Simulation, members, rows, actions, dt) -> None:
         """Follow the route path or the path one lane left/right of it (see ``MissionArrays``)."""
@@ -129,12 +140,12 @@ class AgentProvider(ProviderBase):
         path = np.where(offset > 0, 1, np.where(offset < 0, 2, 0))
         ahead = np.maximum(sim.table.speed[rows] * LANE_LOOKAHEAD_TIME, LANE_MIN_LOOKAHEAD)
         idx = np.minimum(sim.route_index[members] + np.ceil(ahead).astype(np.int64), ma.path_len[members] - 1)
-        feasible = ma.path_valid[members, path, idx]
+        feasible = ma.path_valid[members, idx, path]
         kept = self.lane_offset[members]
         kept_path = np.where(kept > 0, 1, np.where(kept < 0, 2, 0))
-        kept = np.where(ma.path_valid[members, kept_path, idx], kept, 0)  # that lane ended: route lane
+        kept = np.where(ma.path_valid[members, idx, kept_path], kept, 0)  # that lane ended: route lane
         offset = np.where(feasible, offset, kept)
         path = np.where(offset > 0, 1, np.where(offset < 0, 2, 0))
         self.lane_offset[members] = offset
-        target = ma.paths[members, path, idx, :2]
+        target = ma.paths[members, idx, path, :2]
         lane_control_step(sim.table, rows, target_speed, target, dt, self.limits, self.wheelbase[members])

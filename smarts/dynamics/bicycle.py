@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from smarts.dynamics.pose_control import wrap_angle
+from smarts.core.geometry import wrap_angle
 
 # Wheelbase as a fraction of the overall length when a vehicle type does not say (sedan: 2.7 / 4.5).
 WHEELBASE_FRACTION = 0.6

@@ -19,7 +19,7 @@ import numpy as np
 from smarts.core.vehicle_table import VehicleTable
 from smarts.dynamics.bicycle import bicycle_step
 from smarts.dynamics.limits import ReachLimits
-from smarts.dynamics.pose_control import wrap_angle
+from smarts.core.geometry import wrap_angle
 
 DEFAULT_SPEED_GAIN = 2.0  # 1/s: closes half the speed gap in about a third of a second
 

@@ -1,6 +1,8 @@
 """Pose action spaces: move vehicles to a requested next pose, limited to what a car can reach.
 
-A request is limited in this order, all vectorised over the vehicles:
+A request is limited in this order:
+
+All of it runs in one compiled loop over the vehicles (see ``_limit_one``).
 
 1. Speed. The displacement length ``d`` implies the speed ``d / dt``; it is clipped to the speeds
    reachable from the current one, ``[v0 - max_decel*dt, v0 + max_accel*dt]`` intersected with
@@ -16,20 +18,16 @@ The achieved speed written to the table is ``d / dt`` of the limited displacemen
 
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
 
-from smarts.core.vehicle_table import VehicleTable
+from smarts.core.geometry import wrap_angle, wrap_scalar
+
+from smarts.core.vehicle_table import COLUMN, VehicleTable
 from smarts.dynamics.action_spaces import ActionSpaceType, check_actions
 from smarts.dynamics.limits import ReachLimits
-
-_TWO_PI = 2.0 * np.pi
-_INV_TWO_PI = 1.0 / _TWO_PI
-
-
-def wrap_angle(angle):
-    """Wrap angles (scalar or array) to (-pi, pi]; angles already in range come back unchanged."""
-    return angle + _TWO_PI * np.floor((np.pi - angle) * _INV_TWO_PI)
-
 
 def limit_relative_pose(
     dxdydh: np.ndarray, speed: np.ndarray, dt: float, limits: ReachLimits
@@ -39,35 +37,95 @@ def limit_relative_pose(
     ``speed`` is the current signed forward speed of each vehicle. Returns the reachable
     ``(dx, dy, dh, new_speed)``; inputs must be finite (see ``check_actions``).
     """
-    dx, dy, dh = dxdydh[:, 0], dxdydh[:, 1], dxdydh[:, 2]
-    dist = np.hypot(dx, dy)
+    req = np.ascontiguousarray(dxdydh, dtype=np.float64)
+    out = np.empty((len(req), 4))
+    _limit_kernel(req, np.ascontiguousarray(speed, dtype=np.float64), dt, _limit_params(limits), out)
+    return out[:, 0], out[:, 1], out[:, 2], out[:, 3]
+
+
+def _limit_params(limits: ReachLimits) -> np.ndarray:
+    return np.array(
+        [
+            limits.max_speed,
+            limits.max_accel,
+            limits.max_decel,
+            limits.max_yaw_rate,
+            limits.max_curvature,
+            limits.max_slip,
+            1.0 if limits.allow_reverse else 0.0,
+            limits.max_reverse_speed,
+        ]
+    )
+
+
+@numba.njit(cache=True, nogil=True)
+def _limit_one(dx, dy, dh, v0, dt, params):  # pragma: no cover - compiled
+    """The limiter for one request; see the module docstring for the order of the limits."""
+    max_speed, max_accel, max_decel, max_yaw_rate, max_curvature, max_slip = params[:6]
+    allow_reverse, max_reverse_speed = params[6] > 0.0, params[7]
+    dist = math.hypot(dx, dy)
     backward = dx < 0.0
-    if limits.allow_reverse:
-        step0 = speed * dt
+    if allow_reverse:
+        step0 = v0 * dt
         # Braking is limited by max_decel, speeding up (either way) by max_accel.
-        d_min = step0 - np.where(speed > 0.0, limits.max_decel, limits.max_accel) * (dt * dt)
-        d_max = step0 + np.where(speed < 0.0, limits.max_decel, limits.max_accel) * (dt * dt)
-        d = np.where(backward, -dist, dist)
-        d = np.minimum(np.maximum(d, -limits.max_reverse_speed * dt), limits.max_speed * dt)
+        d_min = step0 - (max_decel if v0 > 0.0 else max_accel) * dt * dt
+        d_max = step0 + (max_decel if v0 < 0.0 else max_accel) * dt * dt
+        d = -dist if backward else dist
+        d = min(max(d, -max_reverse_speed * dt), max_speed * dt)
         # Angle of the displacement from the axis the car moves along (its rear when backward).
-        direction = np.arctan2(np.where(backward, -dy, dy), np.abs(dx))
+        direction = math.atan2(-dy if backward else dy, abs(dx))
     else:
-        step0 = np.maximum(speed, 0.0) * dt
-        d_min = step0 - limits.max_decel * (dt * dt)
-        d_max = step0 + limits.max_accel * (dt * dt)
-        d = np.minimum(dist * ~backward, limits.max_speed * dt)  # backward: a stop request
-        direction = np.arctan2(dy, np.abs(dx))
+        step0 = max(v0, 0.0) * dt
+        d_min = step0 - max_decel * dt * dt
+        d_max = step0 + max_accel * dt * dt
+        d = 0.0 if backward else min(dist, max_speed * dt)  # backward: a stop request
+        direction = math.atan2(dy, abs(dx))
     # Clipping to the speed caps first and then to what accel/decel reach from the current speed
     # gives their intersection, or (above max_speed) the nearest speed the brakes can reach.
-    d = np.minimum(np.maximum(d, d_min), d_max)
-    d_abs = np.abs(d) if limits.allow_reverse else d
+    d = min(max(d, d_min), d_max)
+    turn = min(max_curvature * abs(d), max_yaw_rate * dt)
+    dh = min(max(dh, -turn), turn)
+    chord = 0.5 * dh
+    direction = chord + min(max(direction - chord, -max_slip), max_slip)
+    return d * math.cos(direction), d * math.sin(direction), dh, d / dt
 
-    turn = np.minimum(limits.max_curvature * d_abs, limits.max_yaw_rate * dt)
-    dh_lim = np.minimum(np.maximum(dh, -turn), turn)
 
-    chord = 0.5 * dh_lim
-    direction = chord + np.minimum(np.maximum(direction - chord, -limits.max_slip), limits.max_slip)
-    return d * np.cos(direction), d * np.sin(direction), dh_lim, d * (1.0 / dt)
+@numba.njit(cache=True, nogil=True)
+def _limit_kernel(req, speed, dt, params, out):  # pragma: no cover - compiled
+    for i in range(req.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = _limit_one(
+            req[i, 0], req[i, 1], req[i, 2], speed[i], dt, params
+        )
+
+
+@numba.njit(cache=True, nogil=True)
+def _move_kernel(data, rows, req, world_frame, dt, params):  # pragma: no cover - compiled
+    """Limit each row's request and write its new pose and derived kinematic columns."""
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        x, y, h = data[_X, r], data[_Y, r], data[_H, r]
+        c, s = math.cos(h), math.sin(h)
+        dx, dy, dh = req[i, 0], req[i, 1], req[i, 2]
+        if world_frame:  # a target pose: express it in the vehicle frame first
+            wx, wy = dx - x, dy - y
+            dx, dy = c * wx + s * wy, c * wy - s * wx
+            dh = wrap_scalar(dh - h)
+        dx, dy, dh, v = _limit_one(dx, dy, dh, data[_SPEED, r], dt, params)
+        accel = (v - data[_SPEED, r]) / dt
+        yaw_rate = dh / dt
+        data[_X, r] = x + c * dx - s * dy
+        data[_Y, r] = y + s * dx + c * dy
+        data[_H, r] = wrap_scalar(h + dh)
+        data[_JERK, r] = (accel - data[_ACCEL, r]) / dt
+        data[_ACCEL, r] = accel
+        data[_SPEED, r] = v
+        data[_YAW_RATE, r] = yaw_rate
+        data[_LAT_ACCEL, r] = v * yaw_rate
+
+
+_X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
+_SPEED, _ACCEL, _JERK = COLUMN["speed"], COLUMN["accel"], COLUMN["jerk"]
+_YAW_RATE, _LAT_ACCEL = COLUMN["yaw_rate"], COLUMN["lat_accel"]
 
 
 def _checked(
@@ -80,38 +138,15 @@ def _checked(
     return actions
 
 
-def _write_motion(
-    table: VehicleTable,
-    rows: np.ndarray,
-    heading: np.ndarray,
-    dx: np.ndarray,
-    dy: np.ndarray,
-    dh: np.ndarray,
-    speed: np.ndarray,
-    dt: float,
-) -> None:
-    """Move rows by a vehicle-frame displacement and write the derived kinematic columns."""
-    c, s = np.cos(heading), np.sin(heading)
-    table.x[rows] += c * dx - s * dy
-    table.y[rows] += s * dx + c * dy
-    table.heading[rows] = wrap_angle(heading + dh)
-    accel = (speed - table.speed[rows]) / dt
-    table.jerk[rows] = (accel - table.accel[rows]) / dt
-    table.accel[rows] = accel
-    table.speed[rows] = speed
-    yaw_rate = dh / dt
-    table.yaw_rate[rows] = yaw_rate
-    table.lat_accel[rows] = speed * yaw_rate
-
-
 def apply_relative_pose(
     table: VehicleTable, rows: np.ndarray, actions: np.ndarray, dt: float, limits: ReachLimits
 ) -> None:
-    """Drive ``rows`` by RelativeTargetPose actions ``[n, 3]`` (dx, dy, dheading; vehicle frame)."""
+    """Drive ``rows`` by RelativeTargetPose actions ``[n, 3]`` (dx, dy, dheading; vehicle frame).
+
+    Writes x, y, heading, speed, accel, jerk, yaw_rate and lat_accel of the rows in place.
+    """
     actions = _checked(ActionSpaceType.RELATIVE_TARGET_POSE, actions, table, rows)
-    heading = table.heading[rows]
-    dx, dy, dh, speed = limit_relative_pose(actions, table.speed[rows], dt, limits)
-    _write_motion(table, rows, heading, dx, dy, dh, speed, dt)
+    _move_kernel(table.data, np.asarray(rows, dtype=np.int64), actions, False, dt, _limit_params(limits))
 
 
 def world_to_relative(
@@ -137,7 +172,4 @@ def apply_target_pose(
     The target becomes a vehicle-frame request and is limited exactly like RelativeTargetPose.
     """
     actions = _checked(ActionSpaceType.TARGET_POSE, actions, table, rows)
-    heading = table.heading[rows]
-    rel = world_to_relative(table, rows, actions)
-    dx, dy, dh, speed = limit_relative_pose(rel, table.speed[rows], dt, limits)
-    _write_motion(table, rows, heading, dx, dy, dh, speed, dt)
+    _move_kernel(table.data, np.asarray(rows, dtype=np.int64), actions, True, dt, _limit_params(limits))

@@ -51,6 +51,8 @@ class DrivingParallelEnv(ParallelEnv):
             for a in self.scenario.agents
         }
         self._renderer = None
+        self._terminal_events = self.sim.event_config.terminate_on.copy()
+        self._terminal_events[Event.MAX_STEPS] = False
 
     # ------------------------------------------------------------------ spaces
     def observation_space(self, agent: str) -> gym.spaces.Dict:
@@ -75,25 +77,30 @@ class DrivingParallelEnv(ParallelEnv):
         missing = [a for a in self.agents if a not in actions]
         if missing:
             raise ActionError(f"no action given for live agents {missing}", missing)
-        self.sim.step(actions)
-        agents = self.sim.active_agents
-        ids = [self.sim.agent_ids[i] for i in agents]
-        obs = self._split(self.builder.build(self.sim, agents), agents)
-        reward = default_rewards(self.sim, agents, self.scenario.reward)
-        events = self.sim.agent_events[agents]
-        done = self.sim.agent_done[agents]
-        truncated = done & events[:, Event.MAX_STEPS] & ~(events & self.sim.event_config.terminate_on)[:, : Event.MAX_STEPS].any(axis=1)
-        terminated = done & ~truncated
-        rewards = dict(zip(ids, reward.tolist()))
-        terminations = dict(zip(ids, terminated.tolist()))
-        truncations = dict(zip(ids, truncated.tolist()))
+        sim = self.sim
+        sim.step(actions)
+        agents = sim.active_agents
+        ids = [sim.agent_ids[i] for i in agents]
+        obs = self._split(self.builder.build(sim, agents), agents)
+        reward = default_rewards(sim, agents, self.scenario.reward)
+        events = sim.agent_events[agents]
+        done = sim.agent_done[agents]
+        # Truncated: only the step limit ended the episode; terminated: a terminal event did.
+        terminated = (events & self._terminal_events).any(axis=1)
+        truncated = done & ~terminated
         infos: dict[str, dict] = {a: {} for a in ids}
         if events.any():
             for k in np.flatnonzero(events.any(axis=1)):
                 infos[ids[k]]["events"] = [EVENT_NAMES[e] for e in np.flatnonzero(events[k])]
-        self.sim.remove_done_agents()
-        self.agents = [a for a, d in zip(ids, done) if not d]
-        return obs, rewards, terminations, truncations, infos
+        sim.remove_done_agents()
+        self.agents = [a for a, d in zip(ids, done.tolist()) if not d]
+        return (
+            obs,
+            dict(zip(ids, reward.tolist())),
+            dict(zip(ids, terminated.tolist())),
+            dict(zip(ids, truncated.tolist())),
+            infos,
+        )
 
     def _split(self, batch: dict[str, np.ndarray], agents: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
         ids = self.sim.agent_ids

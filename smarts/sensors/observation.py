@@ -23,12 +23,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import gymnasium as gym
+import math
+
+import numba
 import numpy as np
 
 from smarts.core.events import NUM_EVENTS
-from smarts.core.geometry import wrap_angle
-from smarts.core.missions import GOAL_NONE
+from smarts.core.geometry import wrap_scalar
 from smarts.core.simulation import Simulation
+from smarts.core.vehicle_table import COLUMN
 
 EGO_FEATURES = 12
 NEIGHBOUR_FEATURES = 8
@@ -79,106 +82,129 @@ class ObservationBuilder:
         self.config = config or ObservationConfig()
         self.space = observation_space(self.config)
         self._offsets = np.arange(self.config.waypoints) * self.config.waypoint_spacing
+        self._lane_info_map = None
+        self._lane_info_cache = np.zeros((0, 2))
 
     def build(self, sim: Simulation, agents: np.ndarray) -> dict[str, np.ndarray]:
         cfg = self.config
-        t = sim.table
-        rm = sim.road_map
-        n = len(agents)
-        rows = sim.agent_row[agents]
-        x, y, h = t.x[rows], t.y[rows], t.heading[rows]
-        c, s = np.cos(h), np.sin(h)
-
-        ego = np.empty((n, EGO_FEATURES), dtype=np.float32)
-        lane = np.maximum(t.lane[rows], 0)
-        ego[:, 0] = t.speed[rows]
-        ego[:, 1] = t.accel[rows]
-        ego[:, 2] = t.jerk[rows]
-        ego[:, 3] = t.lat_accel[rows]
-        ego[:, 4] = t.yaw_rate[rows]
-        ego[:, 5] = t.steering[rows]
-        ego[:, 6] = wrap_angle(h - t.lane_heading[rows])
-        ego[:, 7] = t.t[rows]
-        ego[:, 8] = rm.lane_width[lane]
-        ego[:, 9] = rm.lane_speed_limit[lane]
-        ego[:, 10] = t.length[rows]
-        ego[:, 11] = t.width[rows]
-
-        neighbours, neighbour_mask = self._neighbours(sim, rows, x, y, h, c, s)
-
         ma = sim.mission_arrays
-        idx = np.minimum(sim.route_index[agents, None] + self._offsets, ma.path_len[agents, None] - 1)
-        in_range = sim.route_index[agents, None] + self._offsets < ma.path_len[agents, None]
-        pts = ma.paths[agents[:, None, None], np.arange(NUM_PATHS)[None, :, None], idx[:, None, :]]
-        dx = pts[..., 0] - x[:, None, None]
-        dy = pts[..., 1] - y[:, None, None]
-        cc, ss = c[:, None, None], s[:, None, None]
-        waypoints = np.empty((n, NUM_PATHS, cfg.waypoints, 3), dtype=np.float32)
-        waypoints[..., 0] = cc * dx + ss * dy
-        waypoints[..., 1] = -ss * dx + cc * dy
-        waypoints[..., 2] = wrap_angle(pts[..., 2] - h[:, None, None])
-        valid = ma.path_valid[agents[:, None, None], np.arange(NUM_PATHS)[None, :, None], idx[:, None, :]]
-        waypoint_mask = (valid & in_range[:, None, :]).astype(np.float32)
-        waypoints *= waypoint_mask[..., None]
-
-        goal = np.zeros((n, GOAL_FEATURES), dtype=np.float32)
-        has_goal = ma.goal_kind[agents] != GOAL_NONE
-        gdx = ma.goal_xy[agents, 0] - x
-        gdy = ma.goal_xy[agents, 1] - y
-        goal[:, 0] = np.where(has_goal, c * gdx + s * gdy, 0.0)
-        goal[:, 1] = np.where(has_goal, -s * gdx + c * gdy, 0.0)
-        goal[:, 2] = ma.route_length[agents] - sim.route_progress[agents]
-        goal[:, 3] = has_goal
-
-        return {
-            "ego": ego,
-            "neighbours": neighbours,
-            "neighbour_mask": neighbour_mask,
-            "waypoints": waypoints,
-            "waypoint_mask": waypoint_mask,
-            "goal": goal,
-            "events": sim.agent_events[agents].astype(np.float32),
+        n, k, w = len(agents), cfg.neighbours, cfg.waypoints
+        obs = {
+            "ego": np.empty((n, EGO_FEATURES), dtype=np.float32),
+            "neighbours": np.empty((n, k, NEIGHBOUR_FEATURES), dtype=np.float32),
+            "neighbour_mask": np.empty((n, k), dtype=np.float32),
+            "waypoints": np.empty((n, NUM_PATHS, w, 3), dtype=np.float32),
+            "waypoint_mask": np.empty((n, NUM_PATHS, w), dtype=np.float32),
+            "goal": np.empty((n, GOAL_FEATURES), dtype=np.float32),
+            "events": np.empty((n, NUM_EVENTS), dtype=np.float32),
         }
+        _observe(
+            sim.table.data, sim.table.lane, sim.alive, agents, sim.agent_row[agents],
+            self._lane_info(sim.road_map), ma.flat_paths, ma.flat_valid, ma.stride,
+            sim.route_index, self._offsets, ma.goal_kind, ma.goal_xy, ma.route_length,
+            sim.route_progress, sim.agent_events, cfg.neighbour_radius**2, *obs.values(),
+        )
+        return obs
 
-    def _neighbours(self, sim, rows, x, y, h, c, s):
-        cfg = self.config
-        t = sim.table
-        n, k = len(rows), cfg.neighbours
-        out = np.zeros((n, k, NEIGHBOUR_FEATURES), dtype=np.float32)
-        mask = np.zeros((n, k), dtype=np.float32)
-        others = t.alive_rows
-        if others.size <= 1:
-            return out, mask
-        dx = t.x[others][None, :] - x[:, None]
-        dy = t.y[others][None, :] - y[:, None]
-        d2 = dx * dx + dy * dy
-        d2[others[None, :] == rows[:, None]] = np.inf
-        d2[d2 > cfg.neighbour_radius**2] = np.inf
-        m = min(k, others.size - 1)
-        if others.size - 1 > m:
-            nearest = np.argpartition(d2, m - 1, axis=1)[:, :m]
+    def _lane_info(self, rm) -> np.ndarray:
+        """(width, speed limit) per lane, stacked once per map."""
+        if self._lane_info_map is not rm:
+            self._lane_info_cache = np.stack([rm.lane_width, rm.lane_speed_limit], axis=1)
+            self._lane_info_map = rm
+        return self._lane_info_cache
+
+
+@numba.njit(cache=True, nogil=True)
+def _observe(
+    data, lane, alive, agents, rows, lane_info, flat_paths, flat_valid, stride, route_index,
+    offsets, goal_kind, goal_xy, route_length, route_progress, events, radius2,
+    ego, neighbours, neighbour_mask, waypoints, waypoint_mask, goal, events_out,
+):  # pragma: no cover - compiled
+    k_max = neighbours.shape[1]
+    near_d2 = np.empty(k_max)
+    near_row = np.empty(k_max, dtype=np.int64)
+    for i in range(agents.shape[0]):
+        a, r = agents[i], rows[i]
+        x, y, h = data[_X, r], data[_Y, r], data[_H, r]
+        c, s = math.cos(h), math.sin(h)
+        speed = data[_SPEED, r]
+
+        ego[i, 0] = speed
+        ego[i, 1] = data[_ACCEL, r]
+        ego[i, 2] = data[_JERK, r]
+        ego[i, 3] = data[_LAT_ACCEL, r]
+        ego[i, 4] = data[_YAW_RATE, r]
+        ego[i, 5] = data[_STEERING, r]
+        ego[i, 6] = wrap_scalar(h - data[_LANE_HEADING, r])
+        ego[i, 7] = data[_T, r]
+        ln = lane[r]
+        ego[i, 8] = lane_info[ln, 0] if ln >= 0 else 0.0
+        ego[i, 9] = lane_info[ln, 1] if ln >= 0 else 0.0
+        ego[i, 10] = data[_LENGTH, r]
+        ego[i, 11] = data[_WIDTH, r]
+
+        # K nearest by insertion into a sorted list (K is small); equal distances keep row order.
+        m = 0
+        for j in alive:
+            if j == r:
+                continue
+            d2 = (data[_X, j] - x) ** 2 + (data[_Y, j] - y) ** 2
+            if d2 > radius2 or (m == k_max and d2 >= near_d2[m - 1]):
+                continue
+            pos = m if m < k_max else k_max - 1
+            while pos > 0 and near_d2[pos - 1] > d2:
+                if pos < k_max:
+                    near_d2[pos], near_row[pos] = near_d2[pos - 1], near_row[pos - 1]
+                pos -= 1
+            near_d2[pos], near_row[pos] = d2, j
+            m = min(m + 1, k_max)
+        neighbours[i] = 0.0
+        neighbour_mask[i] = 0.0
+        for q in range(m):
+            j = near_row[q]
+            dx, dy = data[_X, j] - x, data[_Y, j] - y
+            rel = data[_H, j] - h
+            cr, sr = math.cos(rel), math.sin(rel)
+            nv = data[_SPEED, j]
+            neighbours[i, q, 0] = c * dx + s * dy
+            neighbours[i, q, 1] = c * dy - s * dx
+            neighbours[i, q, 2] = cr
+            neighbours[i, q, 3] = sr
+            # Relative velocity in the ego frame.
+            neighbours[i, q, 4] = nv * cr - speed
+            neighbours[i, q, 5] = nv * sr
+            neighbours[i, q, 6] = data[_LENGTH, j]
+            neighbours[i, q, 7] = data[_WIDTH, j]
+            neighbour_mask[i, q] = 1.0
+
+        # Indices past a path's end clip onto the padding rows, which are marked invalid.
+        for q in range(offsets.shape[0]):
+            flat = a * stride + min(route_index[a] + offsets[q], stride - 1)
+            for p in range(waypoints.shape[1]):
+                if flat_valid[flat, p]:
+                    dx, dy = flat_paths[flat, p, 0] - x, flat_paths[flat, p, 1] - y
+                    waypoints[i, p, q, 0] = c * dx + s * dy
+                    waypoints[i, p, q, 1] = c * dy - s * dx
+                    waypoints[i, p, q, 2] = wrap_scalar(flat_paths[flat, p, 2] - h)
+                    waypoint_mask[i, p, q] = 1.0
+                else:
+                    waypoints[i, p, q] = 0.0
+                    waypoint_mask[i, p, q] = 0.0
+
+        if goal_kind[a] != 0:
+            dx, dy = goal_xy[a, 0] - x, goal_xy[a, 1] - y
+            goal[i, 0] = c * dx + s * dy
+            goal[i, 1] = c * dy - s * dx
+            goal[i, 3] = 1.0
         else:
-            nearest = np.broadcast_to(np.arange(others.size), (n, others.size))
-        order = np.take_along_axis(d2, nearest, axis=1).argsort(axis=1, kind="stable")
-        nearest = np.take_along_axis(nearest, order, axis=1)[:, :m]
-        present = np.isfinite(np.take_along_axis(d2, nearest, axis=1))
-        nrow = others[nearest]
-        ndx = np.take_along_axis(dx, nearest, axis=1)
-        ndy = np.take_along_axis(dy, nearest, axis=1)
-        cc, ss = c[:, None], s[:, None]
-        rel_h = t.heading[nrow] - h[:, None]
-        nv = t.speed[nrow]
-        vx = nv * np.cos(t.heading[nrow]) - (t.speed[rows] * c)[:, None]
-        vy = nv * np.sin(t.heading[nrow]) - (t.speed[rows] * s)[:, None]
-        feats = out[:, :m]
-        feats[..., 0] = cc * ndx + ss * ndy
-        feats[..., 1] = -ss * ndx + cc * ndy
-        feats[..., 2] = np.cos(rel_h)
-        feats[..., 3] = np.sin(rel_h)
-        feats[..., 4] = cc * vx + ss * vy
-        feats[..., 5] = -ss * vx + cc * vy
-        feats[..., 6] = t.length[nrow]
-        feats[..., 7] = t.width[nrow]
-        feats *= present[..., None]
-        mask[:, :m] = present
-        return out, mask
+            goal[i, 0] = goal[i, 1] = goal[i, 3] = 0.0
+        goal[i, 2] = route_length[a] - route_progress[a]
+        for e in range(events.shape[1]):
+            events_out[i, e] = events[a, e]
+
+
+_X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
+_SPEED, _ACCEL, _JERK = COLUMN["speed"], COLUMN["accel"], COLUMN["jerk"]
+_LAT_ACCEL, _YAW_RATE, _STEERING = COLUMN["lat_accel"], COLUMN["yaw_rate"], COLUMN["steering"]
+_LANE_HEADING, _T = COLUMN["lane_heading"], COLUMN["t"]
+_LENGTH, _WIDTH = COLUMN["length"], COLUMN["width"]
