@@ -33,11 +33,12 @@ class VehicleType(IntEnum):
     PEDESTRIAN = 4
 
 
-# Default box size (length, width, height) in metres and mass in kg per vehicle type.
+# Typical box size (length, width, height) in metres and mass in kg per vehicle type; scenarios may
+# override each value per agent.
 VEHICLE_DIMENSIONS: dict[VehicleType, tuple[float, float, float, float]] = {
-    VehicleType.PASSENGER: (4.5, 1.8, 1.5, 1500.0),
+    VehicleType.PASSENGER: (4.6, 1.9, 1.5, 1500.0),
     VehicleType.BUS: (12.0, 2.55, 3.2, 12000.0),
-    VehicleType.TRUCK: (7.5, 2.4, 3.0, 7500.0),
+    VehicleType.TRUCK: (10.0, 2.5, 3.6, 10000.0),
     VehicleType.MOTORCYCLE: (2.2, 0.8, 1.4, 250.0),
     VehicleType.PEDESTRIAN: (0.5, 0.5, 1.7, 75.0),
 }

@@ -20,14 +20,6 @@ from smarts.dynamics.limits import ReachLimits
 from smarts.maps import RoadMap, load_map
 from smarts.scenario import ScenarioSpec, load_scenario
 
-_VEHICLE_TYPES = {
-    "passenger": VehicleType.PASSENGER,
-    "bus": VehicleType.BUS,
-    "truck": VehicleType.TRUCK,
-    "motorcycle": VehicleType.MOTORCYCLE,
-}
-
-
 def as_spec(scenario: str | Path | ScenarioSpec) -> ScenarioSpec:
     """A spec from a library name, a YAML path or a spec object."""
     return scenario if isinstance(scenario, ScenarioSpec) else load_scenario(scenario)
@@ -55,7 +47,7 @@ def build_simulation(
             AgentVehicle(
                 agent_id=agent.id,
                 action_space=ActionSpaceType(agent.action_space),
-                vtype=_VEHICLE_TYPES[agent.vehicle.type],
+                vtype=VehicleType[agent.vehicle.type.upper()],
                 length=dims.length,
                 width=dims.width,
                 height=dims.height,

@@ -8,10 +8,10 @@ memory for the life of the process.
 from __future__ import annotations
 
 import hashlib
-import os
 import tempfile
 from pathlib import Path
 
+from smarts.cache import cache_home
 from smarts.maps.errors import MapError
 from smarts.maps.opendrive import convert_opendrive
 from smarts.maps.road_map import RoadMap
@@ -25,9 +25,8 @@ _loaded: dict[str, RoadMap] = {}
 
 
 def default_cache_dir() -> Path:
-    """``$SMARTS_CACHE_DIR`` if set, else ``~/.cache/smarts/maps``."""
-    env = os.environ.get("SMARTS_CACHE_DIR")
-    return Path(env) if env else Path.home() / ".cache" / "smarts" / "maps"
+    """``<cache home>/maps`` (see ``smarts.cache``)."""
+    return cache_home() / "maps"
 
 
 def load_map(path: str | Path, cache_dir: Path | None = None) -> RoadMap:

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from smarts.cache import cache_home
 from smarts.scenario.errors import NetconvertError, ScenarioError
 
 CACHE_LAYOUT_VERSION = 2
@@ -404,9 +405,7 @@ def cache_root(cache_dir: str | os.PathLike | None = None) -> Path:
 
     ``<cache>`` is ``cache_dir`` if given, else ``$SMARTS_CACHE_DIR``, else ``~/.cache/smarts``.
     """
-    if cache_dir is None:
-        cache_dir = os.environ.get("SMARTS_CACHE_DIR") or Path.home() / ".cache" / "smarts"
-    return Path(cache_dir).expanduser() / "netconvert"
+    return (cache_home() if cache_dir is None else Path(cache_dir).expanduser()) / "netconvert"
 
 
 def cache_key(xml_files: Mapping[str, str], options: tuple[str, ...], version: str) -> str:

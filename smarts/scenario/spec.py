@@ -18,6 +18,8 @@ from typing import Any
 
 import yaml
 
+from smarts.core.vehicle_table import VEHICLE_DIMENSIONS, VehicleType
+
 from smarts.scenario.builtin_maps import BUILTIN_MAPS, builtin_map_path
 from smarts.scenario.errors import ScenarioError
 
@@ -47,10 +49,7 @@ class VehicleDimensions:
 
 
 VEHICLE_TYPES: dict[str, VehicleDimensions] = {
-    "passenger": VehicleDimensions(length=4.6, width=1.9, height=1.5, mass=1500.0),
-    "bus": VehicleDimensions(length=12.0, width=2.55, height=3.2, mass=12000.0),
-    "truck": VehicleDimensions(length=10.0, width=2.5, height=3.6, mass=10000.0),
-    "motorcycle": VehicleDimensions(length=2.2, width=0.8, height=1.4, mass=250.0),
+    t.name.lower(): VehicleDimensions(*VEHICLE_DIMENSIONS[t]) for t in VehicleType if t is not VehicleType.PEDESTRIAN
 }
 """Typical dimensions (m) and mass (kg) per vehicle type; a scenario may override each one."""
 

@@ -79,7 +79,7 @@ def test_default_cache_dir_comes_from_the_environment(
     monkeypatch.setenv("SMARTS_CACHE_DIR", str(tmp_path / "env-cache"))
     clear_memory_cache()
     load_map(straight_net)
-    assert len(list((tmp_path / "env-cache").glob("*.npz"))) == 1
+    assert len(list((tmp_path / "env-cache" / "maps").glob("*.npz"))) == 1
 
 
 def test_unknown_suffix_and_missing_file_name_the_file(tmp_path: Path) -> None:
