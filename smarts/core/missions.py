@@ -137,6 +137,10 @@ def resolve_mission(road_map: RoadMap, agent_id: str, mission, where: str) -> Re
         goal_radius = float(road_map.lane_width[int(tail[-1])])
     route = np.concatenate(route_parts + [tail if not route_parts else tail[1:]]).astype(np.int32)
     path = route_polyline(road_map, route, start_s=float(start.offset))
+    end = len(path.s)
+    if goal_kind == GOAL_POSITION:  # the path ends abreast of the goal, not at its lane's end
+        end = int(np.argmin(np.hypot(*(path.xy - goal_xy).T))) + 1
+    path_xy, path_heading, path_s, path_lane = path.xy[:end], path.heading[:end], path.s[:end], path.lane[:end]
     return ResolvedMission(
         agent_id=agent_id,
         start_lane=start_lane,
@@ -144,10 +148,10 @@ def resolve_mission(road_map: RoadMap, agent_id: str, mission, where: str) -> Re
         start_heading=heading,
         start_speed=float(start.speed),
         route=route,
-        path_xy=path.xy,
-        path_heading=path.heading,
-        path_s=path.s,
-        path_lane=path.lane.astype(np.int32),
+        path_xy=path_xy,
+        path_heading=path_heading,
+        path_s=path_s,
+        path_lane=path_lane.astype(np.int32),
         goal_kind=goal_kind,
         goal_xy=goal_xy,
         goal_radius=goal_radius,

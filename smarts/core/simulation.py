@@ -135,8 +135,8 @@ class Simulation:
 
     def step(self, actions: dict[str, np.ndarray]) -> None:
         """Advance one step. ``actions`` maps active agent ids to their action arrays."""
-        self.time += self.dt
         self.step_count += 1
+        self.time = self.step_count * self.dt  # no drift from summing dt
         self.actions = actions
         for p in self.providers:
             p.step(self, self.dt)
