@@ -103,8 +103,12 @@ class DrivingParallelEnv(ParallelEnv):
         )
 
     def _split(self, batch: dict[str, np.ndarray], agents: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
+        """Per-agent dicts of row views into the batch arrays (iterating an array is the cheap way
+        to get its row views)."""
         ids = self.sim.agent_ids
-        return {ids[i]: {k: v[j] for k, v in batch.items()} for j, i in enumerate(agents)}
+        keys = list(batch)
+        per_agent = zip(*[list(v) for v in batch.values()])
+        return {ids[i]: dict(zip(keys, values)) for i, values in zip(agents.tolist(), per_agent)}
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:
