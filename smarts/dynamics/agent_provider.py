@@ -18,7 +18,6 @@ from smarts.dynamics.bicycle import wheelbase_for_length
 from smarts.dynamics.lane_control import lane_control_step
 from smarts.dynamics.limits import ReachLimits
 from smarts.dynamics.pose_control import apply_relative_pose, apply_target_pose
-from smarts.dynamics.pybullet_chassis import PhysicsWorld, apply_continuous
 
 LANE_LOOKAHEAD_TIME = 1.0  # s of travel to the pure-pursuit point of the lane controller
 LANE_MIN_LOOKAHEAD = 6.0  # m
@@ -49,7 +48,7 @@ class AgentProvider(ProviderBase):
             members = [i for i, v in enumerate(vehicles) if v.action_space is kind]
             if members:
                 self.groups[kind] = np.array(members, dtype=np.int64)
-        self.world: PhysicsWorld | None = None
+        self.world = None  # a pybullet PhysicsWorld, created only when an agent drives Continuous
         self.handles = np.full(len(vehicles), -1, dtype=np.int64)
         self.lane_offset = np.zeros(len(vehicles), dtype=np.int64)  # lane agents: 0 route, +1 left, -1 right
         self.wheelbase = np.array([wheelbase_for_length(v.length) for v in vehicles])
@@ -58,6 +57,8 @@ class AgentProvider(ProviderBase):
     def reset(self, sim: Simulation) -> None:
         if ActionSpaceType.CONTINUOUS in self.groups:
             if self.world is None:
+                from smarts.dynamics.pybullet_chassis import PhysicsWorld  # loads pybullet
+
                 self.world = PhysicsWorld(dt=self.dt)
             else:
                 self.world.reset()
@@ -113,6 +114,8 @@ class AgentProvider(ProviderBase):
             elif kind is ActionSpaceType.TARGET_POSE:
                 apply_target_pose(sim.table, rows, actions, dt, self.limits)
             elif kind is ActionSpaceType.CONTINUOUS:
+                from smarts.dynamics.pybullet_chassis import apply_continuous
+
                 apply_continuous(self.world, sim.table, rows, self.handles[members], actions, dt)
             else:
                 self._lane_step(sim, members, rows, actions, dt)

@@ -7,7 +7,7 @@ from smarts.core.events import Event
 from smarts.core.provider import ProviderBase
 from smarts.core.vehicle_table import Role
 from smarts.env.assembly import build_simulation
-from tests.conftest import agent, make_spec
+from tests.builders import agent, make_spec
 
 FORWARD = np.array([1.0, 0.0, 0.0])  # 10 m/s at dt 0.1
 

@@ -5,7 +5,7 @@ import pytest
 
 from smarts.core.events import Event
 from smarts.env import DrivingParallelEnv
-from tests.conftest import agent, make_spec
+from tests.builders import agent, make_spec
 
 
 def _drive(env, action, steps):

@@ -4,7 +4,7 @@ from pettingzoo.test import parallel_api_test
 
 from smarts.dynamics.action_spaces import ActionError
 from smarts.env import DrivingParallelEnv
-from tests.conftest import agent, make_spec
+from tests.builders import agent, make_spec
 
 
 def test_pettingzoo_parallel_api():

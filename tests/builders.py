@@ -1,8 +1,6 @@
-"""Shared fixtures: scenarios built from the project's own maps (real netconvert output)."""
+"""Scenario specs for tests, built on the project's own maps (real netconvert output)."""
 
 from __future__ import annotations
-
-import pytest
 
 from smarts.scenario import ScenarioSpec
 
@@ -22,8 +20,3 @@ def agent(start_road="main", lane=0, offset=10.0, speed=10.0, goal=None, action_
         },
         **kw,
     }
-
-
-@pytest.fixture
-def spec_factory():
-    return make_spec
