@@ -13,7 +13,6 @@ import math
 import numba
 import numpy as np
 
-from smarts.core.geometry import wrap_angle
 from smarts.core.vehicle_table import COLUMN
 from smarts.maps.drivable import on_road_at
 
@@ -101,13 +100,6 @@ def box_collisions(corners: np.ndarray, x: np.ndarray, y: np.ndarray, radius: np
         hit,
     )
     return hit
-
-
-def wrong_way(heading: np.ndarray, lane_heading: np.ndarray, lane: np.ndarray, lane_internal: np.ndarray) -> np.ndarray:
-    """More than 90 degrees off the lane direction, ignoring junction lanes (they cross each other)."""
-    diff = np.abs(wrap_angle(heading - lane_heading))
-    on_normal_lane = (lane >= 0) & ~lane_internal[np.maximum(lane, 0)]
-    return on_normal_lane & (diff > 0.5 * np.pi)
 
 
 class NotMovingTracker:

@@ -23,11 +23,6 @@ def wrap_scalar(angle: float) -> float:  # pragma: no cover - compiled
     return angle + _TWO_PI * math.floor((math.pi - angle) * _INV_TWO_PI)
 
 
-def to_local(dx: np.ndarray, dy: np.ndarray, cos_h: np.ndarray, sin_h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotate world-frame offsets into a frame with heading h (x forward, y left)."""
-    return cos_h * dx + sin_h * dy, -sin_h * dx + cos_h * dy
-
-
 _FORWARD = np.array([1.0, 1.0, -1.0, -1.0])
 _LEFT = np.array([1.0, -1.0, -1.0, 1.0])
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from smarts.maps import RoadMap, extend_route, project, route_polyline, shortest_route
+from smarts.maps import RoadMap, extend_route, project, route_polyline, route_roads, shortest_route
 from smarts.maps.errors import MapError
 
 GOAL_NONE, GOAL_POSITION, GOAL_ROAD = 0, 1, 2
@@ -221,7 +221,7 @@ def stack_missions(road_map: RoadMap, missions: list[ResolvedMission]) -> Missio
             paths[a, :n, p, 2] = ms.path_heading
             valid[a, :n, p] = neighbour >= 0
         paths[a, n:] = paths[a, n - 1]  # padding repeats the last point (masked invalid)
-        on_route_road[a, road_map.lane_road[ms.route]] = True
+        on_route_road[a] = route_roads(road_map, ms.route)
     return MissionArrays(
         paths=paths,
         path_valid=valid,

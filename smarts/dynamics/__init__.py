@@ -4,6 +4,7 @@ The pybullet names (``PhysicsWorld``, ``ChassisState``, ``apply_continuous``) lo
 importing this package does not start pybullet (which also prints a banner on import).
 """
 
+from smarts.core.geometry import wrap_angle
 from smarts.dynamics.action_spaces import (
     ACTION_COMPONENTS,
     ActionError,
@@ -24,8 +25,6 @@ from smarts.dynamics.pose_control import (
     apply_relative_pose,
     apply_target_pose,
     limit_relative_pose,
-    world_to_relative,
-    wrap_angle,
 )
 
 _PHYSICS_NAMES = ("PhysicsWorld", "ChassisState", "apply_continuous")
@@ -58,6 +57,5 @@ __all__ = [
     "limit_relative_pose",
     "steering_for_curvature",
     "wheelbase_for_length",
-    "world_to_relative",
     "wrap_angle",
 ]

@@ -23,7 +23,7 @@ import math
 import numba
 import numpy as np
 
-from smarts.core.geometry import wrap_angle, wrap_scalar
+from smarts.core.geometry import wrap_scalar
 
 from smarts.core.vehicle_table import COLUMN, VehicleTable
 from smarts.dynamics.action_spaces import ActionSpaceType, check_actions
@@ -147,21 +147,6 @@ def apply_relative_pose(
     """
     actions = _checked(ActionSpaceType.RELATIVE_TARGET_POSE, actions, table, rows)
     _move_kernel(table.data, np.asarray(rows, dtype=np.int64), actions, False, dt, _limit_params(limits))
-
-
-def world_to_relative(
-    table: VehicleTable, rows: np.ndarray, targets: np.ndarray
-) -> np.ndarray:
-    """World-frame target poses ``[n, 3]`` (x, y, heading) as vehicle-frame (dx, dy, dheading)."""
-    heading = table.heading[rows]
-    c, s = np.cos(heading), np.sin(heading)
-    wx = targets[:, 0] - table.x[rows]
-    wy = targets[:, 1] - table.y[rows]
-    rel = np.empty((len(heading), 3))
-    rel[:, 0] = c * wx + s * wy
-    rel[:, 1] = c * wy - s * wx
-    rel[:, 2] = wrap_angle(targets[:, 2] - heading)
-    return rel
 
 
 def apply_target_pose(

@@ -1,6 +1,6 @@
 import numpy as np
 
-from smarts.core.events import NotMovingTracker, box_collisions, wrong_way
+from smarts.core.events import NotMovingTracker, box_collisions
 from smarts.core.vehicle_table import Role, VehicleTable
 
 
@@ -29,17 +29,6 @@ def test_separating_axis_of_a_rotated_box():
 def test_only_the_colliding_pair_is_flagged():
     hits = _boxes([(0, 0, 0), (3, 0.5, 0.2), (50, 0, 0)])
     assert hits.tolist() == [True, True, False]
-
-
-def test_wrong_way_ignores_junction_lanes():
-    internal = np.array([False, True])
-    flags = wrong_way(
-        heading=np.array([np.pi, np.pi, 0.3]),
-        lane_heading=np.array([0.0, 0.0, 0.0]),
-        lane=np.array([0, 1, 0]),
-        lane_internal=internal,
-    )
-    assert flags.tolist() == [True, False, False]
 
 
 def test_not_moving_after_window_and_reset_by_motion():
