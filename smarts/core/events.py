@@ -6,9 +6,8 @@ events end an episode is decided by the scenario's ``events.terminate_on`` list,
 
 from __future__ import annotations
 
-from enum import IntEnum
-
 import math
+from enum import IntEnum
 
 import numba
 import numpy as np

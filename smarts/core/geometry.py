@@ -7,7 +7,6 @@ import math
 import numba
 import numpy as np
 
-
 _TWO_PI = 2.0 * np.pi
 _INV_TWO_PI = 1.0 / _TWO_PI
 

@@ -9,9 +9,8 @@ replay plug in without the loop importing them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import math
+from dataclasses import dataclass
 
 import numba
 import numpy as np

@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from smarts.core.geometry import wrap_angle
 from smarts.core.vehicle_table import VehicleTable
 from smarts.dynamics.bicycle import bicycle_step
 from smarts.dynamics.limits import ReachLimits
-from smarts.core.geometry import wrap_angle
 
 DEFAULT_SPEED_GAIN = 2.0  # 1/s: closes half the speed gap in about a third of a second
 

@@ -24,10 +24,10 @@ import numba
 import numpy as np
 
 from smarts.core.geometry import wrap_scalar
-
 from smarts.core.vehicle_table import COLUMN, VehicleTable
 from smarts.dynamics.action_spaces import ActionSpaceType, check_actions
 from smarts.dynamics.limits import ReachLimits
+
 
 def limit_relative_pose(
     dxdydh: np.ndarray, speed: np.ndarray, dt: float, limits: ReachLimits

@@ -20,6 +20,7 @@ from smarts.dynamics.limits import ReachLimits
 from smarts.maps import RoadMap, load_map
 from smarts.scenario import ScenarioSpec, load_scenario
 
+
 def as_spec(scenario: str | Path | ScenarioSpec) -> ScenarioSpec:
     """A spec from a library name, a YAML path or a spec object."""
     return scenario if isinstance(scenario, ScenarioSpec) else load_scenario(scenario)

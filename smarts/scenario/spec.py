@@ -19,7 +19,6 @@ from typing import Any
 import yaml
 
 from smarts.core.vehicle_table import VEHICLE_DIMENSIONS, VehicleType
-
 from smarts.scenario.builtin_maps import BUILTIN_MAPS, builtin_map_path
 from smarts.scenario.errors import ScenarioError
 

@@ -20,11 +20,10 @@ Per agent:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import gymnasium as gym
-import math
-
 import numba
 import numpy as np
 
