@@ -17,7 +17,7 @@ from smarts.maps.opendrive import convert_opendrive
 from smarts.maps.road_map import RoadMap
 from smarts.maps.sumo_net import compile_sumo_net, read_map_bytes
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 """Version of the compiled arrays; bump it whenever compilation output changes meaning."""
 
 _SUFFIXES = (".net.xml", ".xodr")

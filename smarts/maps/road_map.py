@@ -86,6 +86,23 @@ class RoadMap:
     junction_shapes: list[np.ndarray] = field(default_factory=list)
     """Junction outlines (float64[k, 2]) drawn into the drivable raster and the renderer."""
 
+    # --- connections through junctions (C of them), for right of way and traffic signals ---
+    conn_from: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))  # incoming lane
+    conn_via: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))  # internal lane or -1
+    conn_to: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))  # outgoing lane
+    conn_tls: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))  # signal index or -1
+    conn_link: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))  # link index in it
+    conn_major: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # has right of way
+    conn_dir: np.ndarray = field(default_factory=lambda: np.zeros(0, "<U1"))  # s l r t L R (SUMO)
+
+    # --- traffic signals (T of them) and their fixed-time programs, phases CSR over signals ---
+    tls_ids: list[str] = field(default_factory=list)
+    tls_offset: np.ndarray = field(default_factory=lambda: np.zeros(0))  # s, program time at t=0
+    tls_phase_offsets: np.ndarray = field(default_factory=lambda: np.zeros(1, np.int64))
+    tls_phase_duration: np.ndarray = field(default_factory=lambda: np.zeros(0))  # s
+    tls_phase_state: np.ndarray = field(default_factory=lambda: np.zeros(0, "<U1"))
+    """One SUMO state string per phase (a char per link index: r, y, g/G, o, ...)."""
+
     lane_index_of: dict[str, int] = field(default_factory=dict, repr=False)
     road_index_of: dict[str, int] = field(default_factory=dict, repr=False)
 
@@ -162,7 +179,7 @@ class RoadMap:
                 if f.name in ("lane_index_of", "road_index_of", "junction_shapes"):
                     continue
                 value = data[f.name]
-                if f.name in ("lane_ids", "road_ids"):
+                if f.name in ("lane_ids", "road_ids", "tls_ids"):
                     value = [str(v) for v in value]
                 elif f.name in ("source", "content_hash"):
                     value = str(value)

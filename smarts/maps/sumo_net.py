@@ -85,6 +85,8 @@ def compile_sumo_net(path: Path) -> RoadMap:
     lane_of_id = {lane.lane_id: i for i, lane in enumerate(lanes)}
     links: set[tuple[int, int]] = set()
     via_targets: list[tuple[int, int]] = []
+    signals = _SignalReader(path, root)
+    connections: list[tuple] = []  # (from, via, to, tls, link, major, dir) of normal -> normal links
     for conn in root.findall("connection"):
         try:
             src = lane_of_slot.get((conn.get("from", ""), int(conn.get("fromLane", "-1"))))
@@ -97,6 +99,18 @@ def compile_sumo_net(path: Path) -> RoadMap:
         if src is None:
             continue
         via = conn.get("via")
+        if not conn.get("from", "").startswith(":") and (via or dst is not None):
+            connections.append(
+                (
+                    src,
+                    lane_of_id.get(via, -1) if via else -1,
+                    -1 if dst is None else dst,
+                    signals.index(conn.get("tl")),
+                    int(conn.get("linkIndex", "-1")),
+                    conn.get("state", "M") in _MAJOR_STATES,
+                    conn.get("dir", "s"),
+                )
+            )
         if via:
             via_lane = lane_of_id.get(via)
             if via_lane is None:
@@ -119,7 +133,61 @@ def compile_sumo_net(path: Path) -> RoadMap:
         if len(outline) >= 3:
             junction_shapes.append(outline)
 
-    return assemble_road_map(str(path), content_hash, lanes, sorted(links), junction_shapes)
+    road_map = assemble_road_map(str(path), content_hash, lanes, sorted(links), junction_shapes)
+    if connections:
+        cols = list(zip(*connections))
+        for name, values, dtype in zip(
+            ("conn_from", "conn_via", "conn_to", "conn_tls", "conn_link", "conn_major", "conn_dir"),
+            cols,
+            (np.int32, np.int32, np.int32, np.int32, np.int32, bool, "<U1"),
+        ):
+            setattr(road_map, name, np.array(values, dtype=dtype))
+    signals.store(road_map)
+    return road_map
+
+
+_MAJOR_STATES = ("M", "O")
+"""Connection states with right of way (SUMO: M major, O major when signals are off)."""
+
+
+class _SignalReader:
+    """Traffic-light programs (``<tlLogic>``): the first program of each signal, fixed-time."""
+
+    def __init__(self, path: Path, root: ET.Element):
+        self.ids: list[str] = []
+        self.offsets: list[float] = []
+        self.durations: list[float] = []
+        self.states: list[str] = []
+        self.phase_offsets = [0]
+        for logic in root.findall("tlLogic"):
+            tls_id = logic.get("id")
+            if tls_id is None or tls_id in self.ids:
+                continue  # further programs of a signal are alternatives; the first one runs
+            phases = logic.findall("phase")
+            if not phases:
+                raise MapError(f"{path}: <tlLogic id={tls_id!r}> has no <phase>")
+            self.ids.append(tls_id)
+            try:
+                self.offsets.append(float(logic.get("offset", "0")))
+            except ValueError:
+                raise MapError(f"{path}: <tlLogic id={tls_id!r}> has a non-numeric offset") from None
+            for phase in phases:
+                duration = _float_attr(path, phase, "duration", float("nan"))
+                if not duration > 0:
+                    raise MapError(f"{path}: a <phase> of signal {tls_id!r} needs a positive duration")
+                self.durations.append(duration)
+                self.states.append(phase.get("state", ""))
+            self.phase_offsets.append(len(self.durations))
+
+    def index(self, tls_id: str | None) -> int:
+        return self.ids.index(tls_id) if tls_id in self.ids else -1
+
+    def store(self, road_map) -> None:
+        road_map.tls_ids = list(self.ids)
+        road_map.tls_offset = np.array(self.offsets, dtype=np.float64)
+        road_map.tls_phase_offsets = np.array(self.phase_offsets, dtype=np.int64)
+        road_map.tls_phase_duration = np.array(self.durations, dtype=np.float64)
+        road_map.tls_phase_state = np.array(self.states, dtype=np.str_) if self.states else np.zeros(0, "<U1")
 
 
 def _allows_passenger_cars(lane: ET.Element) -> bool:
