@@ -1,0 +1,1 @@
+"""Policies that read observations and return actions; no simulator internals."""

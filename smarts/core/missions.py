@@ -36,6 +36,7 @@ class ResolvedMission:
     goal_road: int  # -1 unless a road goal
     goal_lane: int  # -1 for any lane of the goal road
     goal_s: float  # road goals are reached at or past this offset on the goal lane
+    on_end: str = "remove"  # or "traffic": the vehicle goes back to traffic when the mission ends
 
 
 def lane_pose_at(road_map: RoadMap, lane: int, s: float) -> tuple[np.ndarray, float]:
@@ -82,9 +83,23 @@ def _best_route(road_map: RoadMap, start: int, candidates: np.ndarray, where: st
     return best
 
 
-def resolve_mission(road_map: RoadMap, agent_id: str, mission, where: str) -> ResolvedMission:
-    """Resolve one agent's ``MissionSpec`` against the map; errors name ``where`` (the spec path)."""
+def resolve_mission(
+    road_map: RoadMap, agent_id: str, mission, where: str, traffic=None
+) -> ResolvedMission:
+    """Resolve one agent's ``MissionSpec`` against the map; errors name ``where`` (the spec path).
+
+    A mission that takes over a traffic trip starts where that trip departs (its first road, its
+    depart lane when given as a number, else lane 0, and its depart position).
+    """
     start = mission.start
+    take_over = getattr(start, "take_over", None)
+    if take_over is not None:
+        trips = {t.id: t for t in (traffic.trips if traffic is not None else [])}
+        if take_over not in trips:
+            raise MapError(f"{where}.start.take_over: no trip {take_over!r} in traffic.trips")
+        trip = trips[take_over]
+        lane = trip.depart_lane if isinstance(trip.depart_lane, int) else 0
+        start = _TakeOverStart(trip.roads[0], lane, float(trip.depart_pos), 0.0, None)
     start_lane = _lane_of(road_map, start.road, start.lane, f"{where}.start")
     lane_len = float(road_map.lane_length[start_lane])
     if not 0.0 <= start.offset <= lane_len:
@@ -158,7 +173,17 @@ def resolve_mission(road_map: RoadMap, agent_id: str, mission, where: str) -> Re
         goal_road=goal_road,
         goal_lane=goal_lane,
         goal_s=goal_s,
+        on_end=getattr(mission, "on_end", "remove"),
     )
+
+
+@dataclass
+class _TakeOverStart:
+    road: str
+    lane: int
+    offset: float
+    speed: float
+    heading: float | None
 
 
 @dataclass
@@ -183,6 +208,8 @@ class MissionArrays:
     goal_road: np.ndarray  # int32[A]
     goal_lane: np.ndarray  # int32[A]
     goal_s: np.ndarray
+    signal_via: np.ndarray  # int32[A, M] next signal-controlled junction lane on the route, -1 none
+    signal_s: np.ndarray  # float64[A, M] route arc length of that signal's stop line
 
     @property
     def stride(self) -> int:
@@ -205,6 +232,10 @@ def stack_missions(road_map: RoadMap, missions: list[ResolvedMission]) -> Missio
     valid = np.zeros((n_agents, m, 3), dtype=bool)
     path_s = np.zeros((n_agents, m))
     on_route_road = np.zeros((n_agents, len(road_map.road_ids)), dtype=bool)
+    signal_via = np.full((n_agents, m), -1, dtype=np.int32)
+    signal_s = np.zeros((n_agents, m))
+    signalled = np.zeros(road_map.num_lanes, dtype=bool)
+    signalled[road_map.conn_via[(road_map.conn_tls >= 0) & (road_map.conn_via >= 0)]] = True
     for a, ms in enumerate(missions):
         n = len(ms.path_s)
         paths[a, :n, 0, :2] = ms.path_xy
@@ -222,6 +253,15 @@ def stack_missions(road_map: RoadMap, missions: list[ResolvedMission]) -> Missio
             valid[a, :n, p] = neighbour >= 0
         paths[a, n:] = paths[a, n - 1]  # padding repeats the last point (masked invalid)
         on_route_road[a] = route_roads(road_map, ms.route)
+        # Points where the path enters a signalled junction lane: the stop line. Each point then
+        # refers to the next such entry at or ahead of it.
+        entries = np.flatnonzero(signalled[ms.path_lane[1:]] & (ms.path_lane[1:] != ms.path_lane[:-1])) + 1
+        if entries.size:
+            nxt_pos = np.searchsorted(entries, np.arange(n))
+            ahead = nxt_pos < entries.size
+            nxt = entries[np.minimum(nxt_pos, entries.size - 1)]
+            signal_via[a, :n] = np.where(ahead, ms.path_lane[nxt], -1)
+            signal_s[a, :n] = np.where(ahead, ms.path_s[nxt], 0.0)
     return MissionArrays(
         paths=paths,
         path_valid=valid,
@@ -235,4 +275,6 @@ def stack_missions(road_map: RoadMap, missions: list[ResolvedMission]) -> Missio
         goal_road=np.array([ms.goal_road for ms in missions], dtype=np.int32),
         goal_lane=np.array([ms.goal_lane for ms in missions], dtype=np.int32),
         goal_s=np.array([ms.goal_s for ms in missions]),
+        signal_via=signal_via,
+        signal_s=signal_s,
     )

@@ -23,6 +23,10 @@ class Provider(Protocol):
     def reset(self, sim: "Simulation") -> None:
         """Create this provider's vehicles for a new episode (the table is empty of its rows)."""
 
+    def start(self, sim: "Simulation") -> None:
+        """Second phase of a reset, after every provider's ``reset``: take over vehicles that
+        other providers created."""
+
     def step(self, sim: "Simulation", dt: float) -> None:
         """Advance the rows this provider owns by ``dt`` seconds, writing the table in place."""
 
@@ -46,6 +50,9 @@ class ProviderBase:
     provider_id = -1
 
     def reset(self, sim: "Simulation") -> None:
+        pass
+
+    def start(self, sim: "Simulation") -> None:
         pass
 
     def step(self, sim: "Simulation", dt: float) -> None:

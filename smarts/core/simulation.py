@@ -18,7 +18,7 @@ import numpy as np
 from smarts.core.events import NUM_EVENTS, Event, NotMovingTracker, agent_events
 from smarts.core.missions import MissionArrays, ResolvedMission, stack_missions
 from smarts.core.provider import Provider
-from smarts.core.vehicle_table import COLUMN, VehicleTable
+from smarts.core.vehicle_table import COLUMN, Role, VehicleTable
 from smarts.maps import RoadMap, project
 from smarts.maps.drivable import raster_lookup
 
@@ -76,6 +76,7 @@ class Simulation:
         self.time = 0.0
         self.step_count = 0
         self.rng = np.random.default_rng(self.seed)
+        self.signals = None  # a smarts.traffic.signals.SignalState when the map has signals
         self.alive = np.zeros(0, dtype=np.int64)  # live rows after the last map update
         self._active = np.zeros(0, dtype=np.int64)
         self._active_rows = np.zeros(0, dtype=np.int64)
@@ -118,6 +119,8 @@ class Simulation:
         self.route_progress_delta[:] = 0.0
         for p in self.providers:
             p.reset(self)
+        for p in self.providers:
+            p.start(self)
         missing = [a for a, r in zip(self.agent_ids, self.agent_row) if r < 0]
         if missing:
             raise RuntimeError(f"no provider created a vehicle for agents {missing}")
@@ -148,6 +151,10 @@ class Simulation:
         finished = np.flatnonzero(self.agent_active & self.agent_done)
         if finished.size:
             rows = self.agent_row[finished]
+            to_traffic = np.array([self.missions[a].on_end == "traffic" for a in finished])
+            if to_traffic.any():
+                self._hand_back(rows[to_traffic])
+                rows = rows[~to_traffic]
             for owner in np.unique(self.table.owner[rows]):
                 if owner >= 0:
                     self.providers[owner].release(self, rows[self.table.owner[rows] == owner])
@@ -155,6 +162,20 @@ class Simulation:
             self.agent_active[finished] = False
             self._refresh_active()
         return finished
+
+    def _hand_back(self, rows: np.ndarray) -> None:
+        """Give finished agents' vehicles to the first provider that takes them (traffic)."""
+        for row in rows.tolist():
+            owner = self.table.owner[row]
+            for p in self.providers:
+                if p.provider_id != owner and p.can_accept(self, np.array([row]))[0]:
+                    self.hand_over(np.array([row]), p, Role.TRAFFIC)
+                    break
+            else:
+                raise RuntimeError(
+                    f"{self.table.ids[row]}: mission.on_end is 'traffic' but no traffic provider "
+                    "can take the vehicle (the scenario needs a traffic section)"
+                )
 
     def close(self) -> None:
         for p in self.providers:

@@ -34,6 +34,8 @@ class AgentVehicle:
     width: float
     height: float
     mass: float
+    role: Role = Role.AGENT  # SOCIAL_AGENT for agents driven by a zoo policy
+    take_over: str | None = None  # id of a traffic vehicle this agent takes over at reset
 
 
 class AgentProvider(ProviderBase):
@@ -52,6 +54,7 @@ class AgentProvider(ProviderBase):
         self.handles = np.full(len(vehicles), -1, dtype=np.int64)
         self.lane_offset = np.zeros(len(vehicles), dtype=np.int64)  # lane agents: 0 route, +1 left, -1 right
         self.wheelbase = np.array([wheelbase_for_length(v.length) for v in vehicles])
+        self._taking: str | None = None  # agent whose take-over is in progress
 
     # ------------------------------------------------------------------ episode
     def reset(self, sim: Simulation) -> None:
@@ -65,11 +68,13 @@ class AgentProvider(ProviderBase):
         self.handles[:] = -1
         self.lane_offset[:] = 0
         for i, (vehicle, mission) in enumerate(zip(self.vehicles, sim.missions)):
+            if vehicle.take_over is not None:
+                continue  # taken from traffic in start(), once traffic has created it
             x, y = mission.start_xy
             row = sim.table.add(
                 vehicle.agent_id,
                 owner=self.provider_id,
-                role=Role.AGENT,
+                role=vehicle.role,
                 x=float(x),
                 y=float(y),
                 heading=mission.start_heading,
@@ -80,20 +85,51 @@ class AgentProvider(ProviderBase):
                 height=vehicle.height,
             )
             sim.register_agent_vehicle(vehicle.agent_id, row)
-            if vehicle.action_space is ActionSpaceType.CONTINUOUS:
-                self.handles[i] = self.world.add_vehicle(
-                    float(x), float(y), mission.start_heading, mission.start_speed,
-                    vehicle.length, vehicle.width, vehicle.height, vehicle.mass,
+            self._add_physics(i, sim, row)
+
+    def start(self, sim: Simulation) -> None:
+        """Take over the traffic vehicles named by ``take_over`` missions (they exist by now)."""
+        for vehicle in self.vehicles:
+            if vehicle.take_over is None:
+                continue
+            row = sim.table.row_of.get(vehicle.take_over)
+            if row is None:
+                raise RuntimeError(
+                    f"{vehicle.agent_id}: mission.start.take_over: traffic created no vehicle "
+                    f"{vehicle.take_over!r} at reset (a trip departing at 0 s is needed)"
                 )
+            self._taking = vehicle.agent_id
+            sim.hand_over(np.array([row]), self, vehicle.role)
+
+    def can_accept(self, sim: Simulation, rows: np.ndarray) -> np.ndarray:
+        return np.full(len(rows), self._taking is not None)
+
+    def accept(self, sim: Simulation, rows: np.ndarray) -> None:
+        """A taken-over vehicle keeps its pose, speed and size; it becomes the agent's."""
+        (row,) = np.asarray(rows).tolist()
+        agent = sim.agent_index[self._taking]
+        self._taking = None
+        sim.register_agent_vehicle(sim.agent_ids[agent], row)
+        self._add_physics(agent, sim, row)
+
+    def _add_physics(self, agent: int, sim: Simulation, row: int) -> None:
+        vehicle = self.vehicles[agent]
+        if vehicle.action_space is not ActionSpaceType.CONTINUOUS:
+            return
+        t = sim.table
+        self.handles[agent] = self.world.add_vehicle(
+            float(t.x[row]), float(t.y[row]), float(t.heading[row]), float(t.speed[row]),
+            float(t.length[row]), float(t.width[row]), float(t.height[row]), vehicle.mass,
+        )
 
     def release(self, sim: Simulation, rows: np.ndarray) -> None:
         if self.world is None:
             return
         for row in np.asarray(rows).tolist():
-            agent = sim.agent_index.get(sim.table.ids[row])
-            if agent is not None and self.handles[agent] >= 0:
-                self.world.remove_vehicle(int(self.handles[agent]))
-                self.handles[agent] = -1
+            for agent in np.flatnonzero(sim.agent_row == row).tolist():
+                if self.handles[agent] >= 0:
+                    self.world.remove_vehicle(int(self.handles[agent]))
+                    self.handles[agent] = -1
 
     def close(self) -> None:
         if self.world is not None:

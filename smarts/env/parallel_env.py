@@ -19,6 +19,7 @@ from smarts.dynamics.action_spaces import ActionError, action_space
 from smarts.dynamics.limits import ReachLimits
 from smarts.env.assembly import as_spec, build_simulation
 from smarts.env.reward import default_rewards
+from smarts.env.social import SocialAgents
 from smarts.scenario import ScenarioSpec
 from smarts.sensors.observation import ObservationBuilder, ObservationConfig
 
@@ -43,13 +44,18 @@ class DrivingParallelEnv(ParallelEnv):
         self.sim = build_simulation(self.scenario, self.limits)
         self.builder = ObservationBuilder(observation)
         self.render_mode = render_mode
-        self.possible_agents = list(self.sim.agent_ids)
+        self.social = SocialAgents(self.scenario, self.sim)
+        self.possible_agents = [a for a, s in zip(self.sim.agent_ids, self.social.is_social) if not s]
+        if not self.possible_agents:
+            raise ValueError(f"{self.scenario.source}: every agent has a policy; at least one must learn")
         self.agents: list[str] = []
         self._obs_spaces = {a: self.builder.space for a in self.possible_agents}
         self._act_spaces = {
             a.id: action_space(a.action_space, self.limits, self.scenario.step_length)
             for a in self.scenario.agents
+            if a.id in self.possible_agents
         }
+        self._last: tuple[dict[str, np.ndarray], np.ndarray] | None = None  # for social agents
         self._renderer = None
         self._terminal_events = self.sim.event_config.terminate_on.copy()
         self._terminal_events[Event.MAX_STEPS] = False
@@ -66,7 +72,10 @@ class DrivingParallelEnv(ParallelEnv):
         self.sim.reset(seed if seed is not None else self.sim.seed)
         self.agents = list(self.possible_agents)
         agents = self.sim.active_agents
-        obs = self._split(self.builder.build(self.sim, agents), agents)
+        batch = self.builder.build(self.sim, agents)
+        self._last = (batch, agents)
+        learners = ~self.social.is_social[agents]
+        obs = self._split({k: v[learners] for k, v in batch.items()}, agents[learners])
         return obs, {a: {} for a in self.agents}
 
     def step(self, actions: dict[str, Any]):
@@ -78,10 +87,18 @@ class DrivingParallelEnv(ParallelEnv):
         if missing:
             raise ActionError(f"no action given for live agents {missing}", missing)
         sim = self.sim
+        if self.social.any:
+            actions = {**actions, **self.social.actions(sim, *self._last)}
         sim.step(actions)
         agents = sim.active_agents
+        batch = self.builder.build(sim, agents)
+        if self.social.any:
+            self._last = (batch, agents)
+            learners = ~self.social.is_social[agents]
+            batch = {k: v[learners] for k, v in batch.items()}
+            agents = agents[learners]
         ids = [sim.agent_ids[i] for i in agents]
-        obs = self._split(self.builder.build(sim, agents), agents)
+        obs = self._split(batch, agents)
         reward = default_rewards(sim, agents, self.scenario.reward)
         events = sim.agent_events[agents]
         done = sim.agent_done[agents]

@@ -8,13 +8,16 @@ Per agent:
   lateral acceleration (m/s^2), yaw rate (rad/s), steering (rad), heading error to the lane (rad),
   lateral offset from the lane centre (m, + left), lane width (m), lane speed limit (m/s), vehicle
   length (m), vehicle width (m).
-- ``neighbours`` float32[K, 8]: the K nearest vehicles within ``neighbour_radius``: dx, dy (m),
-  cos and sin of the relative heading, relative velocity vx, vy (m/s, ego frame), length, width (m).
+- ``neighbours`` float32[K, 9]: the K nearest road users within ``neighbour_radius``: dx, dy (m),
+  cos and sin of the relative heading, relative velocity vx, vy (m/s, ego frame), length, width
+  (m), 1 for a pedestrian (0 for a vehicle).
 - ``neighbour_mask`` float32[K]: 1 where a neighbour is present.
 - ``waypoints`` float32[3, W, 3]: paths along the route (0), the lane left of it (1) and right of it
   (2), W points ``waypoint_spacing`` route points apart: x, y (m), relative heading (rad).
 - ``waypoint_mask`` float32[3, W].
 - ``goal`` float32[4]: goal dx, dy (m), route distance left (m), 1 if the mission has a goal.
+- ``signal`` float32[4]: the next traffic signal on the route: red, yellow, green (one of them 1,
+  all 0 when there is none ahead) and the route distance to its stop line (m, 0 when none).
 - ``events`` float32[8]: the events of ``smarts.core.events.Event`` this step, 0/1.
 """
 
@@ -30,11 +33,12 @@ import numpy as np
 from smarts.core.events import NUM_EVENTS
 from smarts.core.geometry import wrap_scalar
 from smarts.core.simulation import Simulation
-from smarts.core.vehicle_table import COLUMN
+from smarts.core.vehicle_table import COLUMN, Role
 
 EGO_FEATURES = 12
-NEIGHBOUR_FEATURES = 8
+NEIGHBOUR_FEATURES = 9
 GOAL_FEATURES = 4
+SIGNAL_FEATURES = 4
 NUM_PATHS = 3
 
 
@@ -69,6 +73,7 @@ def observation_space(config: ObservationConfig) -> gym.spaces.Dict:
             "waypoints": box((NUM_PATHS, w, 3)),
             "waypoint_mask": box((NUM_PATHS, w), 0.0, 1.0),
             "goal": box((GOAL_FEATURES,)),
+            "signal": box((SIGNAL_FEATURES,)),
             "events": box((NUM_EVENTS,), 0.0, 1.0),
         }
     )
@@ -95,15 +100,24 @@ class ObservationBuilder:
             "waypoints": np.empty((n, NUM_PATHS, w, 3), dtype=np.float32),
             "waypoint_mask": np.empty((n, NUM_PATHS, w), dtype=np.float32),
             "goal": np.empty((n, GOAL_FEATURES), dtype=np.float32),
+            "signal": np.empty((n, SIGNAL_FEATURES), dtype=np.float32),
             "events": np.empty((n, NUM_EVENTS), dtype=np.float32),
         }
+        signals = getattr(sim, "signals", None)
+        via_colour = signals.via_colour if signals is not None else self._no_signals(sim.road_map)
         _observe(
-            sim.table.data, sim.table.lane, sim.alive, agents, sim.agent_row[agents],
+            sim.table.data, sim.table.lane, sim.table.role, sim.alive, agents, sim.agent_row[agents],
             self._lane_info(sim.road_map), ma.flat_paths, ma.flat_valid, ma.stride,
             sim.route_index, self._offsets, ma.goal_kind, ma.goal_xy, ma.route_length,
-            sim.route_progress, sim.agent_events, cfg.neighbour_radius**2, *obs.values(),
+            sim.route_progress, ma.signal_via, ma.signal_s, via_colour, sim.agent_events,
+            cfg.neighbour_radius**2, *obs.values(),
         )
         return obs
+
+    def _no_signals(self, rm) -> np.ndarray:
+        if getattr(self, "_no_signal_colours", None) is None or len(self._no_signal_colours) != rm.num_lanes:
+            self._no_signal_colours = np.zeros(rm.num_lanes, dtype=np.int8)
+        return self._no_signal_colours
 
     def _lane_info(self, rm) -> np.ndarray:
         """(width, speed limit) per lane, stacked once per map."""
@@ -115,9 +129,10 @@ class ObservationBuilder:
 
 @numba.njit(cache=True, nogil=True)
 def _observe(
-    data, lane, alive, agents, rows, lane_info, flat_paths, flat_valid, stride, route_index,
-    offsets, goal_kind, goal_xy, route_length, route_progress, events, radius2,
-    ego, neighbours, neighbour_mask, waypoints, waypoint_mask, goal, events_out,
+    data, lane, role, alive, agents, rows, lane_info, flat_paths, flat_valid, stride, route_index,
+    offsets, goal_kind, goal_xy, route_length, route_progress, signal_via, signal_s, via_colour,
+    events, radius2,
+    ego, neighbours, neighbour_mask, waypoints, waypoint_mask, goal, signal, events_out,
 ):  # pragma: no cover - compiled
     k_max = neighbours.shape[1]
     near_d2 = np.empty(k_max)
@@ -174,6 +189,7 @@ def _observe(
             neighbours[i, q, 5] = nv * sr
             neighbours[i, q, 6] = data[_LENGTH, j]
             neighbours[i, q, 7] = data[_WIDTH, j]
+            neighbours[i, q, 8] = 1.0 if role[j] == _PEDESTRIAN else 0.0
             neighbour_mask[i, q] = 1.0
 
         # Indices past a path's end clip onto the padding rows, which are marked invalid.
@@ -198,6 +214,13 @@ def _observe(
         else:
             goal[i, 0] = goal[i, 1] = goal[i, 3] = 0.0
         goal[i, 2] = route_length[a] - route_progress[a]
+
+        signal[i] = 0.0
+        here = a * stride + route_index[a]
+        via = signal_via.ravel()[here]
+        if via >= 0 and via_colour[via] > 0:
+            signal[i, via_colour[via] - 1] = 1.0  # colours RED=1, YELLOW=2, GREEN=3
+            signal[i, 3] = max(signal_s.ravel()[here] - route_progress[a], 0.0)
         for e in range(events.shape[1]):
             events_out[i, e] = events[a, e]
 
@@ -207,3 +230,4 @@ _SPEED, _ACCEL, _JERK = COLUMN["speed"], COLUMN["accel"], COLUMN["jerk"]
 _LAT_ACCEL, _YAW_RATE, _STEERING = COLUMN["lat_accel"], COLUMN["yaw_rate"], COLUMN["steering"]
 _LANE_HEADING, _T = COLUMN["lane_heading"], COLUMN["t"]
 _LENGTH, _WIDTH = COLUMN["length"], COLUMN["width"]
+_PEDESTRIAN = int(Role.PEDESTRIAN)
