@@ -13,7 +13,7 @@ import numpy as np
 from smarts.core.events import NUM_EVENTS, event_from_name
 from smarts.core.missions import resolve_mission
 from smarts.core.simulation import EventConfig, Simulation
-from smarts.core.vehicle_table import VehicleType
+from smarts.core.vehicle_table import Role, VehicleType
 from smarts.dynamics.action_spaces import ActionSpaceType
 from smarts.dynamics.agent_provider import AgentProvider, AgentVehicle
 from smarts.dynamics.limits import ReachLimits
@@ -38,7 +38,9 @@ def build_simulation(
     road_map = road_map or scenario_map(spec)
     limits = limits or ReachLimits()
     missions = [
-        resolve_mission(road_map, agent.id, agent.mission, f"{spec.source}: agents[{i}].mission")
+        resolve_mission(
+            road_map, agent.id, agent.mission, f"{spec.source}: agents[{i}].mission", spec.traffic
+        )
         for i, agent in enumerate(spec.agents)
     ]
     vehicles = []
@@ -53,6 +55,8 @@ def build_simulation(
                 width=dims.width,
                 height=dims.height,
                 mass=dims.mass,
+                role=Role.SOCIAL_AGENT if agent.is_social else Role.AGENT,
+                take_over=agent.mission.start.take_over,
             )
         )
     terminate = np.zeros(NUM_EVENTS, dtype=bool)

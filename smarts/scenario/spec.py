@@ -7,12 +7,11 @@ expected, because a scenario author should never have to guess which line is wro
 
 from __future__ import annotations
 
-import copy
 import difflib
 import math
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +20,18 @@ import yaml
 from smarts.core.vehicle_table import VEHICLE_DIMENSIONS, VehicleType
 from smarts.scenario.builtin_maps import BUILTIN_MAPS, builtin_map_path
 from smarts.scenario.errors import ScenarioError
+from smarts.scenario.traffic import (
+    DEFAULT_VEHICLE_TYPES,
+    DENSITY_LEVELS,
+    DEPART_LANES,
+    DEPART_SPEEDS,
+    TRAFFIC_ENGINES,
+    FlowSpec,
+    PedestrianFlowSpec,
+    TrafficSpec,
+    TripSpec,
+    VehicleTypeSpec,
+)
 
 BUILTIN_PREFIX = "builtin:"
 MAP_FILE_SUFFIXES = (".net.xml", ".xodr")
@@ -37,6 +48,10 @@ TERMINATION_EVENTS = (
     "max_steps",
 )
 DEFAULT_TERMINATE_ON = ("collision", "off_road", "reached_goal", "max_steps")
+MISSION_END_ACTIONS = ("remove", "traffic")
+"""What happens to an agent's vehicle when its mission ends: it leaves, or traffic drives it on."""
+TRAFFIC_VEHICLE_BASES = ("passenger", "bus", "truck", "motorcycle")
+ZOO_PREFIX = "zoo:"
 
 
 @dataclass(frozen=True)
@@ -75,13 +90,17 @@ class VehicleSpec:
 
 @dataclass
 class StartSpec:
-    road: str
+    road: str | None = None
+    """None only when ``take_over`` names the vehicle to start in."""
     lane: int = 0
     offset: float = 0.0
     """Metres along the lane from its start."""
     speed: float = 0.0
     heading: float | None = None
     """Radians; None means along the lane."""
+    take_over: str | None = None
+    """Id of a traffic trip departing at 0 whose vehicle the agent drives from reset on; the start
+    pose is then that vehicle's, so road, lane, offset, speed and heading are not given."""
 
 
 @dataclass
@@ -109,6 +128,8 @@ class MissionSpec:
     start: StartSpec
     goal: GoalSpec
     route_via: list[str] = field(default_factory=list)
+    on_end: str = "remove"
+    """``remove``: the vehicle leaves when the mission ends; ``traffic``: traffic drives it on."""
 
 
 @dataclass
@@ -117,6 +138,13 @@ class AgentSpec:
     mission: MissionSpec
     action_space: str = "relative_target_pose"
     vehicle: VehicleSpec = field(default_factory=VehicleSpec)
+    policy: str | None = None
+    """Zoo locator (``zoo:keep-lane`` or ``keep-lane``) of the policy that drives this agent inside
+    the simulator: a social agent, not controlled by the learner. None: a learning agent."""
+
+    @property
+    def is_social(self) -> bool:
+        return self.policy is not None
 
 
 @dataclass
@@ -150,8 +178,8 @@ class ScenarioSpec:
     vehicle_capacity: int = 256
     events: EventsSpec = field(default_factory=EventsSpec)
     reward: RewardSpec = field(default_factory=RewardSpec)
-    traffic: dict[str, Any] | None = None
-    """Reserved for traffic settings; kept as an opaque mapping."""
+    traffic: TrafficSpec | None = None
+    """Flows, trips, vehicle types and pedestrians for a traffic engine; None: agents only."""
     source: str = field(default="<dict>", compare=False, repr=False)
     """Where the spec was read from; prefixes every error message."""
     base_dir: Path | None = field(default=None, compare=False, repr=False)
@@ -216,7 +244,7 @@ class ScenarioSpec:
                 "goal_bonus": self.reward.goal_bonus,
                 "step_penalty": self.reward.step_penalty,
             },
-            "traffic": copy.deepcopy(self.traffic),
+            "traffic": None if self.traffic is None else _traffic_dict(self.traffic),
         }
 
     def to_yaml(self) -> str:
@@ -226,6 +254,11 @@ class ScenarioSpec:
     @property
     def agent_ids(self) -> list[str]:
         return [a.id for a in self.agents]
+
+    @property
+    def social_agent_ids(self) -> list[str]:
+        """Agents driven by a zoo policy inside the simulator, not by the learner."""
+        return [a.id for a in self.agents if a.policy is not None]
 
     @property
     def builtin_map(self) -> str | None:
@@ -239,7 +272,7 @@ class ScenarioSpec:
         return _resolve_map_file(self.map, self.base_dir)
 
     def check_map(self, road_map: Any) -> None:
-        """Check every mission's roads, lanes and offsets against the compiled map.
+        """Check every mission's and every traffic entry's roads, lanes and offsets against the map.
 
         ``road_map`` needs ``road_index_of``, ``road_lanes(road)`` and ``lane_length`` (and uses
         ``lane_internal`` and ``bounds`` when present), as on :class:`smarts.maps.road_map.RoadMap`.
@@ -248,7 +281,8 @@ class ScenarioSpec:
         for i, agent in enumerate(self.agents):
             where = f"agents[{i}].mission"
             start = agent.mission.start
-            checker.road_lane(f"{where}.start", start.road, start.lane, start.offset)
+            if start.take_over is None:  # a taken-over vehicle starts where its trip departs
+                checker.road_lane(f"{where}.start", start.road, start.lane, start.offset)
             goal = agent.mission.goal
             if goal.kind == "road":
                 checker.road_lane(f"{where}.goal", goal.road, goal.lane, goal.offset)
@@ -256,6 +290,8 @@ class ScenarioSpec:
                 checker.position(f"{where}.goal.position", goal.position, goal.radius)
             for j, road in enumerate(agent.mission.route_via):
                 checker.road(f"{where}.route_via[{j}]", road)
+        if self.traffic is not None:
+            checker.traffic(self.traffic)
 
 
 def _agent_dict(agent: AgentSpec) -> dict[str, Any]:
@@ -264,14 +300,18 @@ def _agent_dict(agent: AgentSpec) -> dict[str, Any]:
         if getattr(agent.vehicle, key) is not None:
             vehicle[key] = getattr(agent.vehicle, key)
     start = agent.mission.start
-    start_d: dict[str, Any] = {
-        "road": start.road,
-        "lane": start.lane,
-        "offset": start.offset,
-        "speed": start.speed,
-    }
-    if start.heading is not None:
-        start_d["heading"] = start.heading
+    start_d: dict[str, Any]
+    if start.take_over is not None:
+        start_d = {"take_over": start.take_over}
+    else:
+        start_d = {
+            "road": start.road,
+            "lane": start.lane,
+            "offset": start.offset,
+            "speed": start.speed,
+        }
+        if start.heading is not None:
+            start_d["heading"] = start.heading
     goal = agent.mission.goal
     goal_d: dict[str, Any]
     if goal.kind == "endless":
@@ -287,11 +327,38 @@ def _agent_dict(agent: AgentSpec) -> dict[str, Any]:
     mission: dict[str, Any] = {"start": start_d, "goal": goal_d}
     if agent.mission.route_via:
         mission["route_via"] = list(agent.mission.route_via)
+    if agent.mission.on_end != "remove":
+        mission["on_end"] = agent.mission.on_end
+    agent_d: dict[str, Any] = {"id": agent.id, "action_space": agent.action_space}
+    if agent.policy is not None:
+        agent_d["policy"] = agent.policy
+    agent_d["vehicle"] = vehicle
+    agent_d["mission"] = mission
+    return agent_d
+
+
+def _without_none(item: Any, *, drop: tuple[str, ...] = ()) -> dict[str, Any]:
+    """A traffic dataclass as a mapping, leaving out unset (None) fields and those in ``drop``."""
+    out = {}
+    for f in fields(item):
+        value = getattr(item, f.name)
+        if value is None or f.name in drop:
+            continue
+        out[f.name] = list(value) if isinstance(value, list) else value
+    return out
+
+
+def _traffic_dict(traffic: TrafficSpec) -> dict[str, Any]:
     return {
-        "id": agent.id,
-        "action_space": agent.action_space,
-        "vehicle": vehicle,
-        "mission": mission,
+        "engine": traffic.engine,
+        "density": traffic.density,
+        "vehicle_types": {
+            name: _without_none(vtype, drop=("id",))
+            for name, vtype in traffic.vehicle_types.items()
+        },
+        "flows": [_without_none(flow) for flow in traffic.flows],
+        "trips": [_without_none(trip) for trip in traffic.trips],
+        "pedestrians": [_without_none(ped) for ped in traffic.pedestrians],
     }
 
 
@@ -495,9 +562,8 @@ class _Reader:
             )
         events = self.events(d.get("events", {}))
         reward = self.reward(d.get("reward", {}))
-        traffic = d.get("traffic")
-        if traffic is not None and not isinstance(traffic, dict):
-            raise self.error("traffic", f"expected a mapping or nothing, got {_describe(traffic)}")
+        traffic = None if d.get("traffic") is None else self.traffic(d["traffic"])
+        self.agents_and_traffic(agents, traffic)
         return ScenarioSpec(
             name=name,
             map=map_value,
@@ -508,7 +574,7 @@ class _Reader:
             vehicle_capacity=capacity,
             events=events,
             reward=reward,
-            traffic=copy.deepcopy(traffic),
+            traffic=traffic,
             source=self.source,
             base_dir=self.base_dir,
         )
@@ -556,14 +622,30 @@ class _Reader:
         return agents
 
     def agent(self, value: Any, path: str, index: int) -> AgentSpec:
-        d = self.mapping(value, path, ("id", "action_space", "vehicle", "mission"))
+        d = self.mapping(value, path, ("id", "action_space", "policy", "vehicle", "mission"))
         agent_id = self.string(d, "id", path, f"agent_{index}")
         action_space = self.choice(d, "action_space", path, ACTION_SPACES, "relative_target_pose")
+        policy = self.policy(d, path)
         vehicle = self.vehicle(d.get("vehicle", {}), _join(path, "vehicle"))
         if "mission" not in d:
             raise self.error(_join(path, "mission"), "missing required field (start and goal)")
         mission = self.mission(d["mission"], _join(path, "mission"))
-        return AgentSpec(id=agent_id, mission=mission, action_space=action_space, vehicle=vehicle)
+        return AgentSpec(
+            id=agent_id, mission=mission, action_space=action_space, vehicle=vehicle, policy=policy
+        )
+
+    def policy(self, d: dict, path: str) -> str | None:
+        """A zoo locator; only its form is checked here, the zoo resolves it when the env starts."""
+        if d.get("policy") is None:
+            return None
+        locator = self.string(d, "policy", path)
+        name = locator.removeprefix(ZOO_PREFIX)
+        if not name or any(c.isspace() for c in locator):
+            raise self.error(
+                _join(path, "policy"),
+                f"expected a zoo locator such as 'zoo:keep-lane' or 'keep-lane', got {locator!r}",
+            )
+        return locator
 
     def vehicle(self, value: Any, path: str) -> VehicleSpec:
         d = self.mapping(value, path, ("type", "length", "width", "height", "mass"))
@@ -576,10 +658,11 @@ class _Reader:
         )
 
     def mission(self, value: Any, path: str) -> MissionSpec:
-        d = self.mapping(value, path, ("start", "goal", "route_via"))
+        d = self.mapping(value, path, ("start", "goal", "route_via", "on_end"))
         if "start" not in d:
             raise self.error(
-                _join(path, "start"), "missing required field (road, lane, offset, ...)"
+                _join(path, "start"),
+                "missing required field (road, lane, offset, ... or take_over: <trip id>)",
             )
         start = self.start(d["start"], _join(path, "start"))
         if "goal" not in d:
@@ -588,10 +671,26 @@ class _Reader:
             )
         goal = self.goal(d["goal"], _join(path, "goal"))
         route_via = self.string_list(d, "route_via", path, [])
-        return MissionSpec(start=start, goal=goal, route_via=route_via)
+        on_end = self.choice(d, "on_end", path, MISSION_END_ACTIONS, "remove")
+        return MissionSpec(start=start, goal=goal, route_via=route_via, on_end=on_end)
 
     def start(self, value: Any, path: str) -> StartSpec:
-        d = self.mapping(value, path, ("road", "lane", "offset", "speed", "heading"))
+        pose = ("road", "lane", "offset", "speed", "heading")
+        d = self.mapping(value, path, (*pose, "take_over"))
+        if d.get("take_over") is not None:
+            trip = self.string(d, "take_over", path)
+            for key in pose:
+                if key in d:
+                    raise self.error(
+                        _join(path, key),
+                        f"not allowed with take_over: the agent starts as trip {trip!r}'s vehicle, "
+                        "where it is and as fast as it goes",
+                    )
+            return StartSpec(take_over=trip)
+        if "road" not in d:
+            raise self.error(
+                _join(path, "road"), "missing required field (a road id, or give take_over instead)"
+            )
         return StartSpec(
             road=self.string(d, "road", path),
             lane=self.integer(d, "lane", path, 0, minimum=0),
@@ -635,6 +734,294 @@ class _Reader:
             lane=self.integer(d, "lane", path, None, minimum=0, optional=True),
             offset=self.number(d, "offset", path, None, non_negative=True, optional=True),
         )
+
+    # ---------------------------------------------------------------- traffic
+    def traffic(self, value: Any) -> TrafficSpec:
+        path = "traffic"
+        allowed = ("engine", "density", "vehicle_types", "flows", "trips", "pedestrians")
+        d = self.mapping(value, path, allowed)
+        engine = self.choice(d, "engine", path, TRAFFIC_ENGINES, "builtin")
+        density = self.choice(d, "density", path, DENSITY_LEVELS, "none")
+        vehicle_types = self.vehicle_types(d.get("vehicle_types", {}), "traffic.vehicle_types")
+        flows = [
+            self.flow(item, f"{path}.flows[{i}]", vehicle_types)
+            for i, item in enumerate(self.item_list(d, "flows", path))
+        ]
+        trips = [
+            self.trip(item, f"{path}.trips[{i}]", vehicle_types)
+            for i, item in enumerate(self.item_list(d, "trips", path))
+        ]
+        self.unique_ids(
+            [(f"{path}.flows[{i}].id", f.id) for i, f in enumerate(flows)]
+            + [(f"{path}.trips[{i}].id", t.id) for i, t in enumerate(trips)],
+            "flows and trips",
+        )
+        pedestrians = [
+            self.pedestrian(item, f"{path}.pedestrians[{i}]")
+            for i, item in enumerate(self.item_list(d, "pedestrians", path))
+        ]
+        self.unique_ids(
+            [(f"{path}.pedestrians[{i}].id", p.id) for i, p in enumerate(pedestrians)],
+            "pedestrian flows",
+        )
+        if pedestrians and engine != "sumo":
+            raise self.error(
+                f"{path}.pedestrians",
+                f"pedestrians need engine: sumo (the {engine} engine has none), "
+                f"got engine {engine!r}",
+            )
+        return TrafficSpec(
+            engine=engine,
+            density=density,
+            vehicle_types=vehicle_types,
+            flows=flows,
+            trips=trips,
+            pedestrians=pedestrians,
+        )
+
+    def item_list(self, d: dict, key: str, path: str) -> list:
+        value = d.get(key, [])
+        if not isinstance(value, list):
+            raise self.error(_join(path, key), f"expected a list, got {_describe(value)}")
+        return value
+
+    def unique_ids(self, ids: list[tuple[str, str]], among: str) -> None:
+        seen: dict[str, str] = {}
+        for path, item_id in ids:
+            if item_id in seen:
+                raise self.error(
+                    path, f"duplicate id {item_id!r} among {among} (also {seen[item_id]})"
+                )
+            seen[item_id] = path
+
+    def vehicle_types(self, value: Any, path: str) -> dict[str, VehicleTypeSpec]:
+        if not isinstance(value, dict):
+            raise self.error(
+                path, f"expected a mapping of type name -> parameters, got {_describe(value)}"
+            )
+        types = {}
+        for name, params in value.items():
+            if not isinstance(name, str) or not name.strip():
+                raise self.error(path, f"expected non-empty type names, got {_describe(name)}")
+            types[name] = self.vehicle_type(name, params, _join(path, name))
+        return types
+
+    def vehicle_type(self, name: str, value: Any, path: str) -> VehicleTypeSpec:
+        defaults = VehicleTypeSpec(name)
+        keys = tuple(f.name for f in fields(VehicleTypeSpec) if f.name != "id")
+        d = self.mapping(value, path, keys)
+        params: dict[str, Any] = {
+            "base": self.choice(d, "base", path, TRAFFIC_VEHICLE_BASES, "passenger")
+        }
+        for key in ("length", "width", "height"):
+            params[key] = self.number(d, key, path, None, positive=True, optional=True)
+        for key in ("max_speed", "accel", "decel", "emergency_decel", "tau", "speed_factor"):
+            params[key] = self.number(d, key, path, getattr(defaults, key), positive=True)
+        params["sigma"] = self.number(
+            d, "sigma", path, defaults.sigma, non_negative=True, maximum=1.0
+        )
+        for key in keys:
+            if key not in params:
+                params[key] = self.number(d, key, path, getattr(defaults, key), non_negative=True)
+        return VehicleTypeSpec(name, **params)
+
+    def route_fields(self, d: dict, path: str) -> tuple[list[str] | None, str | None, str | None]:
+        """Exactly one way to give the path: ``route`` (>= 1 roads) or origin and destination."""
+        ends = [k for k in ("origin", "destination") if k in d]
+        if "route" in d:
+            if ends:
+                raise self.error(
+                    _join(path, ends[0]),
+                    "not allowed with route: give either route or origin and destination",
+                )
+            route = self.string_list(d, "route", path, [])
+            if not route:
+                raise self.error(
+                    _join(path, "route"), "expected a list of at least one road, got []"
+                )
+            return route, None, None
+        if not ends:
+            raise self.error(
+                path, "expected a route (a list of roads) or origin and destination, got neither"
+            )
+        origin, destination = (self.road_id(d, key, path) for key in ("origin", "destination"))
+        return None, origin, destination
+
+    def road_id(self, d: dict, key: str, path: str) -> str:
+        if key not in d:
+            raise self.error(_join(path, key), "missing required field (a road id)")
+        return self.string(d, key, path)
+
+    def rate_fields(self, d: dict, path: str) -> tuple[float | None, float | None]:
+        given = [k for k in ("rate", "probability") if k in d]
+        if len(given) != 1:
+            raise self.error(
+                path,
+                "expected exactly one of rate (vehicles per hour) or probability (departures per "
+                f"second), got {'both' if given else 'neither'}",
+            )
+        rate = self.number(d, "rate", path, None, positive=True)
+        probability = self.number(d, "probability", path, None, positive=True, maximum=1.0)
+        return rate, probability
+
+    def time_window(self, d: dict, path: str) -> tuple[float, float]:
+        begin = self.number(d, "begin", path, 0.0, non_negative=True)
+        end = self.number(d, "end", path, 3600.0)
+        if end <= begin:
+            raise self.error(
+                _join(path, "end"), f"expected a time after begin ({begin:g} s), got {end:g}"
+            )
+        return begin, end
+
+    def vehicle_type_ref(self, d: dict, path: str, declared: Mapping[str, Any]) -> str:
+        name = self.string(d, "vehicle_type", path, "car")
+        if name not in declared and name not in DEFAULT_VEHICLE_TYPES:
+            known = ", ".join(declared) or "none"
+            raise self.error(
+                _join(path, "vehicle_type"),
+                f"unknown vehicle type {name!r}; declared in traffic.vehicle_types: {known}; "
+                f"always available: {', '.join(DEFAULT_VEHICLE_TYPES)}",
+            )
+        return name
+
+    def depart_fields(self, d: dict, path: str) -> dict[str, Any]:
+        lane = d.get("depart_lane", "best")
+        lane_ok = (isinstance(lane, str) and lane in DEPART_LANES) or (
+            isinstance(lane, int) and not isinstance(lane, bool) and lane >= 0
+        )
+        if not lane_ok:
+            raise self.error(
+                _join(path, "depart_lane"),
+                f"expected one of {', '.join(DEPART_LANES)} or a lane index (an integer >= 0), "
+                f"got {_describe(lane)}",
+            )
+        speed = d.get("depart_speed", "desired")
+        if isinstance(speed, str) and speed in DEPART_SPEEDS:
+            pass
+        elif (
+            isinstance(speed, (int, float))
+            and not isinstance(speed, bool)
+            and math.isfinite(speed)
+            and speed >= 0
+        ):
+            speed = float(speed)
+        else:
+            raise self.error(
+                _join(path, "depart_speed"),
+                f"expected one of {', '.join(DEPART_SPEEDS)} or a speed in m/s (a number >= 0), "
+                f"got {_describe(speed)}",
+            )
+        pos = self.number(d, "depart_pos", path, 0.0, non_negative=True)
+        return {"depart_lane": lane, "depart_speed": speed, "depart_pos": pos}
+
+    def flow(self, value: Any, path: str, declared: Mapping[str, Any]) -> FlowSpec:
+        keys = (
+            "id", "route", "origin", "destination", "rate", "probability", "begin", "end",
+            "vehicle_type", "depart_lane", "depart_speed", "depart_pos",
+        )  # fmt: skip
+        d = self.mapping(value, path, keys)
+        flow_id = self.string(d, "id", path)
+        route, origin, destination = self.route_fields(d, path)
+        rate, probability = self.rate_fields(d, path)
+        begin, end = self.time_window(d, path)
+        return FlowSpec(
+            id=flow_id,
+            route=route,
+            origin=origin,
+            destination=destination,
+            rate=rate,
+            probability=probability,
+            begin=begin,
+            end=end,
+            vehicle_type=self.vehicle_type_ref(d, path, declared),
+            **self.depart_fields(d, path),
+        )
+
+    def trip(self, value: Any, path: str, declared: Mapping[str, Any]) -> TripSpec:
+        keys = (
+            "id", "route", "origin", "destination", "depart", "vehicle_type", "depart_lane",
+            "depart_speed", "depart_pos",
+        )  # fmt: skip
+        d = self.mapping(value, path, keys)
+        trip_id = self.string(d, "id", path)
+        route, origin, destination = self.route_fields(d, path)
+        return TripSpec(
+            id=trip_id,
+            route=route,
+            origin=origin,
+            destination=destination,
+            depart=self.number(d, "depart", path, 0.0, non_negative=True),
+            vehicle_type=self.vehicle_type_ref(d, path, declared),
+            **self.depart_fields(d, path),
+        )
+
+    def pedestrian(self, value: Any, path: str) -> PedestrianFlowSpec:
+        keys = ("id", "origin", "destination", "rate", "probability", "begin", "end", "speed")
+        d = self.mapping(value, path, keys)
+        ped_id = self.string(d, "id", path)
+        origin, destination = (self.road_id(d, key, path) for key in ("origin", "destination"))
+        rate, probability = self.rate_fields(d, path)
+        begin, end = self.time_window(d, path)
+        return PedestrianFlowSpec(
+            id=ped_id,
+            origin=origin,
+            destination=destination,
+            rate=rate,
+            probability=probability,
+            begin=begin,
+            end=end,
+            speed=self.number(d, "speed", path, 1.3, positive=True),
+        )
+
+    def agents_and_traffic(self, agents: list[AgentSpec], traffic: TrafficSpec | None) -> None:
+        """Checks that span both sections: taken-over trips, hand-back, clashing vehicle ids."""
+        trips = {} if traffic is None else {t.id: t for t in traffic.trips}
+        taken_by: dict[str, int] = {}
+        for i, agent in enumerate(agents):
+            where = f"agents[{i}].mission"
+            trip_id = agent.mission.start.take_over
+            if trip_id is not None:
+                path = f"{where}.start.take_over"
+                if traffic is None:
+                    raise self.error(
+                        path,
+                        f"no trip {trip_id!r} to take over: the scenario has no traffic section",
+                    )
+                if trip_id not in trips:
+                    hint = difflib.get_close_matches(trip_id, trips, n=1)
+                    suggestion = f" (did you mean {hint[0]!r}?)" if hint else ""
+                    raise self.error(
+                        path,
+                        f"unknown trip {trip_id!r}{suggestion}; traffic.trips: "
+                        f"{', '.join(trips) or 'none'}",
+                    )
+                depart = trips[trip_id].depart
+                if depart != 0.0:
+                    raise self.error(
+                        path,
+                        f"trip {trip_id!r} departs at {depart:g} s; only a trip departing at 0 "
+                        "exists at reset to be taken over",
+                    )
+                if trip_id in taken_by:
+                    raise self.error(
+                        path,
+                        f"trip {trip_id!r} is already taken over by agents[{taken_by[trip_id]}]",
+                    )
+                taken_by[trip_id] = i
+            if agent.mission.on_end == "traffic" and traffic is None:
+                raise self.error(
+                    f"{where}.on_end",
+                    "'traffic' hands the vehicle to traffic, but the scenario has no traffic "
+                    "section",
+                )
+        agent_index = {a.id: i for i, a in enumerate(agents)}
+        for j, trip in enumerate(traffic.trips if traffic is not None else []):
+            if trip.id in agent_index:
+                raise self.error(
+                    f"traffic.trips[{j}].id",
+                    f"{trip.id!r} is also the id of agents[{agent_index[trip.id]}]; "
+                    "vehicle ids must be unique",
+                )
 
     def events(self, value: Any) -> EventsSpec:
         path = "events"
@@ -701,11 +1088,22 @@ class _MapChecker:
 
     def road_lane(self, path: str, road: str, lane: int | None, offset: float | None) -> None:
         lanes = self.road(f"{path}.road", road)
+        self.lane_offset(road, lanes, lane, offset, f"{path}.lane", f"{path}.offset", "offset")
+
+    def lane_offset(
+        self,
+        road: str,
+        lanes: Any,
+        lane: int | None,
+        offset: float | None,
+        lane_path: str,
+        offset_path: str,
+        offset_name: str,
+    ) -> None:
+        """The lane exists on the road and the offset lies on it (on every lane when None)."""
         n = len(lanes)
         if lane is not None and lane >= n:
-            raise self.error(
-                f"{path}.lane", f"road {road!r} has {n} lanes (0..{n - 1}), got {lane}"
-            )
+            raise self.error(lane_path, f"road {road!r} has {n} lanes (0..{n - 1}), got {lane}")
         if offset is None:
             return
         candidates = [lanes[lane]] if lane is not None else list(lanes)
@@ -713,8 +1111,33 @@ class _MapChecker:
         if offset > length:
             which = f"lane {lane} of road {road!r}" if lane is not None else f"road {road!r}"
             raise self.error(
-                f"{path}.offset", f"{which} is {length:.1f} m long, got offset {offset:g}"
+                offset_path, f"{which} is {length:.1f} m long, got {offset_name} {offset:g}"
             )
+
+    def traffic(self, traffic: TrafficSpec) -> None:
+        """Every road of every flow, trip and pedestrian flow; the departure lane and position."""
+        for kind, items in (("flows", traffic.flows), ("trips", traffic.trips)):
+            for i, item in enumerate(items):
+                path = f"traffic.{kind}[{i}]"
+                if item.route is not None:
+                    found = [self.road(f"{path}.route[{j}]", r) for j, r in enumerate(item.route)]
+                    first_lanes = found[0]
+                else:
+                    first_lanes = self.road(f"{path}.origin", item.origin)
+                    self.road(f"{path}.destination", item.destination)
+                lane = item.depart_lane if isinstance(item.depart_lane, int) else None
+                self.lane_offset(
+                    item.roads[0],
+                    first_lanes,
+                    lane,
+                    item.depart_pos,
+                    f"{path}.depart_lane",
+                    f"{path}.depart_pos",
+                    "depart_pos",
+                )
+        for i, ped in enumerate(traffic.pedestrians):
+            self.road(f"traffic.pedestrians[{i}].origin", ped.origin)
+            self.road(f"traffic.pedestrians[{i}].destination", ped.destination)
 
     def position(self, path: str, xy: tuple[float, float], radius: float) -> None:
         bounds = getattr(self.map, "bounds", None)

@@ -8,8 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sumolib
+import yaml
 
 from smarts.maps.road_map import RoadMap
+from smarts.scenario import list_scenarios, load_scenario, scenario_path
 from smarts.scenario.builtin_maps import BUILTIN_MAPS, builtin_map_path
 
 
@@ -73,3 +75,33 @@ def _lane_table_map(path: Path, net: sumolib.net.Net) -> RoadMap:
 @pytest.fixture(scope="session")
 def lane_table_maps(built_maps, sumo_nets) -> dict[str, RoadMap]:
     return {name: _lane_table_map(built_maps[name], sumo_nets[name]) for name in built_maps}
+
+
+def _library_map(name: str) -> str:
+    """The built-in map a library scenario names, read from the raw YAML (without validating)."""
+    data = yaml.safe_load(scenario_path(name).read_text(encoding="utf-8"))
+    return str(data["map"]).removeprefix("builtin:")
+
+
+@pytest.fixture
+def library_scenario():
+    """``load(name)``: a library scenario, skipped while its built-in map recipe does not exist.
+
+    intersection_pedestrians names a map whose recipe is added separately; until it is in
+    BUILTIN_MAPS that scenario cannot load, and only tests touching it are skipped.
+    """
+    def load(name: str):
+        map_name = _library_map(name)
+        if map_name not in BUILTIN_MAPS:
+            pytest.skip(f"built-in map {map_name!r} of scenario {name!r} is not available yet")
+        return load_scenario(name)
+
+    return load
+
+
+@pytest.fixture
+def library_maps_available():
+    """Skips a test that needs every library scenario to load (see ``library_scenario``)."""
+    missing = {n: m for n in list_scenarios() if (m := _library_map(n)) not in BUILTIN_MAPS}
+    if missing:
+        pytest.skip(f"built-in maps not available yet: {missing}")

@@ -11,7 +11,7 @@ from smarts.__main__ import main
 from smarts.scenario import BUILTIN_MAPS, list_scenarios, load_scenario
 
 
-def test_scenario_list_shows_every_scenario_with_map_agents_steps(capsys):
+def test_scenario_list_shows_every_scenario_with_map_agents_steps(capsys, library_maps_available):
     assert main(["scenario", "list"]) == 0
     out = capsys.readouterr().out
     for name in list_scenarios():
@@ -66,7 +66,7 @@ def test_no_command_prints_help(capsys):
     assert "scenario" in capsys.readouterr().out
 
 
-def test_python_dash_m_smarts_runs():
+def test_python_dash_m_smarts_runs(library_maps_available):
     result = subprocess.run(
         [sys.executable, "-m", "smarts", "scenario", "list"],
         capture_output=True,

@@ -23,6 +23,11 @@ REQUIRED = {
     "highway_merge",
     "highway_exit",
     "highway_6lane_perf",
+    "intersection_4way_signal_traffic",
+    "highway_merge_traffic",
+    "t_junction_social",
+    "straight_takeover",
+    "intersection_pedestrians",
 }
 
 
@@ -34,8 +39,8 @@ def test_library_lists_the_required_scenarios():
 
 
 @pytest.mark.parametrize("name", list_scenarios())
-def test_library_scenario_loads_and_matches_its_map(name, lane_table_maps):
-    spec = load_scenario(name)
+def test_library_scenario_loads_and_matches_its_map(name, lane_table_maps, library_scenario):
+    spec = library_scenario(name)
     assert spec.name == name
     assert spec.builtin_map is not None
     assert spec.agents and len(set(spec.agent_ids)) == len(spec.agents)
@@ -44,9 +49,10 @@ def test_library_scenario_loads_and_matches_its_map(name, lane_table_maps):
 
 @pytest.mark.filterwarnings("ignore:Module 'rtree' not available")
 @pytest.mark.parametrize("name", list_scenarios())
-def test_library_missions_are_routable(name, sumo_nets):
+def test_library_missions_are_routable(name, sumo_nets, library_scenario):
     """Each goal can be reached from the start through the map's connections (via sumolib)."""
-    spec = load_scenario(name)
+    spec = library_scenario(name)
+    trips = {t.id: t for t in spec.traffic.trips} if spec.traffic else {}
     net = sumo_nets[spec.builtin_map]
     for agent in spec.agents:
         mission = agent.mission
@@ -59,7 +65,9 @@ def test_library_missions_are_routable(name, sumo_nets):
             lanes = net.getNeighboringLanes(*goal.position, r=goal.radius)
             goal_edges = {lane.getEdge().getID() for lane, _ in lanes}
             assert goal_edges, f"{name}/{agent.id}: no lane within the goal radius"
-        waypoints = [mission.start.road, *mission.route_via]
+        start = mission.start
+        start_road = start.road if start.take_over is None else trips[start.take_over].roads[0]
+        waypoints = [start_road, *mission.route_via]
         for a, b in zip(waypoints[:-1], waypoints[1:], strict=True):
             assert net.getShortestPath(net.getEdge(a), net.getEdge(b))[0], (
                 f"{name}/{agent.id}: {a}->{b}"

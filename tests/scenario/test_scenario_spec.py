@@ -14,7 +14,6 @@ from smarts.scenario import (
     ScenarioSpec,
     VehicleSpec,
     list_scenarios,
-    load_scenario,
 )
 
 BASE = {
@@ -77,7 +76,7 @@ def test_name_defaults_to_the_file_name(tmp_path):
 
 def test_dict_and_yaml_round_trip(tmp_path):
     data = copy.deepcopy(BASE)
-    data["traffic"] = {"flows": [{"route": ["west_in", "east_out"], "rate": 300}]}
+    data["traffic"] = {"flows": [{"id": "we", "route": ["west_in", "east_out"], "rate": 300}]}
     data["events"] = {"terminate_on": ["collision", "wrong_way"], "not_moving_distance": 0.5}
     data["agents"][0]["mission"]["start"]["heading"] = 0.25
     data["agents"][0]["mission"]["goal"] = {"road": "north_out", "lane": 1, "offset": 12.5}
@@ -95,8 +94,8 @@ def test_dict_and_yaml_round_trip(tmp_path):
 
 
 @pytest.mark.parametrize("name", list_scenarios())
-def test_library_scenarios_round_trip(name):
-    spec = load_scenario(name)
+def test_library_scenarios_round_trip(name, library_scenario):
+    spec = library_scenario(name)
     assert ScenarioSpec.from_dict(spec.to_dict()) == spec
 
 
