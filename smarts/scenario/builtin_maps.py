@@ -370,7 +370,39 @@ def _recipes() -> dict[str, MapRecipe]:
                     {"arms": ("west", "north", "east", "south"), "lanes": lanes, "signal": signal},
                 )
             )
+    recipes.append(
+        MapRecipe(
+            "highway_6lane_ramp_long",
+            "1.28 km 6-lane one-way highway (3.66 m lanes) with a 135 m on-ramp; holds 200+ "
+            "vehicles for traffic benchmarks",
+            highway_with_ramp,
+            {"pieces": (170.0, 50.0, 1060.0)},
+        )
+    )
+    recipes.append(
+        MapRecipe(
+            "intersection_4way_1lane_peds",
+            "intersection_4way_1lane with 2 m sidewalks on every arm and a pedestrian crossing over "
+            "each arm at the junction (SUMO pedestrians)",
+            junction,
+            {"arms": ("west", "north", "east", "south"), "lanes": 1, "signal": False},
+            netconvert_options=DEFAULT_NETCONVERT_OPTIONS + PEDESTRIAN_NETCONVERT_OPTIONS,
+        )
+    )
     return {r.name: r for r in recipes}
+
+
+PEDESTRIAN_NETCONVERT_OPTIONS: tuple[str, ...] = (
+    # A sidewalk (SUMO lane 0, pedestrians only) on every road up to 50 km/h; the car lanes keep
+    # their positions because sidewalks are added outside them.
+    "--sidewalks.guess",
+    "true",
+    "--sidewalks.guess.max-speed",
+    "13.9",
+    # Crossings wherever sidewalks meet at a junction; walking areas join them to the sidewalks.
+    "--crossings.guess",
+    "true",
+)
 
 
 BUILTIN_MAPS: dict[str, MapRecipe] = _recipes()

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from smarts.core.provider import ProviderBase
 from smarts.maps import RoadMap
 
 NO_SIGNAL, RED, YELLOW, GREEN = 0, 1, 2, 3
@@ -91,11 +92,10 @@ class SignalState:
         self.via_colour[self.via_lane[has_via]] = self.colour[has_via]
 
 
-class FixedTimeSignals:
+class FixedTimeSignals(ProviderBase):
     """A provider that runs the map's fixed-time programs (used when SUMO does not run)."""
 
     name = "signals"
-    provider_id = -1
 
     def __init__(self, signals: SignalState):
         self.signals = signals
@@ -106,15 +106,3 @@ class FixedTimeSignals:
 
     def step(self, sim, dt: float) -> None:
         self.signals.update_fixed_time(sim.time)
-
-    def can_accept(self, sim, rows):
-        return np.zeros(len(rows), dtype=bool)
-
-    def accept(self, sim, rows) -> None:
-        raise NotImplementedError("the signal provider drives no vehicles")
-
-    def release(self, sim, rows) -> None:
-        pass
-
-    def close(self) -> None:
-        pass

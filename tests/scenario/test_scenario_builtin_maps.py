@@ -35,6 +35,9 @@ EXPECTED = {
         {**{f"main_{i}": 25.0 for i in range(5)}, "ramp": 16.67, "exit": 16.67},
     ),
     "highway_6lane_ramp": ({"main_0": 6, "main_1": 7, "main_2": 6, "ramp": 1}, 3.66, {}),
+    "highway_6lane_ramp_long": ({"main_0": 6, "main_1": 7, "main_2": 6, "ramp": 1}, 3.66, {}),
+    # Two lanes per arm: a 2 m sidewalk (lane 0) and the car lane (lane 1).
+    "intersection_4way_1lane_peds": ({e: 2 for e in FOUR_ARMS}, 3.2, {}),
     **{
         f"intersection_4way_{n}lane{suffix}": ({e: n for e in FOUR_ARMS}, 3.2, {})
         for n in (1, 2, 3)
@@ -55,6 +58,9 @@ def test_map_has_expected_edges_lanes_widths_speeds(name, sumo_nets):
     assert {e: edges[e].getLaneNumber() for e in edges} == lane_counts
     for edge_id, edge in edges.items():
         for lane in edge.getLanes():
+            if lane.allows("pedestrian") and not lane.allows("passenger"):
+                assert lane.getWidth() == pytest.approx(2.0)  # a sidewalk
+                continue
             assert lane.getWidth() == pytest.approx(width)
             assert lane.getSpeed() == pytest.approx(speeds.get(edge_id, 13.89))
             assert lane.getID() == f"{edge_id}_{lane.getIndex()}"
