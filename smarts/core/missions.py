@@ -227,7 +227,7 @@ class MissionArrays:
 def stack_missions(road_map: RoadMap, missions: list[ResolvedMission]) -> MissionArrays:
     n_agents = len(missions)
     # One spare row past the longest path: clipping any index to the last row lands on padding.
-    m = max(len(ms.path_s) for ms in missions) + 1
+    m = max((len(ms.path_s) for ms in missions), default=0) + 1
     paths = np.zeros((n_agents, m, 3, 3))
     valid = np.zeros((n_agents, m, 3), dtype=bool)
     path_s = np.zeros((n_agents, m))
@@ -270,7 +270,7 @@ def stack_missions(road_map: RoadMap, missions: list[ResolvedMission]) -> Missio
         route_length=np.array([ms.path_s[-1] for ms in missions]),
         on_route_road=on_route_road,
         goal_kind=np.array([ms.goal_kind for ms in missions], dtype=np.int8),
-        goal_xy=np.stack([ms.goal_xy for ms in missions]),
+        goal_xy=np.array([ms.goal_xy for ms in missions]).reshape(-1, 2),
         goal_radius=np.array([ms.goal_radius for ms in missions]),
         goal_road=np.array([ms.goal_road for ms in missions], dtype=np.int32),
         goal_lane=np.array([ms.goal_lane for ms in missions], dtype=np.int32),

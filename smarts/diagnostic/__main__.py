@@ -87,11 +87,38 @@ def time_case(n_agents: int, steps: int, warmup: int) -> dict:
     return row
 
 
+def _sumo_case(n: int, steps: int) -> dict:
+    from smarts.traffic.sumo_benchmark import sumo_step_benchmark
+
+    r = sumo_step_benchmark(n, steps)
+    return {"engine": "sumo", "vehicles": n, "vehicles_on_road": r["vehicles"], "step_ms": r["step_ms"], "provider_ms": r["sumo_ms"]}
+
+
+def _builtin_case(n: int, steps: int) -> dict:
+    from smarts.traffic.builtin import builtin_step_benchmark
+
+    r = builtin_step_benchmark(n, steps)
+    return {
+        "engine": "builtin",
+        "vehicles": n,
+        "vehicles_on_road": r["vehicles_mean"],
+        "step_ms": r["sim_step_ms_median"],
+        "provider_ms": r["provider_ms_median"],
+    }
+
+
+TRAFFIC_BENCHMARKS = {"sumo": _sumo_case, "builtin": _builtin_case}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m smarts.diagnostic", description=__doc__.splitlines()[0])
     parser.add_argument("--agents", default="1,10,20,50", help="comma-separated agent counts (default 1,10,20,50)")
     parser.add_argument("--steps", type=int, default=300, help="timed steps per case (default 300)")
     parser.add_argument("--warmup", type=int, default=20, help="untimed steps first (default 20)")
+    parser.add_argument("--vehicles", default="1,10,20,50,200", help="traffic vehicle counts (default 1,10,20,50,200)")
+    parser.add_argument(
+        "--traffic", default="sumo,builtin", help="traffic engines to time: sumo,builtin (default both; 'none' to skip)"
+    )
     parser.add_argument("--out", type=Path, default=Path("reports/diagnostic.json"), help="JSON output file")
     args = parser.parse_args(argv)
     try:
@@ -100,6 +127,16 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--agents: expected comma-separated integers, got {args.agents!r}")
     if not counts or min(counts) < 1:
         parser.error(f"--agents: expected positive integers, got {args.agents!r}")
+    try:
+        vehicle_counts = [int(c) for c in args.vehicles.split(",") if c.strip()]
+    except ValueError:
+        parser.error(f"--vehicles: expected comma-separated integers, got {args.vehicles!r}")
+    if not vehicle_counts or min(vehicle_counts) < 1:
+        parser.error(f"--vehicles: expected positive integers, got {args.vehicles!r}")
+    engines = [e for e in args.traffic.split(",") if e.strip() and e != "none"]
+    unknown = [e for e in engines if e not in TRAFFIC_BENCHMARKS]
+    if unknown:
+        parser.error(f"--traffic: unknown engine(s) {unknown}; expected sumo, builtin or none")
     travel = CRUISE_SPEED * (args.steps + args.warmup) * 0.1
     max_agents = LANES * (int((ROAD_LENGTH - END_MARGIN - 5.0 - travel) // SPACING) + 1)
     if max(counts) > max_agents:
@@ -128,11 +165,27 @@ def main(argv: list[str] | None = None) -> int:
             f"{r['agent_steps_per_s']:.0f}",
         )
     console.print(table)
+
+    traffic_rows = []
+    if engines:
+        cases = [(e, n) for e in engines for n in vehicle_counts]
+        for engine, n in track(cases, description="timing traffic", console=console):
+            traffic_rows.append(TRAFFIC_BENCHMARKS[engine](n, args.steps))
+        ttable = Table(title=f"Traffic at full load, {args.steps} timed steps per case (ms per step, median)")
+        for col in ("engine", "vehicles", "on the road", "whole step", "traffic provider"):
+            ttable.add_column(col, justify="right", no_wrap=True)
+        for r in traffic_rows:
+            ttable.add_row(
+                r["engine"], str(r["vehicles"]), f"{r['vehicles_on_road']:.0f}",
+                f"{r['step_ms']:.3f}", f"{r['provider_ms']:.3f}",
+            )
+        console.print(ttable)
     report = {
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "machine": {"python": sys.version.split()[0], "platform": platform.platform(), "processor": platform.processor()},
         "map": PERF_MAP,
         "cases": rows,
+        "traffic_cases": traffic_rows,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(report, indent=2))

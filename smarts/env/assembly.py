@@ -18,7 +18,8 @@ from smarts.dynamics.action_spaces import ActionSpaceType
 from smarts.dynamics.agent_provider import AgentProvider, AgentVehicle
 from smarts.dynamics.limits import ReachLimits
 from smarts.maps import RoadMap, load_map
-from smarts.scenario import ScenarioSpec, load_scenario
+from smarts.scenario import ScenarioError, ScenarioSpec, load_scenario
+from smarts.traffic.signals import FixedTimeSignals, SignalState
 
 
 def as_spec(scenario: str | Path | ScenarioSpec) -> ScenarioSpec:
@@ -67,13 +68,47 @@ def build_simulation(
         not_moving_seconds=spec.events.not_moving_seconds,
         not_moving_distance=spec.events.not_moving_distance,
     )
-    return Simulation(
+    signals = SignalState(road_map) if road_map.tls_ids else None
+    providers = [AgentProvider(vehicles, limits, spec.step_length)]
+    providers += traffic_providers(spec, road_map, signals)
+    sim = Simulation(
         road_map,
         missions,
-        [AgentProvider(vehicles, limits, spec.step_length)],
+        providers,
         dt=spec.step_length,
         episode_steps=spec.episode_steps,
         events=events,
         capacity=spec.vehicle_capacity,
         seed=spec.seed,
     )
+    sim.signals = signals
+    return sim
+
+
+def traffic_providers(spec: ScenarioSpec, road_map: RoadMap, signals: SignalState | None) -> list:
+    """The providers that move everything but the agents, in stepping order (after the agents).
+
+    SUMO drives its own signals; without SUMO the map's fixed-time programs run (also when the
+    scenario has no traffic, so observations and metrics still see the lights change).
+    """
+    try:
+        return _traffic_providers(spec, road_map, signals)
+    except ScenarioError as err:  # name the scenario file, as every spec error does
+        message = str(err)
+        raise ScenarioError(message if message.startswith(spec.source) else f"{spec.source}: {message}") from None
+
+
+def _traffic_providers(spec: ScenarioSpec, road_map: RoadMap, signals: SignalState | None) -> list:
+    traffic = spec.traffic
+    if traffic is not None and traffic.engine == "sumo":
+        from smarts.maps import sumo_net_path
+        from smarts.traffic.sumo_provider import SumoTrafficProvider
+
+        net_file = sumo_net_path(spec.map_path())
+        return [SumoTrafficProvider(traffic, road_map, net_file, spec.step_length, signals)]
+    providers = [FixedTimeSignals(signals)] if signals is not None else []
+    if traffic is not None:
+        from smarts.traffic.builtin import BuiltinTrafficProvider
+
+        providers.append(BuiltinTrafficProvider(traffic, road_map, spec.step_length, signals))
+    return providers

@@ -34,6 +34,7 @@ error. Parallel environments therefore run in separate processes.
 from __future__ import annotations
 
 import contextlib
+import gc
 import hashlib
 import io
 import math
@@ -55,12 +56,12 @@ from smarts.core.vehicle_table import COLUMN, Role, VehicleType
 from smarts.maps import RoadMap, project
 from smarts.scenario.errors import ScenarioError
 from smarts.scenario.traffic import TrafficSpec
+from smarts.traffic.density import exit_roads
 from smarts.traffic.signals import SignalState
 from smarts.traffic.sumo_routes import (
     AGENT_VTYPE,
     VehicleTypeInfo,
     all_flows,
-    entry_exit_roads,
     used_vehicle_types,
     vehicle_type_info,
     write_route_file,
@@ -143,6 +144,11 @@ class SumoTrafficProvider(ProviderBase):
             self.route_file = write_route_file(traffic, road_map, work_dir, 0, self.net_file)
             other = _OPEN_PROVIDER() if _OPEN_PROVIDER is not None else None
             if other is not None and not other.closed:
+                # An env nobody references any more may only wait for the cycle collector.
+                del other
+                gc.collect()
+                other = _OPEN_PROVIDER() if _OPEN_PROVIDER is not None else None
+            if other is not None and not other.closed:
                 raise RuntimeError(
                     "another SumoTrafficProvider is open in this process; libsumo runs one SUMO "
                     "simulation per process, so close the other one first (or run parallel "
@@ -161,7 +167,7 @@ class SumoTrafficProvider(ProviderBase):
         self._started = [False]  # shared with the finalizer, which must not hold ``self``
         _OPEN_PROVIDER = weakref.ref(self)
         self._finalizer = weakref.finalize(self, _shut_down, work_dir, self._started)
-        self._exit_roads = sorted({e for _, exits in entry_exit_roads(road_map) for e in exits})
+        self._exit_roads = sorted(exit_roads(road_map))
         self._ls = None
         self._reset_episode_state()
 

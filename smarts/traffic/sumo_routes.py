@@ -6,7 +6,7 @@ raised as a :class:`ScenarioError` naming the scenario field (``traffic.flows[2]
 
 Flows and trips name roads only (``from``/``to``/``via``): SUMO's router picks the lanes, exactly
 as it would for a hand-written scenario. Density levels become generated flows from every entry
-road to every exit road reachable from it (see :func:`density_flows`).
+road to every exit road reachable from it (see :func:`smarts.traffic.density.density_flows`).
 """
 
 from __future__ import annotations
@@ -28,7 +28,6 @@ from smarts.scenario.errors import ScenarioError
 from smarts.scenario.traffic import (
     DEFAULT_VEHICLE_TYPES,
     DENSITY_LEVELS,
-    DENSITY_RATES,
     DEPART_LANES,
     DEPART_SPEEDS,
     FlowSpec,
@@ -37,11 +36,10 @@ from smarts.scenario.traffic import (
     TripSpec,
     VehicleTypeSpec,
 )
+from smarts.traffic.density import density_flows
 
 AGENT_VTYPE = "smarts.agent"
 """SUMO type of the vehicles that mirror agents (their size is set per vehicle)."""
-DENSITY_FLOW_END = 86400.0
-"""Generated density flows run for a day of simulated time, i.e. for any episode."""
 VEHICLE_BASES = {
     "passenger": VehicleType.PASSENGER,
     "bus": VehicleType.BUS,
@@ -71,75 +69,6 @@ def vehicle_type_info(spec: VehicleTypeSpec) -> VehicleTypeInfo:
         float(spec.width if spec.width is not None else width),
         float(spec.height if spec.height is not None else height),
     )
-
-
-# ---------------------------------------------------------------------------- density
-def density_flows(level: str, road_map: RoadMap) -> list[FlowSpec]:
-    """Flows for a density level: from each entry road (no lane has a predecessor) to each exit
-    road (no lane has a successor) reachable from it without a U-turn, ``DENSITY_RATES[level]``
-    vehicles per hour per entry road, split evenly over its exits.
-
-    The flows depart with a per-second probability instead of a fixed period, so every seed
-    gives a different (but reproducible) stream of vehicles.
-    """
-    rate = DENSITY_RATES[level]
-    if rate <= 0:
-        return []
-    flows = []
-    for entry, exits in entry_exit_roads(road_map):
-        share = rate / len(exits)
-        for exit_road in exits:
-            entry_id, exit_id = road_map.road_ids[entry], road_map.road_ids[exit_road]
-            flows.append(
-                FlowSpec(
-                    id=f"density.{entry_id}.{exit_id}",
-                    route=[entry_id, exit_id],
-                    probability=share / 3600.0,
-                    end=DENSITY_FLOW_END,
-                    depart_lane="best",
-                    depart_speed="max",
-                )
-            )
-    return flows
-
-
-def entry_exit_roads(road_map: RoadMap) -> list[tuple[int, list[int]]]:
-    """(entry road, exit roads reachable from it without a U-turn) for every entry road that
-    reaches an exit; road indices into ``road_map.road_ids``."""
-    rm = road_map
-    n_roads = len(rm.road_ids)
-    has_pred = np.zeros(n_roads, dtype=bool)
-    has_succ = np.zeros(n_roads, dtype=bool)
-    n_pred, n_succ = np.diff(rm.pred_offsets), np.diff(rm.succ_offsets)
-    np.logical_or.at(has_pred, rm.lane_road, n_pred > 0)
-    np.logical_or.at(has_succ, rm.lane_road, n_succ > 0)
-    internal = np.zeros(n_roads, dtype=bool)
-    internal[rm.lane_road[rm.lane_internal]] = True
-    entries = np.flatnonzero(~has_pred & ~internal)
-    exits = set(np.flatnonzero(~has_succ & ~internal).tolist())
-    # Road graph through junction connections, leaving out U-turns (a flow that turns round
-    # at the first junction is not traffic anyone wants).
-    adjacency: dict[int, set[int]] = {}
-    if len(rm.conn_from):
-        keep = (rm.conn_to >= 0) & (rm.conn_dir != "t")
-        for a, b in zip(rm.lane_road[rm.conn_from[keep]], rm.lane_road[rm.conn_to[keep]]):
-            adjacency.setdefault(int(a), set()).add(int(b))
-    else:  # no connection table: follow the lane graph, junction lanes included
-        for lane in range(rm.num_lanes):
-            for nxt in rm.successors(lane):
-                adjacency.setdefault(int(rm.lane_road[lane]), set()).add(int(rm.lane_road[nxt]))
-    pairs = []
-    for entry in entries.tolist():
-        seen, stack = {entry}, [entry]
-        while stack:
-            for nxt in adjacency.get(stack.pop(), ()):
-                if nxt not in seen:
-                    seen.add(nxt)
-                    stack.append(nxt)
-        reachable = sorted(seen & exits)
-        if reachable:
-            pairs.append((entry, reachable))
-    return pairs
 
 
 # ---------------------------------------------------------------------------- checks
@@ -394,7 +323,7 @@ def used_vehicle_types(
 
 def all_flows(traffic: TrafficSpec, road_map: RoadMap) -> list[FlowSpec]:
     """The listed flows followed by the density level's generated flows."""
-    return list(traffic.flows) + density_flows(traffic.density, road_map)
+    return list(traffic.flows) + density_flows(traffic, road_map)
 
 
 def write_route_file(

@@ -220,11 +220,8 @@ def test_agent_takes_over_a_sumo_trip_and_hands_it_back_at_mission_end():
             ],
         },
     )
-    sim = build_simulation(spec)
-    sumo = SumoTrafficProvider(
-        spec.traffic, sim.road_map, sumo_net_path(sim.road_map.source), sim.dt
-    )
-    sim.add_provider(sumo)
+    sim = build_simulation(spec)  # engine: sumo, so the assembly adds the SUMO provider
+    (sumo,) = [p for p in sim.providers if isinstance(p, SumoTrafficProvider)]
     ls = _libsumo()
     try:
         sim.reset()

@@ -17,7 +17,8 @@ from smarts.scenario.traffic import (
     TripSpec,
     VehicleTypeSpec,
 )
-from smarts.traffic.sumo_routes import AGENT_VTYPE, density_flows, write_route_file
+from smarts.traffic.density import density_flows
+from smarts.traffic.sumo_routes import AGENT_VTYPE, write_route_file
 
 
 def _map(name):
@@ -133,16 +134,16 @@ def test_pedestrian_flow_walks_between_roads(tmp_path):
 
 def test_density_flows_join_every_entry_to_every_exit_without_u_turns():
     rm = _map("intersection_4way_1lane")
-    flows = density_flows("medium", rm)
+    flows = density_flows(TrafficSpec(density="medium"), rm)
     arms = ("west", "north", "east", "south")
     expected = {f"density.{a}_in.{b}_out" for a in arms for b in arms if a != b}
     assert {f.id for f in flows} == expected
     for f in flows:
         assert f.probability == pytest.approx(DENSITY_RATES["medium"] / 3 / 3600)
         assert f.route == [f.id.split(".")[1], f.id.split(".")[2]]
-    highway = {f.id for f in density_flows("low", _map("highway_6lane_ramp"))}
+    highway = {f.id for f in density_flows(TrafficSpec(density="low"), _map("highway_6lane_ramp"))}
     assert highway == {"density.main_0.main_2", "density.ramp.main_2"}
-    assert density_flows("none", rm) == []
+    assert density_flows(TrafficSpec(density="none"), rm) == []
 
 
 def test_density_level_flows_are_in_the_route_file(tmp_path):

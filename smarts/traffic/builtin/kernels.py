@@ -1,0 +1,889 @@
+"""Compiled per-step kernels of the built-in traffic model.
+
+One step is two calls: ``build_occupancy`` sorts every road user (own vehicles, agents, other
+providers' rows) into per-lane lists ordered by arc length, and ``step_vehicles`` decides each own
+vehicle's acceleration and lane change from those lists (pass 1, all from the same start-of-step
+state), then moves every vehicle and writes its pose into the vehicle table (pass 2).
+
+Per vehicle, pass 1 does: IDM car following behind the nearest road user ahead on the vehicle's
+own route (looking through lane ends into the route's next lanes); stop lines of red signals;
+right of way at junctions (see ``junctions``): waiting at the stop line for foes with priority
+whose passage overlaps in time, and following vehicles ahead on a merging or diverging path;
+MOBIL lane changes (incentive with politeness and threshold, safety for the new follower) plus
+the changes the route needs. Drivers who have waited a while (at a merge, or to change lanes
+before their lane ends) get room: others slow down for them, and they accept harder braking
+from others, so queues zip in rather than lock up. A hard limit keeps every move shorter than
+the gap to the vehicle ahead, so vehicles never drive into each other even when braking would
+not be enough.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from smarts.core.vehicle_table import COLUMN
+from smarts.traffic.builtin.junctions import NOMINAL_LENGTH
+
+# --- per-row float state st[k, row]
+S, LAT, LAT0, LC_PROG, COOL, FACTOR, WAIT = range(7)
+NUM_FLOAT_STATE = 7
+# --- per-row int state si[k, row]
+SLOT, PREV_LANE, LC_LANE, LC_FROM = range(4)
+NUM_INT_STATE = 4
+# --- per-row driver parameters pa[k, row]
+ACCEL, DECEL, EMERG, TAU, MIN_GAP, MAX_SPEED, POLITE, THRESH, KEEP_RIGHT = range(9)
+NUM_PARAMS = 9
+# --- per-lane floats lane_f[k, lane]
+LEN, WIDTH, SPEED_LIMIT, INTERNAL = range(4)
+# --- slots slot_int[k, slot]
+S_LANE, S_NEXT, S_LEFT, S_RIGHT, S_DIR = range(5)
+NEXT_NONE, NEXT_ARRIVE = -1, -2
+# --- connections conn_int[k, c]
+C_FROM, C_TO, C_FIRST, C_MAJOR, C_MERGE_ONLY = range(5)
+CROSS, MERGE, DIVERGE = 0, 1, 2
+NOMINAL_HALF = 0.5 * NOMINAL_LENGTH  # conflict zones hold for this half length; longer add the rest
+# --- occupancy entry kinds
+PRIMARY, DUPLICATE, OVERHANG = 0, 1, 2
+# --- signal colours (smarts.traffic.signals)
+RED, YELLOW = 1, 2
+
+_X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
+_V, _A, _J = COLUMN["speed"], COLUMN["accel"], COLUMN["jerk"]
+_YAW, _LATA = COLUMN["yaw_rate"], COLUMN["lat_accel"]
+_LENGTH, _WIDTH = COLUMN["length"], COLUMN["width"]
+
+LC_DURATION = 3.0  # s for the sideways move of a lane change
+LC_COOLDOWN = 2.0  # s after a lane change before a discretionary one
+WALL_MIN_GAP = 1.0  # m kept before stop lines and lane ends
+CONFLICT_MARGIN = 1.0  # s between two vehicles' passages through a conflict zone
+APPROACH_RANGE = 150.0  # m before a junction within which approaching foes count
+MIN_CHANGE_ROOM = 10.0  # m of lane left that a discretionary lane change needs
+SAFE_GAP = 0.5  # m: smallest gap to the new leader and follower a lane change accepts
+B_SAFE_DISCRETIONARY = 3.0  # m/s^2 the new follower may have to brake for a free lane change
+B_SAFE_PREFERRED = 2.0  # ... for a change towards the route's preferred lane
+KEEP_RIGHT_BIAS = 0.3
+"""m/s^2 per unit of lc_keep_right favouring changes to the right; above the default threshold,
+so a free lane on the right is taken."""
+FOLLOWER_LOOKBACK = 80.0  # m searched behind a lane change spot for the new follower
+FOLLOWER_STACK = 32  # lanes a follower search keeps pending (branching predecessors)
+GUARD_MARGIN = 0.2  # m a move always leaves to the road user ahead
+COURTESY_WAIT = 3.0  # s a vehicle waits to merge or change lanes before others make room
+IMPATIENCE_TIME = 10.0
+"""s of waiting over which the braking a driver accepts to impose on others grows from
+comfortable to twice that (so queues at merges and lane ends zip in instead of waiting forever)."""
+IDM_DELTA = 4.0
+INF = 1e9
+
+
+# ----------------------------------------------------------------------------- small helpers
+@numba.njit(cache=True, nogil=True)
+def idm(v, v0, gap, v_lead, a, b, tau, s0):  # pragma: no cover - compiled
+    """Intelligent Driver Model acceleration for a bumper-to-bumper ``gap`` to a leader."""
+    free = 1.0 - (v / max(v0, 0.1)) ** IDM_DELTA
+    if gap >= INF * 0.5:
+        return a * free
+    s_star = s0 + max(0.0, v * tau + v * (v - v_lead) / (2.0 * math.sqrt(a * b)))
+    g = max(gap, 0.05)
+    return a * (free - (s_star / g) ** 2)
+
+
+@numba.njit(cache=True, nogil=True)
+def travel_time(dist, v, a, v_max):  # pragma: no cover - compiled
+    """Seconds to cover ``dist`` from speed ``v`` accelerating at ``a`` up to ``v_max``."""
+    if dist <= 0.0:
+        return 0.0
+    if a <= 0.0:
+        return dist / max(v, 0.1)
+    top = max(v_max, v, 0.1)
+    t1 = (top - v) / a
+    d1 = 0.5 * (v + top) * t1
+    if dist <= d1:
+        return (-v + math.sqrt(v * v + 2.0 * a * dist)) / a
+    return t1 + (dist - d1) / top
+
+
+@numba.njit(cache=True, nogil=True)
+def lane_pose(lane, s, point_off, point_s, points, seg_heading):  # pragma: no cover - compiled
+    """Centre-line point and heading of ``lane`` at arc length ``s`` (extrapolated past the ends).
+
+    The heading blends linearly between neighbouring segments' headings from one segment middle
+    to the next, so it turns smoothly at the polyline's vertices instead of jumping.
+    """
+    a, b = point_off[lane], point_off[lane + 1]
+    lo, hi = a, b - 2  # segment index range (segment k joins points k and k + 1)
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if point_s[mid] <= s:
+            lo = mid
+        else:
+            hi = mid - 1
+    k = lo
+    seg = point_s[k + 1] - point_s[k]
+    u = (s - point_s[k]) / seg if seg > 1e-9 else 0.0
+    x = points[k, 0] + u * (points[k + 1, 0] - points[k, 0])
+    y = points[k, 1] + u * (points[k + 1, 1] - points[k, 1])
+    h = seg_heading[k - lane]
+    if u < 0.5 and k > a:
+        other, w = seg_heading[k - 1 - lane], 0.5 - u
+    elif u > 0.5 and k < b - 2:
+        other, w = seg_heading[k + 1 - lane], u - 0.5
+    else:
+        return x, y, h
+    w = min(w, 0.5)
+    turn = math.atan2(math.sin(other - h), math.cos(other - h))
+    return x, y, h + w * turn
+
+
+@numba.njit(cache=True, nogil=True)
+def _first_ahead(lane, s, row, lane_off, e_s, e_row):  # pragma: no cover - compiled
+    """Index of the first entry on ``lane`` ordered after (s, row), skipping ``row``'s own
+    entries, or -1. Entries are sorted by (arc length, row), so two road users at the same arc
+    length still see one another as ahead and behind."""
+    lo, hi = lane_off[lane], lane_off[lane + 1]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if e_s[mid] < s or (e_s[mid] == s and e_row[mid] <= row):
+            lo = mid + 1
+        else:
+            hi = mid
+    k = lo
+    end = lane_off[lane + 1]
+    while k < end and e_row[k] == row:
+        k += 1
+    return k if k < end else -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _last_behind(lane, s, row, lane_off, e_s, e_row):  # pragma: no cover - compiled
+    """Index of the last entry on ``lane`` ordered before (s, row), skipping ``row``, or -1."""
+    lo, hi = lane_off[lane], lane_off[lane + 1]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if e_s[mid] < s or (e_s[mid] == s and e_row[mid] < row):
+            lo = mid + 1
+        else:
+            hi = mid
+    k = lo - 1
+    start = lane_off[lane]
+    while k >= start and e_row[k] == row:
+        k -= 1
+    return k if k >= start else -1
+
+
+@numba.njit(cache=True, nogil=True)
+def find_leader(slot, s, row, max_dist, slot_int, lane_f, lane_off, e_s, e_half, e_row):  # pragma: no cover
+    """Entry ahead of arc length ``s`` on the slot's lane and the route's next lanes.
+
+    Returns (entry index or -1, distance from ``s`` to that entry's rear).
+    """
+    lane = slot_int[S_LANE, slot]
+    k = _first_ahead(lane, s, row, lane_off, e_s, e_row)
+    if k >= 0:
+        return k, e_s[k] - e_half[k] - s
+    dist = lane_f[LEN, lane] - s
+    nxt = slot_int[S_NEXT, slot]
+    while nxt >= 0 and dist < max_dist:
+        lane = slot_int[S_LANE, nxt]
+        k = lane_off[lane]
+        end = lane_off[lane + 1]
+        while k < end and e_row[k] == row:
+            k += 1
+        if k < end:
+            return k, dist + e_s[k] - e_half[k]
+        dist += lane_f[LEN, lane]
+        nxt = slot_int[S_NEXT, nxt]
+    return -1, INF
+
+
+@numba.njit(cache=True, nogil=True)
+def find_follower(
+    lane, s, row, max_back, lane_f, lane_off, e_s, e_half, e_row, pred_off, pred
+):  # pragma: no cover - compiled
+    """Entry behind arc length ``s`` on ``lane`` or, looking back up to ``max_back`` metres, on
+    the lanes leading into it (the nearest one over all branches).
+
+    Returns (entry index or -1, distance from that entry's front to ``s``).
+    """
+    k = _last_behind(lane, s, row, lane_off, e_s, e_row)
+    if k >= 0:
+        return k, s - e_s[k] - e_half[k]
+    best, best_gap = -1, INF
+    stack_lane = np.empty(FOLLOWER_STACK, dtype=np.int64)
+    stack_dist = np.empty(FOLLOWER_STACK)
+    top = 0
+    for p in range(pred_off[lane], pred_off[lane + 1]):
+        if top < FOLLOWER_STACK:
+            stack_lane[top], stack_dist[top] = pred[p], s
+            top += 1
+    while top > 0:
+        top -= 1
+        pl, d = stack_lane[top], stack_dist[top]
+        k = lane_off[pl + 1] - 1
+        while k >= lane_off[pl] and e_row[k] == row:
+            k -= 1
+        if k >= lane_off[pl]:
+            gap = d + lane_f[LEN, pl] - e_s[k] - e_half[k]
+            if gap < best_gap:
+                best, best_gap = k, gap
+            continue
+        d += lane_f[LEN, pl]
+        if d >= max_back:
+            continue
+        for p in range(pred_off[pl], pred_off[pl + 1]):
+            if top < FOLLOWER_STACK:
+                stack_lane[top], stack_dist[top] = pred[p], d
+                top += 1
+    return best, best_gap
+
+
+# ----------------------------------------------------------------------------- occupancy
+@numba.njit(cache=True, nogil=True)
+def _put(n, lane, s, half, v, row, kind, raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind):
+    raw_lane[n], raw_s[n], raw_half[n] = lane, s, half
+    raw_v[n], raw_row[n], raw_kind[n] = v, row, kind
+    return n + 1
+
+
+@numba.njit(cache=True, nogil=True)
+def build_occupancy(
+    own, f_rows, f_lane, f_s, f_t, f_dh, data, si, st, slot_int, lane_f, lane_lr, pred_off, pred,
+    lane_off, raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind, e_s, e_half, e_v, e_row, e_kind,
+):  # pragma: no cover - compiled
+    """Fill the per-lane entry lists sorted by arc length; returns the number of entries.
+
+    Own vehicles appear on their lane, on the lane they are leaving while a lane change still
+    puts their body over it, and at the end of the previous lane while their rear overhangs it.
+    Other rows (``f_*``: projected lane, s, t and heading minus lane heading) appear on their
+    lane, on the neighbour lane their body reaches into, and on a single predecessor lane while
+    their rear overhangs it, with their speed along the lane.
+    """
+    n = 0
+    for i in range(own.shape[0]):
+        r = own[i]
+        lane = slot_int[S_LANE, si[SLOT, r]]
+        s, half, v = st[S, r], 0.5 * data[_LENGTH, r], data[_V, r]
+        n = _put(n, lane, s, half, v, r, PRIMARY, raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind)
+        src = si[LC_FROM, r]
+        if (st[LC_PROG, r] < 1.0 and si[LC_LANE, r] == lane and src >= 0
+                and abs(st[LAT, r]) > 0.5 * (lane_f[WIDTH, lane] - data[_WIDTH, r]) - 0.2):
+            s_src = s * lane_f[LEN, src] / max(lane_f[LEN, lane], 1e-9)
+            n = _put(n, src, s_src, half, v, r, DUPLICATE,
+                     raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind)
+        prev = si[PREV_LANE, r]
+        if prev >= 0 and s < half:
+            n = _put(n, prev, lane_f[LEN, prev] + s, half, v, r, OVERHANG,
+                     raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind)
+    for i in range(f_rows.shape[0]):
+        r, lane = f_rows[i], f_lane[i]
+        if lane < 0:
+            continue
+        half, w = 0.5 * data[_LENGTH, r], data[_WIDTH, r]
+        reach = 0.5 * lane_f[WIDTH, lane]
+        t = f_t[i]
+        if abs(t) > reach + 0.5 * w:
+            continue  # beside the lane, not on it
+        v = max(data[_V, r] * math.cos(f_dh[i]), 0.0)
+        s = f_s[i]
+        n = _put(n, lane, s, half, v, r, PRIMARY, raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind)
+        if abs(t) + 0.5 * w > reach + 0.3:
+            nb = lane_lr[0, lane] if t > 0 else lane_lr[1, lane]
+            if nb >= 0:
+                s_nb = s * lane_f[LEN, nb] / max(lane_f[LEN, lane], 1e-9)
+                n = _put(n, nb, s_nb, half, v, r, DUPLICATE,
+                         raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind)
+        if s < half and pred_off[lane + 1] - pred_off[lane] == 1:
+            p = pred[pred_off[lane]]
+            n = _put(n, p, lane_f[LEN, p] + s, half, v, r, OVERHANG,
+                     raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind)
+    _sort_entries(n, lane_off.shape[0] - 1, lane_off, raw_lane, raw_s, raw_half, raw_v, raw_row,
+                  raw_kind, e_s, e_half, e_v, e_row, e_kind)
+    return n
+
+
+@numba.njit(cache=True, nogil=True)
+def _sort_entries(n, n_lanes, lane_off, raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind,
+                  e_s, e_half, e_v, e_row, e_kind):  # pragma: no cover - compiled
+    """Counting sort by lane, then insertion sort by arc length within each (short) lane list."""
+    for k in range(n_lanes + 1):
+        lane_off[k] = 0
+    for k in range(n):
+        lane_off[raw_lane[k] + 1] += 1
+    for k in range(n_lanes):
+        lane_off[k + 1] += lane_off[k]
+    cursor = lane_off[:-1].copy()
+    for k in range(n):
+        p = cursor[raw_lane[k]]
+        cursor[raw_lane[k]] += 1
+        e_s[p], e_half[p], e_v[p] = raw_s[k], raw_half[k], raw_v[k]
+        e_row[p], e_kind[p] = raw_row[k], raw_kind[k]
+    for lane in range(n_lanes):
+        a, b = lane_off[lane], lane_off[lane + 1]
+        for k in range(a + 1, b):
+            j = k
+            while j > a and (e_s[j - 1] > e_s[j] or (e_s[j - 1] == e_s[j] and e_row[j - 1] > e_row[j])):
+                e_s[j - 1], e_s[j] = e_s[j], e_s[j - 1]
+                e_half[j - 1], e_half[j] = e_half[j], e_half[j - 1]
+                e_v[j - 1], e_v[j] = e_v[j], e_v[j - 1]
+                e_row[j - 1], e_row[j] = e_row[j], e_row[j - 1]
+                e_kind[j - 1], e_kind[j] = e_kind[j], e_kind[j - 1]
+                j -= 1
+
+
+# ----------------------------------------------------------------------------- driver model
+@numba.njit(cache=True, nogil=True)
+def desired_speed(r, lane, pa, st, lane_f):  # pragma: no cover - compiled
+    return min(pa[MAX_SPEED, r], lane_f[SPEED_LIMIT, lane] * st[FACTOR, r])
+
+
+@numba.njit(cache=True, nogil=True)
+def impatience(r, st):  # pragma: no cover - compiled
+    """1 + the share of IMPATIENCE_TIME that vehicle ``r`` has been waiting."""
+    return 1.0 + min(st[WAIT, r] / IMPATIENCE_TIME, 1.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _other_accel(row, v, gap, v_lead, lane, mine, pa, st, lane_f):  # pragma: no cover - compiled
+    """IDM acceleration of road user ``row`` (own: its parameters; others: typical ones)."""
+    if mine[row]:
+        v0 = desired_speed(row, lane, pa, st, lane_f)
+        return idm(v, v0, gap, v_lead, pa[ACCEL, row], pa[DECEL, row], pa[TAU, row], pa[MIN_GAP, row])
+    return idm(v, max(v, lane_f[SPEED_LIMIT, lane]), gap, v_lead, 2.6, 4.5, 1.0, 2.5)
+
+
+@numba.njit(cache=True, nogil=True)
+def _judge_foe(
+    r, p_v, v, h, v0, accel, decel, tau, emerg, bold, major_c, len_c,
+    kind, zin, zout, fin, fout, major_f, merge_f, len_f, colour_f,
+    w, p_w, v_w, h_w, w_own, w_accel, w_decel, w_v0, w_wait, a_min, guard,
+):  # pragma: no cover - compiled
+    """Right of way between own vehicle ``r`` (at ``p_v`` along its connection) and road user
+    ``w`` (at ``p_w`` along a foe connection). Returns the updated (acceleration bound, gap bound).
+    """
+    if w == r:
+        return a_min, guard
+    extra_v = max(h - NOMINAL_HALF, 0.0)
+    extra_w = max(h_w - NOMINAL_HALF, 0.0)
+    if kind == DIVERGE:  # same incoming lane: follow whoever is ahead on the shared start
+        if p_w > p_v and p_w - extra_w < fout:
+            gap = p_w - p_v - h - h_w
+            a_min = min(a_min, idm(v, v0, gap, v_w, accel, decel, tau, WALL_MIN_GAP))
+            if gap >= 0.0:
+                guard = min(guard, gap)
+        return a_min, guard
+    if p_w - extra_w > fout:
+        return a_min, guard  # it has left the zone
+    v_in = p_v + h > 0.0
+    w_in = p_w + h_w > 0.0
+    if not w_in and colour_f != 0:  # it will stop at its own red (or yellow) light
+        room = max(-p_w - h_w, 0.0)
+        limit = 2.0 * w_decel if colour_f == RED else w_decel
+        if colour_f <= YELLOW and v_w * v_w <= 2.0 * limit * room + 0.01:
+            return a_min, guard
+    if kind == MERGE:
+        delta = (len_c - (len_f - p_w)) - p_v
+        ahead = delta > 0.0 or (delta == 0.0 and w < r)
+        if w_in and ahead:
+            gap = delta - h - h_w
+            a_min = min(a_min, idm(v, v0, gap, v_w, accel, decel, tau, WALL_MIN_GAP))
+            if gap >= 0.0:
+                guard = min(guard, gap)
+            return a_min, guard
+        if w_in and v_in:
+            return a_min, guard  # both in the junction and it is behind: it follows
+        if ahead and not w_in and major_c > major_f and w_wait >= COURTESY_WAIT and merge_f:
+            # It has waited at its stop line to merge in ahead (and waits for nothing else, its
+            # connection crossing no other): let it in if braking is easy.
+            gap = delta - h - h_w
+            a_courtesy = idm(v, v0, gap, v_w, accel, decel, tau, WALL_MIN_GAP)
+            if gap > SAFE_GAP and a_courtesy >= -decel:
+                return min(a_min, a_courtesy), min(guard, gap)
+        if not ahead:  # it is behind on the merged path: go if it can follow comfortably
+            gap_wv = -delta - h - h_w
+            if gap_wv > SAFE_GAP and idm(v_w, max(v_w, w_v0, 1.0), gap_wv, v, max(w_accel, 1.0),
+                                          w_decel, 1.0, 2.5) >= -w_decel * bold:
+                return a_min, guard
+    t_vin = travel_time(zin - extra_v - p_v, v, accel, v0)
+    t_vout = travel_time(zout + extra_v - p_v, v, accel, v0)
+    wa = w_accel if w_own else 0.0
+    t_win = travel_time(fin - extra_w - p_w, v_w, wa, w_v0)
+    t_wout = travel_time(fout + extra_w - p_w, v_w, wa, w_v0)
+    # Who goes first: whoever is already in the junction; else the connection with right of way;
+    # else whoever reaches its stop line first (a measure that does not depend on the pair, so
+    # the order is the same for everyone and waiting never goes round in a circle); inside, whoever
+    # reaches the zone first.
+    if v_in != w_in:
+        w_first = w_in
+    elif not v_in:
+        if major_c != major_f:
+            w_first = major_f > major_c
+        else:
+            t_v = travel_time(-p_v - h, v, accel, v0)
+            t_w = travel_time(-p_w - h_w, v_w, wa, w_v0)
+            w_first = t_w < t_v or (t_w == t_v and w < r)
+    else:
+        w_first = t_win < t_vin or (t_win == t_vin and w < r)
+    if not w_first:
+        return a_min, guard
+    if t_vin > t_wout + CONFLICT_MARGIN or t_win > t_vout + CONFLICT_MARGIN:
+        return a_min, guard  # their passages do not overlap in time
+    gap = zin - extra_v - p_v  # how far the centre may still move before the zone
+    if not v_in:
+        gap = min(gap, -p_v - h)  # and not past the stop line
+    if gap <= 0.0:
+        return a_min, guard  # already in the zone: nothing left to yield
+    if v * v <= 2.0 * emerg * max(gap - 0.1, 0.0):
+        a_min = min(a_min, idm(v, v0, gap, 0.0, accel, decel, tau, WALL_MIN_GAP))
+    return a_min, guard
+
+
+@numba.njit(cache=True, nogil=True)
+def _junction(
+    r, c, p_v, v, h, v0, accel, decel, tau, emerg, a_min, guard,
+    data, si, st, pa, mine, lane_off, e_s, e_half, e_v, e_row, e_kind, lane_f, slot_int,
+    conn_int, conn_len, clanes_off, clanes, offset_of_lane, foe_off, foe, foe_kind, zone,
+    via_colour,
+):  # pragma: no cover - compiled
+    """Apply right of way on connection ``c`` against every road user on or approaching a foe."""
+    bold = impatience(r, st)
+    major_c = conn_int[C_MAJOR, c]
+    len_c = conn_len[c]
+    extra_v = max(h - NOMINAL_HALF, 0.0)
+    for f in range(foe_off[c], foe_off[c + 1]):
+        if p_v - extra_v > zone[1, f]:
+            continue  # already past this zone
+        fc = foe[f]
+        kind = foe_kind[f]
+        zin, zout, fin, fout = zone[0, f], zone[1, f], zone[2, f], zone[3, f]
+        major_f, len_f = conn_int[C_MAJOR, fc], conn_len[fc]
+        merge_f = conn_int[C_MERGE_ONLY, fc] > 0
+        first = conn_int[C_FIRST, fc]
+        colour_f = via_colour[first]
+        # 1. on the foe's junction lanes
+        for q in range(clanes_off[fc], clanes_off[fc + 1]):
+            ln = clanes[q]
+            for k in range(lane_off[ln], lane_off[ln + 1]):
+                w = e_row[k]
+                own_w = mine[w]
+                wa = pa[ACCEL, w] if own_w else 0.0
+                wd = pa[DECEL, w] if own_w else 4.5
+                wv0 = desired_speed(w, ln, pa, st, lane_f) if own_w else e_v[k]
+                ww = st[WAIT, w] if own_w else 0.0
+                a_min, guard = _judge_foe(
+                    r, p_v, v, h, v0, accel, decel, tau, emerg, bold, major_c, len_c,
+                    kind, zin, zout, fin, fout, major_f, merge_f, len_f, colour_f,
+                    w, offset_of_lane[ln] + e_s[k], e_v[k], e_half[k], own_w, wa, wd, wv0,
+                    ww, a_min, guard,
+                )
+        # 2. just out of it, on its outgoing lane but maybe not yet out of the zone
+        to = conn_int[C_TO, fc]
+        beyond = max(fout - len_f, 0.0) + NOMINAL_HALF
+        for k in range(lane_off[to], lane_off[to + 1]):
+            if e_s[k] - e_half[k] > beyond:
+                break
+            w = e_row[k]
+            a_min, guard = _judge_foe(
+                r, p_v, v, h, v0, accel, decel, tau, emerg, bold, major_c, len_c,
+                kind, zin, zout, fin, fout, major_f, merge_f, len_f, colour_f,
+                w, len_f + e_s[k], e_v[k], e_half[k], False, 0.0, 4.5, e_v[k], 0.0, a_min, guard,
+            )
+        # 3. the first vehicle approaching on its incoming lane (those behind cannot enter
+        #    before it has, and count once they are first)
+        src = conn_int[C_FROM, fc]
+        src_len = lane_f[LEN, src]
+        for k in range(lane_off[src + 1] - 1, lane_off[src] - 1, -1):
+            if e_kind[k] != PRIMARY:
+                continue
+            dist = src_len - e_s[k]
+            if dist > APPROACH_RANGE:
+                break
+            w = e_row[k]
+            own_w = mine[w]
+            if own_w:
+                nxt = slot_int[S_NEXT, si[SLOT, w]]
+                if nxt < 0 or slot_int[S_LANE, nxt] != first:
+                    break  # takes another way through the junction
+            wa = pa[ACCEL, w] if own_w else 0.0
+            wd = pa[DECEL, w] if own_w else 4.5
+            wv0 = desired_speed(w, src, pa, st, lane_f) if own_w else e_v[k]
+            ww = st[WAIT, w] if own_w else 0.0
+            a_min, guard = _judge_foe(
+                r, p_v, v, h, v0, accel, decel, tau, emerg, bold, major_c, len_c,
+                kind, zin, zout, fin, fout, major_f, merge_f, len_f, colour_f,
+                w, -dist, e_v[k], e_half[k], own_w, wa, wd, wv0, ww, a_min, guard,
+            )
+            break
+    return a_min, guard
+
+
+@numba.njit(cache=True, nogil=True)
+def _try_change(
+    r, slot, nslot, d, s, v, h, a_now, lead_gap, lead_v, has_lead, mode, look,
+    data, pa, st, mine, lane_off, e_s, e_half, e_v, e_row, lane_f, slot_int, pred_off, pred,
+):  # pragma: no cover - compiled
+    """Check a lane change to ``nslot`` (side ``d``: +1 left, -1 right). mode 0: discretionary
+    (MOBIL), 1: towards the route's preferred lane, 2: the lane ends. Returns (safe, incentive,
+    own acceleration after, gap to the new leader).
+
+    The politeness term weighs the new follower's loss and, for changes to the right only, the
+    old follower's gain: drivers keep right to let others pass, but do not pull out to the left
+    for a faster vehicle behind."""
+    lane = slot_int[S_LANE, slot]
+    nlane = slot_int[S_LANE, nslot]
+    s_n = min(max(s * lane_f[LEN, nlane] / max(lane_f[LEN, lane], 1e-9), 0.0), lane_f[LEN, nlane])
+    accel, decel, tau, s0 = pa[ACCEL, r], pa[DECEL, r], pa[TAU, r], pa[MIN_GAP, r]
+    v0_n = desired_speed(r, nlane, pa, st, lane_f)
+    k, g = find_leader(nslot, s_n, r, look, slot_int, lane_f, lane_off, e_s, e_half, e_row)
+    gap_nl = g - h
+    v_nl = e_v[k] if k >= 0 else 0.0
+    if gap_nl < SAFE_GAP:
+        return False, 0.0, 0.0, gap_nl
+    a_after = idm(v, v0_n, gap_nl, v_nl, accel, decel, tau, s0)
+    if mode == 2:
+        b_safe = decel * impatience(r, st)
+    elif mode == 1:
+        b_safe = B_SAFE_PREFERRED * impatience(r, st)
+    else:
+        b_safe = min(decel, B_SAFE_DISCRETIONARY)
+    if a_after < -b_safe and mode < 2:
+        return False, 0.0, a_after, gap_nl
+    fk, fg = find_follower(nlane, s_n, r, FOLLOWER_LOOKBACK, lane_f, lane_off, e_s, e_half, e_row,
+                           pred_off, pred)
+    gap_nf = fg - h
+    a_nf_gain = 0.0
+    if fk >= 0:
+        if gap_nf < SAFE_GAP:
+            return False, 0.0, a_after, gap_nl
+        fr = e_row[fk]
+        vf = e_v[fk]
+        a_nf_after = _other_accel(fr, vf, gap_nf, v, nlane, mine, pa, st, lane_f)
+        if a_nf_after < -b_safe:
+            return False, 0.0, a_after, gap_nl
+        if mode == 0:
+            before_gap = gap_nf + 2.0 * h + gap_nl if k >= 0 else INF
+            a_nf_gain = a_nf_after - _other_accel(fr, vf, before_gap, v_nl, nlane, mine, pa, st, lane_f)
+    if mode > 0:
+        return True, INF, a_after, gap_nl
+    a_of_gain = 0.0
+    ok, og = -1, INF
+    if d < 0:
+        ok, og = find_follower(lane, s, r, FOLLOWER_LOOKBACK, lane_f, lane_off, e_s, e_half, e_row,
+                               pred_off, pred)
+    if ok >= 0:
+        orow, vo = e_row[ok], e_v[ok]
+        gap_of = og - h
+        after_gap = gap_of + 2.0 * h + lead_gap if has_lead else INF
+        a_of_gain = (_other_accel(orow, vo, after_gap, lead_v, lane, mine, pa, st, lane_f)
+                     - _other_accel(orow, vo, gap_of, v, lane, mine, pa, st, lane_f))
+    incentive = a_after - a_now + pa[POLITE, r] * (a_nf_gain + a_of_gain)
+    return True, incentive, a_after, gap_nl
+
+
+@numba.njit(cache=True, nogil=True)
+def _neighbour_turns(slot, s, r, d, slot_int, lane_off, e_s, e_row, turn):  # pragma: no cover
+    """Whether the road user just ahead or just behind on the lane has already decided this step
+    to change lanes to the same side (decisions share one start-of-step state, so two of them
+    could otherwise move into the same gap)."""
+    lane = slot_int[S_LANE, slot]
+    k = _first_ahead(lane, s, r, lane_off, e_s, e_row)
+    if k >= 0 and turn[e_row[k]] == d:
+        return True
+    k = _last_behind(lane, s, r, lane_off, e_s, e_row)
+    return k >= 0 and turn[e_row[k]] == d
+
+
+# ----------------------------------------------------------------------------- the step
+@numba.njit(cache=True, nogil=True)
+def step_vehicles(
+    own, data, si, st, pa, mine, arrived, acc, guard_out, change, turn,
+    lane_off, e_s, e_half, e_v, e_row, e_kind,
+    lane_f, lane_lr, point_off, point_s, points, seg_heading, pred_off, pred,
+    slot_int, slot_cost,
+    conn_int, conn_len, clanes_off, clanes, conn_of_lane, offset_of_lane,
+    foe_off, foe, foe_kind, zone, via_colour, dt, step,
+):  # pragma: no cover - compiled
+    """Advance every own vehicle one step (see the module docstring); flags arrivals."""
+    n = own.shape[0]
+    for i in range(n):
+        turn[own[i]] = 0
+    # ---- pass 1: decisions from the start-of-step state
+    for i in range(n):
+        r = own[i]
+        slot = si[SLOT, r]
+        lane = slot_int[S_LANE, slot]
+        s = st[S, r]
+        v = data[_V, r]
+        h = 0.5 * data[_LENGTH, r]
+        accel, decel, emerg = pa[ACCEL, r], pa[DECEL, r], pa[EMERG, r]
+        tau, s0 = pa[TAU, r], pa[MIN_GAP, r]
+        v0 = desired_speed(r, lane, pa, st, lane_f)
+        look = max(50.0, v * v / (2.0 * decel) + 3.0 * v + 20.0)
+        # car following on the own route
+        k, g = find_leader(slot, s, r, look, slot_int, lane_f, lane_off, e_s, e_half, e_row)
+        lead_gap = g - h
+        lead_v = e_v[k] if k >= 0 else 0.0
+        a_cf = idm(v, v0, lead_gap if k >= 0 else INF, lead_v, accel, decel, tau, s0)
+        a_min = a_cf
+        guard = lead_gap if (k >= 0 and lead_gap >= 0.0) else INF
+        # still partly on the lane being left: only avoid running into what is ahead there
+        # (no time headway: the vehicle is on its way out of that lane)
+        src = si[LC_FROM, r]
+        if (st[LC_PROG, r] < 1.0 and si[LC_LANE, r] == lane and src >= 0
+                and abs(st[LAT, r]) > 0.5 * (lane_f[WIDTH, lane] - data[_WIDTH, r]) - 0.2):
+            s_src = s * lane_f[LEN, src] / max(lane_f[LEN, lane], 1e-9)
+            k2 = _first_ahead(src, s_src, r, lane_off, e_s, e_row)
+            if k2 >= 0:
+                gap2 = e_s[k2] - e_half[k2] - s_src - h
+                a_min = min(a_min, idm(v, v0, gap2, e_v[k2], accel, decel, 0.0, WALL_MIN_GAP))
+                if gap2 >= 0.0:
+                    guard = min(guard, gap2)
+        # make room for a stopped neighbour that has waited to change into this lane
+        if lane_f[INTERNAL, lane] == 0.0:
+            for side in range(2):
+                nb = lane_lr[side, lane]
+                if nb < 0:
+                    continue
+                s_nb = s * lane_f[LEN, nb] / max(lane_f[LEN, lane], 1e-9)
+                k3 = _first_ahead(nb, s_nb, r, lane_off, e_s, e_row)
+                if k3 < 0 or e_kind[k3] != PRIMARY or not mine[e_row[k3]]:
+                    continue
+                w = e_row[k3]
+                if st[WAIT, w] < COURTESY_WAIT or st[LC_PROG, w] < 1.0:
+                    continue
+                if slot_int[S_DIR, si[SLOT, w]] != (-1 if side == 0 else 1):
+                    continue  # it does not need this lane
+                gap3 = e_s[k3] - e_half[k3] - s_nb - h
+                a_c = idm(v, v0, gap3, 0.0, accel, decel, tau, s0)
+                if gap3 > SAFE_GAP and a_c >= -decel:
+                    a_min = min(a_min, a_c)
+                    guard = min(guard, gap3)
+        # junction the vehicle is in
+        c_here = conn_of_lane[lane]
+        if c_here >= 0:
+            a_min, guard = _junction(
+                r, c_here, offset_of_lane[lane] + s, v, h, v0, accel, decel, tau, emerg, a_min,
+                guard, data, si, st, pa, mine, lane_off, e_s, e_half, e_v, e_row, e_kind, lane_f,
+                slot_int, conn_int, conn_len, clanes_off, clanes, offset_of_lane, foe_off, foe,
+                foe_kind, zone, via_colour,
+            )
+        # the route ahead: lane ends, signals, junctions, lower speed limits
+        dist = lane_f[LEN, lane] - s
+        cur = slot
+        cur_lane = lane
+        while dist < look:
+            nxt = slot_int[S_NEXT, cur]
+            if nxt == NEXT_ARRIVE:
+                break
+            if nxt == NEXT_NONE:
+                gap = dist - h
+                a_min = min(a_min, idm(v, v0, gap, 0.0, accel, decel, tau, WALL_MIN_GAP))
+                break
+            nlane = slot_int[S_LANE, nxt]
+            if lane_f[INTERNAL, nlane] > 0.0 and lane_f[INTERNAL, cur_lane] == 0.0:
+                gap = dist - h
+                colour = via_colour[nlane]
+                stop = False
+                if colour == RED:
+                    stop = v * v <= 2.0 * emerg * max(gap, 0.0)
+                elif colour == YELLOW:
+                    stop = v * v <= 2.0 * decel * max(gap, 0.0)
+                if stop:
+                    a_min = min(a_min, idm(v, v0, gap, 0.0, accel, decel, tau, WALL_MIN_GAP))
+                    break
+                c = conn_of_lane[nlane]
+                if c >= 0:
+                    a_min, guard = _junction(
+                        r, c, -dist, v, h, v0, accel, decel, tau, emerg, a_min, guard,
+                        data, si, st, pa, mine, lane_off, e_s, e_half, e_v, e_row, e_kind, lane_f,
+                        slot_int, conn_int, conn_len, clanes_off, clanes, offset_of_lane, foe_off,
+                        foe, foe_kind, zone, via_colour,
+                    )
+            v_next = desired_speed(r, nlane, pa, st, lane_f)
+            if v > v_next:
+                a_min = min(a_min, (v_next * v_next - v * v) / (2.0 * max(dist, 1.0)))
+            dist += lane_f[LEN, nlane]
+            cur = nxt
+            cur_lane = nlane
+        # lane changes
+        change[i] = -1
+        if lane_f[INTERNAL, lane] == 0.0 and st[LC_PROG, r] >= 1.0:
+            want = slot_int[S_DIR, slot]
+            ends = slot_int[S_NEXT, slot] == NEXT_NONE
+            best_inc = -INF
+            best_slot = -1
+            best_a = 0.0
+            best_gap = INF
+            for side in range(2):
+                d = 1 if side == 0 else -1
+                if (step % 2 == 0) != (d > 0):
+                    continue  # left changes on even steps, right on odd: no two into one gap
+                nslot = slot_int[S_LEFT, slot] if d > 0 else slot_int[S_RIGHT, slot]
+                if nslot < 0:
+                    continue
+                if lane_f[LEN, lane] - s < v * LC_DURATION + h:
+                    continue  # the sideways move must end before the lane does
+                if want != 0 and d == want:
+                    mode = 2 if ends else 1
+                elif want != 0 or slot_cost[nslot] > slot_cost[slot]:
+                    continue
+                else:
+                    mode = 0
+                    if st[COOL, r] > 0.0 or v < 1.0:
+                        continue
+                    if lane_f[LEN, lane] - s < MIN_CHANGE_ROOM + v:
+                        continue
+                if _neighbour_turns(slot, s, r, d, slot_int, lane_off, e_s, e_row, turn):
+                    continue  # the vehicle just ahead or behind moves over this step
+                ok, inc, a_after, gap_after = _try_change(
+                    r, slot, nslot, d, s, v, h, a_cf, lead_gap, lead_v, k >= 0, mode, look,
+                    data, pa, st, mine, lane_off, e_s, e_half, e_v, e_row, lane_f, slot_int,
+                    pred_off, pred,
+                )
+                if not ok:
+                    continue
+                if mode == 0:
+                    bias = KEEP_RIGHT_BIAS * pa[KEEP_RIGHT, r]
+                    need = pa[THRESH, r] + (bias if d > 0 else -bias)
+                    if inc <= need:
+                        continue
+                    inc -= need
+                if inc > best_inc:
+                    best_inc, best_slot, best_a, best_gap = inc, nslot, a_after, gap_after
+            if best_slot >= 0:
+                change[i] = best_slot
+                turn[r] = 1 if best_slot == slot_int[S_LEFT, slot] else -1
+                a_min = min(a_min, best_a)
+                if best_gap >= 0.0:
+                    guard = min(guard, best_gap)
+        acc[i] = min(max(a_min, -emerg), accel)
+        guard_out[i] = guard
+    # ---- pass 2: move
+    for i in range(n):
+        r = own[i]
+        arrived[i] = False
+        slot = si[SLOT, r]
+        lane = slot_int[S_LANE, slot]
+        s = st[S, r]
+        if change[i] >= 0:
+            nslot = change[i]
+            nlane = slot_int[S_LANE, nslot]
+            d = 1.0 if nslot == slot_int[S_LEFT, slot] else -1.0
+            offset = 0.5 * (lane_f[WIDTH, lane] + lane_f[WIDTH, nlane])
+            st[LAT0, r] = st[LAT, r] - d * offset
+            st[LAT, r] = st[LAT0, r]
+            st[LC_PROG, r] = 0.0
+            st[COOL, r] = LC_DURATION + LC_COOLDOWN
+            s = min(max(s * lane_f[LEN, nlane] / max(lane_f[LEN, lane], 1e-9), 0.0), lane_f[LEN, nlane])
+            si[LC_FROM, r] = lane
+            si[LC_LANE, r] = nlane
+            slot, lane = nslot, nlane
+        v = data[_V, r]
+        a = acc[i]
+        v_new = v + a * dt
+        if v_new < 0.0:
+            ds = v * v / (-2.0 * a) if a < 0.0 else 0.0
+            v_new = 0.0
+        else:
+            ds = 0.5 * (v + v_new) * dt
+        g = guard_out[i] - GUARD_MARGIN
+        if g < INF * 0.5 and ds > g:
+            ds = max(g, 0.0)
+            v_new = max(0.0, min(v_new, 2.0 * ds / dt - v))  # constant deceleration over ds
+        s += ds
+        while s > lane_f[LEN, lane]:
+            nxt = slot_int[S_NEXT, slot]
+            if nxt >= 0:
+                s -= lane_f[LEN, lane]
+                si[PREV_LANE, r] = lane
+                slot = nxt
+                lane = slot_int[S_LANE, slot]
+            elif nxt == NEXT_ARRIVE:
+                arrived[i] = True
+                break
+            else:
+                s = lane_f[LEN, lane]
+                v_new = 0.0
+                break
+        si[SLOT, r] = slot
+        st[S, r] = s
+        st[WAIT, r] = st[WAIT, r] + dt if v_new < 0.5 else 0.0
+        # lateral offset of a lane change (or of an adopted vehicle) decaying to the centre
+        lat_rate = 0.0
+        if st[LC_PROG, r] < 1.0:
+            u = min(st[LC_PROG, r] + dt / LC_DURATION, 1.0)
+            st[LC_PROG, r] = u
+            st[LAT, r] = st[LAT0, r] * (1.0 - u * u * (3.0 - 2.0 * u))
+            lat_rate = -st[LAT0, r] * 6.0 * u * (1.0 - u) / LC_DURATION
+        else:
+            st[LAT, r] = 0.0
+        st[COOL, r] -= dt
+        x, y, hd = lane_pose(lane, s, point_off, point_s, points, seg_heading)
+        lat = st[LAT, r]
+        x -= lat * math.sin(hd)
+        y += lat * math.cos(hd)
+        heading = hd + math.atan2(lat_rate, max(v_new, 3.0))
+        heading = math.atan2(math.sin(heading), math.cos(heading))
+        dh = heading - data[_H, r]
+        dh = math.atan2(math.sin(dh), math.cos(dh))
+        a_real = (v_new - v) / dt
+        data[_J, r] = (a_real - data[_A, r]) / dt
+        data[_A, r] = a_real
+        data[_X, r], data[_Y, r], data[_H, r], data[_V, r] = x, y, heading, v_new
+        data[_YAW, r] = dh / dt
+        data[_LATA, r] = v_new * dh / dt
+
+
+@numba.njit(cache=True, nogil=True)
+def place_vehicle(
+    r, data, si, st, slot_int, point_off, point_s, points, seg_heading
+):  # pragma: no cover - compiled
+    """Write the pose of a vehicle from its slot, arc length and lateral offset."""
+    lane = slot_int[S_LANE, si[SLOT, r]]
+    x, y, hd = lane_pose(lane, st[S, r], point_off, point_s, points, seg_heading)
+    lat = st[LAT, r]
+    data[_X, r] = x - lat * math.sin(hd)
+    data[_Y, r] = y + lat * math.cos(hd)
+    data[_H, r] = math.atan2(math.sin(hd), math.cos(hd))
+
+
+@numba.njit(cache=True, nogil=True)
+def clearance(
+    lanes, spots, next_lanes, half, own, si, st, data, slot_int, lane_f, f_rows, f_lane, f_s,
+):  # pragma: no cover - compiled
+    """Room around entry spots for a new vehicle of half length ``half``: float64[4, n] of gap
+    ahead, speed of the road user ahead, gap behind, speed of the one behind (INF: none). Scans
+    every road user on each spot's lane and on the lane after it."""
+    n = lanes.shape[0]
+    out = np.empty((4, n))
+    for c in range(n):
+        lane, s, next_lane = lanes[c], spots[c], next_lanes[c]
+        ahead, v_ahead, behind, v_behind = INF, 0.0, INF, 0.0
+        for i in range(own.shape[0] + f_rows.shape[0]):
+            if i < own.shape[0]:
+                r = own[i]
+                ln = slot_int[S_LANE, si[SLOT, r]]
+                es = st[S, r]
+                if ln != lane and si[LC_FROM, r] == lane and st[LC_PROG, r] < 1.0:
+                    es = es * lane_f[LEN, lane] / max(lane_f[LEN, ln], 1e-9)
+                    ln = lane
+            else:
+                j = i - own.shape[0]
+                r, ln, es = f_rows[j], f_lane[j], f_s[j]
+            if ln == next_lane and next_lane >= 0:
+                es += lane_f[LEN, lane]
+                ln = lane
+            if ln != lane:
+                continue
+            eh = 0.5 * data[_LENGTH, r]
+            if es >= s:
+                gap = es - eh - s - half
+                if gap < ahead:
+                    ahead, v_ahead = gap, data[_V, r]
+            else:
+                gap = s - half - es - eh
+                if gap < behind:
+                    behind, v_behind = gap, data[_V, r]
+        out[0, c], out[1, c], out[2, c], out[3, c] = ahead, v_ahead, behind, v_behind
+    return out
