@@ -40,6 +40,10 @@ class KeepLanePolicy:
         half_lane = 0.5 * np.maximum(ego[:, 8:9], 2.5)
         ahead = (mask > 0) & (nb[..., 0] > 0) & (np.abs(nb[..., 1]) < half_lane)
         gap = np.where(ahead, nb[..., 0] - 0.5 * (nb[..., 6] + ego[:, 10:11]), np.inf).min(axis=1)
+        if "signal" in obs:  # a red or yellow light ahead is a standing leader at its stop line
+            sig = obs["signal"]
+            stop = (sig[:, 0] + sig[:, 1] > 0) & (sig[:, 3] > 0.5 * ego[:, 10])
+            gap = np.where(stop, np.minimum(gap, sig[:, 3] - 0.5 * ego[:, 10]), gap)
         closing = np.where(ahead, -nb[..., 4], 0.0)  # ego speed minus leader speed along x
         first = np.where(ahead, nb[..., 0], np.inf).argmin(axis=1)
         closing = closing[np.arange(len(speed)), first]

@@ -11,6 +11,7 @@ from typing import Any
 
 ZOO: dict[str, tuple[str, str, str]] = {
     "keep-lane": ("agents.keep_lane", "KeepLanePolicy", "IDM speed on the route's waypoints"),
+    "random": ("agents.random_agent", "RandomPolicy", "uniform random relative-pose steps"),
 }
 """name -> (module, class, one-line description)."""
 

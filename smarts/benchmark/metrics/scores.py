@@ -1,0 +1,440 @@
+"""The benchmark metrics (PR, RC, Humanness, MTE, SFD, S_bench) computed from episode logs.
+
+Every metric is ``1 - cost`` with a cost in [0, 1] per mission vehicle; higher is better.
+Averaging order: per vehicle over its steps, then over the vehicles of an episode, then over the
+episodes of a scenario, then over scenarios (each scenario weighs the same however many
+episodes it ran). Because every metric is linear in its cost, ``1 - mean(cost)`` equals
+``mean(1 - cost)`` at every level.
+
+Per-vehicle costs (``p`` = :class:`MetricParams`):
+
+- progress (PR): ``min(d_final, d_init) / d_init``, ``d`` the route distance to the goal.
+  ``d_init`` is the metadata's initial route distance (measured at the mission start, before the
+  first logged step); ``d_final`` is the last row's ``route_distance_to_goal``, or 0 once
+  ``goal_reached`` was set (arriving within the goal radius completes the route; the residual
+  inside the radius is not a shortfall). A zero-length route (``d_init == 0``) costs 0: the
+  vehicle is already there.
+- humanness: ``(comfort + mean_steps(lane_centre)) / 2``.
+  ``dyn_t = max(|jerk_long|/jl, |jerk_lat|/jt, |accel_long|/al, |accel_lat|/at)``; with
+  ``T_trv`` the vehicle's logged steps and ``T_p = round(penalty_period_s / dt)`` steps,
+  ``u_t = 1`` for ``t = 1..T_trv+T_p`` when ``max(dyn_t' for t' in [max(1, t-T_p), min(T_trv, t)]) > 1``,
+  so one uncomfortable step at ``k`` switches ``u`` on for steps ``k..k+T_p`` (``T_p + 1`` steps);
+  ``comfort = sum(u) / (T_trv + T_p)``. ``lane_centre = 1`` on rows fully off road, else
+  ``min(|lane_offset| / (lane_offset_scale * lane_width), 1)``.
+- rules (RC): ``(mean_steps(min(max(v - v_limit, 0) / (overspeed_scale * v_limit), 1))
+  + wrong_way_ever + off_road_ever) / 3``; ``off_road_ever`` is set when any row has
+  ``partial_off_road`` or ``off_road``.
+- time (MTE, collaborative): ``T_arrive / T_limit``, ``T_arrive`` the ``time`` of the first row
+  with ``goal_reached`` (clipped to ``T_limit``), ``T_limit`` when the goal is never reached.
+- follow gap (SFD, adaptive): mean over steps of ``gap``; ``gap = 1`` when the lead is out of the
+  ego's lane or out of sight, when the ego is inside the follow margin, or when the time gap to
+  the margin exceeds ``max_time_gap_s``; else ``time_gap / max_time_gap_s``.
+
+``S_bench = (w_pr PR + w_rc RC + w_h Humanness + w_task M_task) / (w_pr + w_rc + w_h + w_task)``
+with ``M_task`` = MTE (collaborative) or SFD (adaptive).
+
+Failed episodes (a log with a failure reason): under the default policy ``worst`` every cost of
+the episode is 1 (every metric 0) and it counts like any other episode; under ``exclude`` it is
+left out of every mean and only listed in :attr:`SuiteScores.failed`. :func:`score_episode`
+always returns the worst values for a failed episode; the policy is applied by
+:func:`score_suite`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from smarts.benchmark.metrics.following import (
+    follow_margin,
+    in_follow_margin,
+    time_gap_to_margin,
+)
+from smarts.benchmark.metrics.log import (
+    AgentTrace,
+    EpisodeLog,
+    LogError,
+    validate_episode,
+)
+from smarts.benchmark.metrics.params import MetricParams, load_params
+
+# The env logger's helpers, importable from here too (SFD is defined by them).
+__all__ = [
+    "COST_OF_METRIC",
+    "TASK_METRIC",
+    "AgentCosts",
+    "SuiteScores",
+    "agent_costs",
+    "comfort_cost",
+    "comfort_window",
+    "follow_gap_cost",
+    "follow_margin",
+    "in_follow_margin",
+    "lane_centre_cost",
+    "metric_names",
+    "overspeed_cost",
+    "penalty_steps",
+    "progress_cost",
+    "s_bench",
+    "score_episode",
+    "score_suite",
+    "time_cost",
+    "time_gap_to_margin",
+]
+
+TASK_METRIC = {"collaborative": "MTE", "adaptive": "SFD"}
+COST_OF_METRIC = {
+    "PR": "progress",
+    "RC": "rules",
+    "Humanness": "humanness",
+    "MTE": "time",
+    "SFD": "follow_gap",
+}
+
+
+def metric_names(task: str) -> tuple[str, ...]:
+    """Column order of a report: the three shared metrics, the task's own one, then S_bench."""
+    return ("PR", "RC", "Humanness", TASK_METRIC[task], "S_bench")
+
+
+# ------------------------------------------------------------------------- per-step cost terms
+def progress_cost(
+    route_distance_to_goal: np.ndarray,
+    goal_reached: np.ndarray,
+    initial_distance: float,
+) -> float:
+    """PR cost of one vehicle: the share of its route still ahead at the end, in [0, 1]."""
+    if initial_distance <= 0.0:
+        return 0.0
+    if route_distance_to_goal.size == 0:
+        return 1.0
+    final = 0.0 if goal_reached.any() else float(route_distance_to_goal[-1])
+    return min(final, initial_distance) / initial_distance
+
+
+def comfort_window(uncomfortable: np.ndarray, penalty_steps: int) -> np.ndarray:
+    """``u_t`` for ``t = 1..T_trv+T_p``: 1 where an uncomfortable step lies in ``[t-T_p, t]``."""
+    n = uncomfortable.shape[0]
+    counts = np.concatenate(([0], np.cumsum(uncomfortable, dtype=np.int64)))
+    t = np.arange(1, n + penalty_steps + 1)
+    first = np.maximum(1, t - penalty_steps)
+    last = np.minimum(n, t)
+    return counts[last] - counts[first - 1] > 0
+
+
+def comfort_cost(trace: AgentTrace, penalty_steps: int, params: MetricParams) -> float:
+    """``T_u / (T_trv + T_p)``: the share of the padded episode spent in or after discomfort."""
+    h = params.humanness
+    dyn = np.maximum.reduce(
+        [
+            np.abs(trace.jerk_long) / h.jerk_long_max,
+            np.abs(trace.jerk_lat) / h.jerk_lat_max,
+            np.abs(trace.accel_long) / h.accel_long_max,
+            np.abs(trace.accel_lat) / h.accel_lat_max,
+        ]
+    )
+    total = trace.num_steps + penalty_steps
+    if total == 0:
+        return 0.0
+    return float(comfort_window(dyn > 1.0, penalty_steps).sum()) / total
+
+
+def lane_centre_cost(
+    lane_offset: np.ndarray, lane_width: np.ndarray, off_road: np.ndarray, scale: float
+) -> np.ndarray:
+    """Per-step lane-centre cost: 1 off road, else offset over ``scale`` lane widths, capped at 1."""
+    with np.errstate(invalid="ignore"):
+        ratio = np.minimum(np.abs(lane_offset) / (scale * lane_width), 1.0)
+    return np.where(off_road, 1.0, ratio)
+
+
+def overspeed_cost(
+    speed: np.ndarray, speed_limit: np.ndarray, scale: float
+) -> np.ndarray:
+    """Per-step speeding cost: excess over the limit in units of ``scale * limit``, capped at 1."""
+    return np.minimum(np.maximum(speed - speed_limit, 0.0) / (scale * speed_limit), 1.0)
+
+
+def time_cost(time: np.ndarray, goal_reached: np.ndarray, time_limit: float) -> float:
+    """MTE cost: arrival time over the time limit; 1 when the goal is never reached."""
+    hits = np.flatnonzero(goal_reached)
+    if hits.size == 0:
+        return 1.0
+    return min(max(float(time[hits[0]]), 0.0), time_limit) / time_limit
+
+
+def follow_gap_cost(
+    follow_time_gap: np.ndarray,
+    in_follow_margin: np.ndarray,
+    lead_in_lane_and_visible: np.ndarray,
+    max_time_gap: float,
+) -> np.ndarray:
+    """Per-step SFD gap: the time gap to the follow margin in units of ``max_time_gap``, else 1."""
+    usable = lead_in_lane_and_visible & ~in_follow_margin
+    with np.errstate(invalid="ignore"):
+        within = usable & (follow_time_gap <= max_time_gap)
+        return np.where(within, follow_time_gap / max_time_gap, 1.0)
+
+
+# ------------------------------------------------------------------------ per-vehicle costs
+@dataclass(frozen=True)
+class AgentCosts:
+    """The inner cost terms of one mission vehicle in one episode, each in [0, 1]."""
+
+    progress: float
+    comfort: float
+    lane_centre: float
+    overspeed: float
+    wrong_way: float
+    off_road: float
+    time: float | None = None
+    """MTE cost; collaborative task only."""
+    follow_gap: float | None = None
+    """SFD cost; adaptive task only."""
+
+    @property
+    def humanness(self) -> float:
+        return (self.comfort + self.lane_centre) / 2.0
+
+    @property
+    def rules(self) -> float:
+        return (self.overspeed + self.wrong_way + self.off_road) / 3.0
+
+    def as_dict(self) -> dict[str, float]:
+        out = {k: v for k, v in asdict(self).items() if v is not None}
+        out.update(humanness=self.humanness, rules=self.rules)
+        return out
+
+    @classmethod
+    def worst(cls, task: str) -> AgentCosts:
+        return cls(
+            progress=1.0,
+            comfort=1.0,
+            lane_centre=1.0,
+            overspeed=1.0,
+            wrong_way=1.0,
+            off_road=1.0,
+            time=1.0 if task == "collaborative" else None,
+            follow_gap=1.0 if task == "adaptive" else None,
+        )
+
+
+def penalty_steps(dt: float, params: MetricParams) -> int:
+    """T_p in steps: ``round(penalty_period_s / dt)``."""
+    return round(params.humanness.penalty_period_s / dt)
+
+
+def agent_costs(
+    log: EpisodeLog, params: MetricParams | None = None
+) -> dict[str, AgentCosts]:
+    """Every mission vehicle's cost terms; a failed episode gives the worst costs to each agent."""
+    params = load_params() if params is None else params
+    validate_episode(log)
+    if log.failed:
+        return {a: AgentCosts.worst(log.task) for a in log.agents}
+    steps_p = penalty_steps(log.dt, params)
+    out: dict[str, AgentCosts] = {}
+    for agent_id, tr in log.agents.items():
+        follow = None
+        if log.task == "adaptive":
+            follow = float(
+                follow_gap_cost(
+                    tr.follow_time_gap,
+                    tr.in_follow_margin,
+                    tr.lead_in_lane_and_visible,
+                    params.following.max_time_gap_s,
+                ).mean()
+            )
+        out[agent_id] = AgentCosts(
+            progress=progress_cost(
+                tr.route_distance_to_goal,
+                tr.goal_reached,
+                float(log.initial_route_distance[agent_id]),
+            ),
+            comfort=comfort_cost(tr, steps_p, params),
+            lane_centre=float(
+                lane_centre_cost(
+                    tr.lane_offset,
+                    tr.lane_width,
+                    tr.off_road,
+                    params.humanness.lane_offset_scale,
+                ).mean()
+            ),
+            overspeed=float(
+                overspeed_cost(
+                    tr.speed, tr.speed_limit, params.rules.overspeed_scale
+                ).mean()
+            ),
+            wrong_way=float(tr.wrong_way.any()),
+            off_road=float((tr.partial_off_road | tr.off_road).any()),
+            time=time_cost(tr.time, tr.goal_reached, float(log.time_limit))
+            if log.task == "collaborative"
+            else None,
+            follow_gap=follow,
+        )
+    return out
+
+
+# ------------------------------------------------------------------------------ per episode
+def s_bench(metrics: dict[str, float], task: str, params: MetricParams) -> float:
+    """Weighted mean of PR, RC, Humanness and the task's metric."""
+    w = params.weights
+    task_metric = TASK_METRIC[task]
+    pairs = [
+        (w.pr, metrics["PR"]),
+        (w.rc, metrics["RC"]),
+        (w.humanness, metrics["Humanness"]),
+        (w.mte if task_metric == "MTE" else w.sfd, metrics[task_metric]),
+    ]
+    return sum(wi * m for wi, m in pairs) / sum(wi for wi, _ in pairs)
+
+
+def score_episode(
+    log: EpisodeLog, params: MetricParams | None = None
+) -> dict[str, float]:
+    """One episode's metrics and mean inner costs.
+
+    Keys: ``PR``, ``RC``, ``Humanness``, ``MTE`` or ``SFD``, ``S_bench`` (each in [0, 1], higher
+    is better) and ``cost.<term>`` for every inner term averaged over the episode's vehicles
+    (``progress``, ``comfort``, ``lane_centre``, ``humanness``, ``overspeed``, ``wrong_way``,
+    ``off_road``, ``rules``, ``time`` or ``follow_gap``). A failed episode scores 0 on every
+    metric (every cost 1).
+    """
+    params = load_params() if params is None else params
+    per_agent = agent_costs(log, params)
+    if per_agent:
+        rows = [c.as_dict() for c in per_agent.values()]
+        costs = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
+    else:  # a failed episode that never spawned its agents
+        costs = AgentCosts.worst(log.task).as_dict()
+    metrics = {m: 1.0 - costs[COST_OF_METRIC[m]] for m in metric_names(log.task)[:-1]}
+    metrics["S_bench"] = s_bench(metrics, log.task, params)
+    metrics.update({f"cost.{k}": v for k, v in costs.items()})
+    return metrics
+
+
+# ---------------------------------------------------------------------------------- per suite
+@dataclass
+class SuiteScores:
+    """A suite's scores: the overall metrics, a per-scenario table and the failed episodes."""
+
+    task: str
+    overall: dict[str, float]
+    """``PR``, ``RC``, ``Humanness``, ``MTE`` or ``SFD``, ``S_bench``: means over scenarios."""
+    scenarios: dict[str, dict[str, float]]
+    """Scenario -> mean over its scored episodes of every :func:`score_episode` key."""
+    episodes: dict[str, int]
+    """Scenario -> number of episodes that entered its mean."""
+    failed: list[dict[str, Any]] = field(default_factory=list)
+    """One entry per failed episode: scenario, episode, failure, source, excluded."""
+    policy: str = "worst"
+
+    @property
+    def metric_names(self) -> tuple[str, ...]:
+        return metric_names(self.task)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def format_table(self) -> str:
+        """A plain-text table: one row per scenario, then the overall row."""
+        names = self.metric_names
+        width = max([len("overall"), *map(len, self.scenarios)])
+        head = f"{'scenario':<{width}}  {'episodes':>8}  " + "  ".join(
+            f"{n:>9}" for n in names
+        )
+        lines = [f"task: {self.task}", head, "-" * len(head)]
+        for scenario, row in self.scenarios.items():
+            values = "  ".join(f"{row[n]:>9.4f}" for n in names)
+            lines.append(
+                f"{scenario:<{width}}  {self.episodes[scenario]:>8d}  {values}"
+            )
+        lines.append("-" * len(head))
+        total = sum(self.episodes.values())
+        lines.append(
+            f"{'overall':<{width}}  {total:>8d}  "
+            + "  ".join(f"{self.overall[n]:>9.4f}" for n in names)
+        )
+        if self.failed:
+            verb = "excluded" if self.policy == "exclude" else "scored as worst"
+            lines.append(f"failed episodes ({verb}):")
+            lines += [
+                f"  {f['scenario']} #{f['episode']}: {f['failure']}"
+                for f in self.failed
+            ]
+        return "\n".join(lines)
+
+
+def score_suite(
+    logs: Sequence[EpisodeLog], params: MetricParams | None = None
+) -> SuiteScores:
+    """Score a suite: episodes are averaged per scenario first, then scenarios equally.
+
+    All logs must share one task (S_bench's fourth metric differs between tasks: score each task
+    separately). The same (scenario, episode index) twice is an error, as is a scenario whose
+    episodes disagree on the task.
+    """
+    params = load_params() if params is None else params
+    if not logs:
+        raise ValueError("score_suite: no episode logs given")
+    tasks = sorted({log.task for log in logs})
+    if len(tasks) != 1 or tasks[0] not in TASK_METRIC:
+        for log in logs:
+            validate_episode(log)
+        raise ValueError(
+            f"score_suite: logs mix tasks {tasks}; score each task's logs separately"
+        )
+    task = tasks[0]
+
+    seen: dict[tuple[str, int], str | None] = {}
+    per_scenario: dict[str, list[dict[str, float]]] = {}
+    failed: list[dict[str, Any]] = []
+    exclude = params.failed_episodes == "exclude"
+    for log in logs:
+        scores = score_episode(log, params)
+        key = (log.scenario, int(log.episode))
+        if key in seen:
+            raise LogError(
+                f"episode {log.episode} of scenario {log.scenario!r} appears twice (also in {seen[key] or '<in-memory log>'})",
+                source=log.source,
+            )
+        seen[key] = log.source
+        if log.failed:
+            failed.append(
+                {
+                    "scenario": log.scenario,
+                    "episode": int(log.episode),
+                    "failure": log.failure,
+                    "source": log.source,
+                    "excluded": exclude,
+                }
+            )
+            if exclude:
+                continue
+        per_scenario.setdefault(log.scenario, []).append(scores)
+    if not per_scenario:
+        raise ValueError(
+            "score_suite: every episode failed and failed episodes are excluded; nothing to score"
+        )
+
+    scenarios: dict[str, dict[str, float]] = {}
+    for name in sorted(per_scenario):
+        rows = per_scenario[name]
+        scenarios[name] = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
+    overall = {
+        m: float(np.mean([row[m] for row in scenarios.values()]))
+        for m in metric_names(task)[:-1]
+    }
+    overall["S_bench"] = s_bench(overall, task, params)
+    failed.sort(key=lambda f: (f["scenario"], f["episode"]))
+    return SuiteScores(
+        task=task,
+        overall=overall,
+        scenarios=scenarios,
+        episodes={name: len(per_scenario[name]) for name in scenarios},
+        failed=failed,
+        policy=params.failed_episodes,
+    )

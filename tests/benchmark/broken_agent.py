@@ -1,0 +1,17 @@
+"""Agents that misbehave, for the runner's failure handling."""
+
+import numpy as np
+
+
+class RaisingPolicy:
+    action_space = "relative_target_pose"
+
+    def act(self, obs):
+        raise RuntimeError("planner crashed")
+
+
+class NaNPolicy:
+    action_space = "relative_target_pose"
+
+    def act(self, obs):
+        return np.full((len(obs["ego"]), 3), np.nan, dtype=np.float32)
