@@ -40,9 +40,14 @@ def agent_label(locator: str) -> str:
 
 
 def load_policy(locator: str, seed: int = 0):
-    """A batched policy from a zoo locator (``zoo:keep-lane``, ``zoo:random``); clear error otherwise."""
+    """A batched policy from a zoo locator (``zoo:keep-lane``, ``zoo:random``) or a PPO
+    checkpoint file (``*.pt``); a clear error otherwise."""
     from zoo import make_policy
 
+    if locator.endswith(".pt") or Path(locator).is_file():
+        from agents.ppo import PPOPolicy
+
+        return PPOPolicy.load(locator)
     policy = make_policy(locator)
     if hasattr(policy, "seed"):
         policy.seed(seed)

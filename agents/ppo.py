@@ -1,0 +1,196 @@
+"""PPO actor-critic for the simulator's dict observations, and its checkpoint format.
+
+The observation dict is flattened in a fixed key order into one vector (``ObservationLayout``),
+then an MLP gives the mean of a Gaussian over the action box (log-std is a learned vector) and a
+separate MLP gives the state value. Training (``train/ppo.py``) uses torchrl's losses on these
+modules; evaluation and the benchmark load a checkpoint into ``PPOPolicy``, which acts with the
+mean action. Checkpoints are plain tensors and JSON-able metadata, loaded with
+``torch.load(..., weights_only=True)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+CHECKPOINT_FORMAT = "smarts-ppo-v1"
+
+
+@dataclass(frozen=True)
+class ObservationLayout:
+    """Which observation keys make the network input, in order, with their shapes."""
+
+    keys: tuple[str, ...]
+    shapes: tuple[tuple[int, ...], ...]
+
+    @classmethod
+    def from_space(cls, space) -> "ObservationLayout":
+        keys = tuple(sorted(k for k, s in space.spaces.items() if np.issubdtype(s.dtype, np.floating)))
+        return cls(keys, tuple(tuple(space.spaces[k].shape) for k in keys))
+
+    @property
+    def size(self) -> int:
+        return int(sum(int(np.prod(s)) for s in self.shapes))
+
+    def flatten(self, obs: dict) -> torch.Tensor:
+        """[..., size] float32 from a dict of arrays/tensors with matching trailing shapes."""
+        parts = []
+        for key, shape in zip(self.keys, self.shapes):
+            value = torch.as_tensor(np.asarray(obs[key]) if not torch.is_tensor(obs[key]) else obs[key])
+            lead = value.shape[: value.dim() - len(shape)]
+            parts.append(value.reshape(*lead, -1).float())
+        return torch.cat(parts, dim=-1)
+
+
+def mlp(sizes: list[int], out: int, final_gain: float = 1.0) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for a, b in zip(sizes[:-1], sizes[1:]):
+        layer = nn.Linear(a, b)
+        nn.init.orthogonal_(layer.weight, np.sqrt(2))
+        nn.init.zeros_(layer.bias)
+        layers += [layer, nn.Tanh()]
+    head = nn.Linear(sizes[-1], out)
+    nn.init.orthogonal_(head.weight, final_gain)
+    nn.init.zeros_(head.bias)
+    return nn.Sequential(*layers, head)
+
+
+class Actor(nn.Module):
+    """Flat observation -> (loc, scale) of a Gaussian before the tanh squash onto the action box."""
+
+    def __init__(self, obs_size: int, action_size: int, hidden: tuple[int, ...] = (128, 128)):
+        super().__init__()
+        self.net = mlp([obs_size, *hidden], action_size, final_gain=0.01)
+        self.log_std = nn.Parameter(torch.full((action_size,), -0.5))
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        loc = self.net(x)
+        return loc, self.log_std.exp().expand_as(loc)
+
+
+class Critic(nn.Module):
+    def __init__(self, obs_size: int, hidden: tuple[int, ...] = (128, 128)):
+        super().__init__()
+        self.net = mlp([obs_size, *hidden], 1, final_gain=1.0)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x)
+
+
+class ObsNormalizer(nn.Module):
+    """Running mean/std of the flat observation (updated during training, frozen at test)."""
+
+    def __init__(self, size: int, clip: float = 10.0):
+        super().__init__()
+        self.register_buffer("mean", torch.zeros(size))
+        self.register_buffer("var", torch.ones(size))
+        self.register_buffer("count", torch.tensor(1e-4))
+        self.clip = clip
+
+    @torch.no_grad()
+    def update(self, x: torch.Tensor) -> None:
+        x = x.reshape(-1, x.shape[-1])
+        batch_mean, batch_var, n = x.mean(0), x.var(0, unbiased=False), x.shape[0]
+        delta = batch_mean - self.mean
+        total = self.count + n
+        self.mean += delta * n / total
+        self.var = (self.var * self.count + batch_var * n + delta**2 * self.count * n / total) / total
+        self.count = total
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return ((x - self.mean) / torch.sqrt(self.var + 1e-8)).clamp(-self.clip, self.clip)
+
+
+def scale_action(pre_tanh: torch.Tensor, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:
+    """The actor's Gaussian lives before a tanh squash onto [low, high] (torchrl's TanhNormal
+    with low/high); the deterministic action squashes the mean."""
+    return low + (torch.tanh(pre_tanh) + 1.0) * 0.5 * (high - low)
+
+
+def save_checkpoint(path: Path, *, actor: Actor, critic: Critic, normalizer: ObsNormalizer,
+                    layout: ObservationLayout, low: np.ndarray, high: np.ndarray,
+                    action_space: str, config: dict, step: int, metrics: dict,
+                    optimizer_state: dict | None = None) -> Path:  # fmt: skip
+    """Write tensors + JSON-able metadata atomically (``weights_only`` loadable)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    blob = {
+        "format": CHECKPOINT_FORMAT,
+        "actor": actor.state_dict(),
+        "critic": critic.state_dict(),
+        "normalizer": normalizer.state_dict(),
+        "layout": {"keys": list(layout.keys), "shapes": [list(s) for s in layout.shapes]},
+        "action": {"space": action_space, "low": [float(v) for v in low], "high": [float(v) for v in high]},
+        "hidden": list(config.get("hidden", (128, 128))),
+        "config": config,
+        "step": int(step),
+        "metrics": {k: float(v) for k, v in metrics.items()},
+    }
+    if optimizer_state is not None:
+        blob["optimizer"] = optimizer_state
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(blob, tmp)
+    tmp.replace(path)
+    return path
+
+
+class CheckpointError(ValueError):
+    pass
+
+
+def load_checkpoint(path: Path) -> dict:
+    """Read a checkpoint with ``weights_only=True``; a corrupted or foreign file is a clear error."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"{path}: no such checkpoint file")
+    try:
+        blob = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as err:  # unpickling errors come in many types
+        raise CheckpointError(f"{path}: not a readable checkpoint ({type(err).__name__}: {err})") from None
+    if not isinstance(blob, dict) or blob.get("format") != CHECKPOINT_FORMAT:
+        found = blob.get("format") if isinstance(blob, dict) else type(blob).__name__
+        raise CheckpointError(f"{path}: expected a {CHECKPOINT_FORMAT} checkpoint, found {found!r}")
+    for key in ("actor", "critic", "normalizer", "layout", "action", "hidden"):
+        if key not in blob:
+            raise CheckpointError(f"{path}: checkpoint lacks {key!r}")
+    return blob
+
+
+class PPOPolicy:
+    """A trained PPO actor as a batched policy (``act(obs) -> actions``), for eval and the zoo."""
+
+    def __init__(self, blob: dict, source: str = "<checkpoint>"):
+        layout = ObservationLayout(tuple(blob["layout"]["keys"]), tuple(tuple(s) for s in blob["layout"]["shapes"]))
+        self.layout = layout
+        self.action_space = blob["action"]["space"]
+        self.low = torch.tensor(blob["action"]["low"], dtype=torch.float32)
+        self.high = torch.tensor(blob["action"]["high"], dtype=torch.float32)
+        self.actor = Actor(layout.size, len(self.low), tuple(blob["hidden"]))
+        self.normalizer = ObsNormalizer(layout.size)
+        try:
+            self.actor.load_state_dict(blob["actor"])
+            self.normalizer.load_state_dict(blob["normalizer"])
+        except RuntimeError as err:
+            raise CheckpointError(f"{source}: weights do not match the recorded layout ({err})") from None
+        self.actor.eval()
+
+    @classmethod
+    def load(cls, path: str | Path) -> "PPOPolicy":
+        return cls(load_checkpoint(Path(path)), str(path))
+
+    def check_space(self, space) -> None:
+        """The env's observation space must have every key the policy reads, with its shape."""
+        for key, shape in zip(self.layout.keys, self.layout.shapes):
+            if key not in space.spaces or tuple(space.spaces[key].shape) != shape:
+                got = tuple(space.spaces[key].shape) if key in space.spaces else "missing"
+                raise CheckpointError(f"observation {key!r}: policy expects shape {shape}, env has {got}")
+
+    @torch.no_grad()
+    def act(self, obs: dict) -> np.ndarray:
+        x = self.normalizer(self.layout.flatten(obs))
+        loc, _ = self.actor(x)
+        return scale_action(loc, self.low, self.high).numpy()
