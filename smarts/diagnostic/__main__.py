@@ -5,6 +5,10 @@ full basic observation each step. Agents start spread over the six lanes and cru
 of them stay live for the measured steps (full load). Three timings per step are reported:
 ``sim`` (actions, dynamics, map projection, events, route progress), ``obs`` (batched observation) and
 ``env`` (a whole PettingZoo ``step`` including both, rewards and the per-agent dicts).
+
+The sensor case (``--sensors``) puts 10 agents with every sensor on (occlusion, 64x64 rasters of all
+layers plus RGB, 64-ray lidar, extended neighbours) among 50 built-in traffic vehicles on the same
+highway and splits the observation time into its sensors.
 """
 
 from __future__ import annotations
@@ -30,6 +34,50 @@ ROAD_LENGTH = 455.0
 END_MARGIN = 15.0  # metres kept clear of the road's end
 
 
+SENSOR_INTERFACE = {
+    "neighbours": {"extended": True},
+    "occlusion": {"enabled": True, "mode": "hide"},
+    "rasters": {"size": 64, "resolution": 0.5, "layers": ["drivable", "lanes", "route", "occupancy", "occlusion"], "rgb": True},
+    "lidar": {"rays": 64, "range": 30.0},
+}
+TRAFFIC_SPACING = 14.0  # metres between traffic rows: room for every trip to depart at once
+
+
+def sensor_scenario(n_agents: int, n_vehicles: int, steps: int) -> ScenarioSpec:
+    """``n_vehicles`` built-in traffic vehicles in rows of six, the agents in rows just ahead of
+    them; everyone cruises at 8 m/s, so the traffic follows the agents and nobody collides."""
+    rows = -(-n_vehicles // LANES)
+    first_agent = 5.0 + TRAFFIC_SPACING * rows
+    agents = []
+    for i in range(n_agents):
+        offset = first_agent + TRAFFIC_SPACING * (i // LANES)
+        start = {"road": PERF_ROAD, "lane": i % LANES, "offset": offset, "speed": CRUISE_SPEED}
+        agents.append(
+            {"id": f"agent_{i}", "interface": SENSOR_INTERFACE, "mission": {"start": start, "goal": {"endless": True}}}
+        )
+    trips = [
+        {
+            "id": f"car_{k}", "origin": PERF_ROAD, "destination": "main_2", "depart": 0,
+            "depart_lane": k % LANES, "depart_pos": 5.0 + TRAFFIC_SPACING * (k // LANES),
+            "depart_speed": CRUISE_SPEED, "vehicle_type": "cruise",
+        }  # fmt: skip
+        for k in range(n_vehicles)
+    ]
+    cruise = {"max_speed": CRUISE_SPEED, "speed_dev": 0.0, "tau": 0.5, "min_gap": 2.0}
+    return ScenarioSpec.from_dict(
+        {
+            "name": f"diagnostic_sensors_{n_agents}_agents_{n_vehicles}_vehicles",
+            "map": PERF_MAP,
+            "episode_steps": steps + 10,
+            "vehicle_capacity": n_agents + n_vehicles + 16,
+            "agents": agents,
+            "traffic": {"engine": "builtin", "vehicle_types": {"cruise": cruise}, "trips": trips},
+            "events": {"terminate_on": ["collision", "off_road", "max_steps"]},
+        },
+        source="smarts.diagnostic",
+    )
+
+
 def perf_scenario(n_agents: int, steps: int) -> ScenarioSpec:
     """``n_agents`` endless agents, six abreast, ``SPACING`` apart, cruising at 8 m/s."""
     agents = []
@@ -48,11 +96,16 @@ def perf_scenario(n_agents: int, steps: int) -> ScenarioSpec:
     )
 
 
-def time_case(n_agents: int, steps: int, warmup: int) -> dict:
+def time_case(n_agents: int, steps: int, warmup: int, vehicles: int | None = None) -> dict:
+    """Whole-step, simulation and observation times; with ``vehicles``, the sensor case."""
     from smarts.env import DrivingParallelEnv
 
-    env = DrivingParallelEnv(perf_scenario(n_agents, steps + warmup))
+    if vehicles is None:
+        env = DrivingParallelEnv(perf_scenario(n_agents, steps + warmup))
+    else:
+        env = DrivingParallelEnv(sensor_scenario(n_agents, vehicles, steps + warmup))
     sim, builder = env.sim, env.builder
+    parts: dict[str, list[float]] = {"shadows": [], "rasters": [], "lidar": []}
     step_dx = np.array([CRUISE_SPEED * sim.dt, 0.0, 0.0], dtype=np.float32)
     actions = {a: step_dx for a in env.possible_agents}
 
@@ -71,6 +124,8 @@ def time_case(n_agents: int, steps: int, warmup: int) -> dict:
                 builder.build(sim, sim.active_agents)
             if k >= warmup:
                 out[k - warmup] = (time.perf_counter() - t0) * 1e3
+                if mode == "obs" and vehicles is not None:
+                    _time_sensors(builder, sim, parts)
         live = int(sim.agent_active.sum())
         if live != n_agents:
             raise RuntimeError(f"{n_agents}-agent case lost agents during timing ({live} live at the end)")
@@ -79,12 +134,33 @@ def time_case(n_agents: int, steps: int, warmup: int) -> dict:
     timings = {mode: run(mode) for mode in ("sim", "obs", "env")}
     env.close()
     row = {"agents": n_agents, "steps": steps}
+    if vehicles is not None:
+        row["vehicles"] = vehicles
+        row["live_rows"] = int(len(sim.alive))  # vehicles and agents at the end
+        for name, ms in parts.items():
+            row[f"{name}_ms_mean"] = float(np.mean(ms))
     for mode, ms in timings.items():
         row[f"{mode}_ms_mean"] = float(ms.mean())
         row[f"{mode}_ms_median"] = float(np.median(ms))
     row["env_steps_per_s"] = 1e3 / row["env_ms_mean"]
     row["agent_steps_per_s"] = n_agents * row["env_steps_per_s"]
     return row
+
+
+def _time_sensors(builder, sim, parts: dict[str, list[float]]) -> None:
+    """Each sensor of the all-sensors build on its own (the rest of ``obs`` is the basic part)."""
+    agents = sim.active_agents
+    rows = sim.agent_row[agents]
+    t0 = time.perf_counter()
+    shadows = builder.shadows.scan(sim, rows)
+    t1 = time.perf_counter()
+    builder.rasters.observe(sim, agents, rows, shadows)
+    t2 = time.perf_counter()
+    builder.lidar.observe(sim, rows)
+    t3 = time.perf_counter()
+    parts["shadows"].append((t1 - t0) * 1e3)
+    parts["rasters"].append((t2 - t1) * 1e3)
+    parts["lidar"].append((t3 - t2) * 1e3)
 
 
 def _sumo_case(n: int, steps: int) -> dict:
@@ -119,6 +195,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--traffic", default="sumo,builtin", help="traffic engines to time: sumo,builtin (default both; 'none' to skip)"
     )
+    parser.add_argument(
+        "--sensors", default="10:50",
+        help="all-sensors case as AGENTS:VEHICLES (default 10:50, built-in traffic); 'none' to skip",
+    )
     parser.add_argument("--out", type=Path, default=Path("reports/diagnostic.json"), help="JSON output file")
     args = parser.parse_args(argv)
     try:
@@ -143,6 +223,17 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--agents: at most {max_agents} agents stay on the 455 m highway for {args.steps} steps")
     if args.steps < 1 or args.warmup < 0:
         parser.error("--steps must be >= 1 and --warmup >= 0")
+    sensor_case = None
+    if args.sensors != "none":
+        try:
+            sensor_case = tuple(int(v) for v in args.sensors.split(":"))
+        except ValueError:
+            sensor_case = ()
+        if len(sensor_case) != 2 or min(sensor_case) < 1:
+            parser.error(f"--sensors: expected AGENTS:VEHICLES (positive integers) or none, got {args.sensors!r}")
+        rows_needed = -(-sensor_case[0] // LANES) + -(-sensor_case[1] // LANES)
+        if 5.0 + TRAFFIC_SPACING * rows_needed + travel > ROAD_LENGTH - END_MARGIN:
+            parser.error(f"--sensors: {args.sensors} does not fit on the 455 m highway for {args.steps} steps")
 
     from rich.console import Console
     from rich.progress import track
@@ -166,6 +257,23 @@ def main(argv: list[str] | None = None) -> int:
         )
     console.print(table)
 
+    sensor_rows = []
+    if sensor_case is not None:
+        sensor_rows.append(time_case(sensor_case[0], args.steps, args.warmup, vehicles=sensor_case[1]))
+        stable = Table(
+            title=f"All sensors (occlusion, 64x64 rasters + RGB, 64-ray lidar), {args.steps} timed steps (ms per step)"
+        )
+        for col in ("agents", "vehicles", "env step mean", "env step median", "sim mean", "obs mean",
+                    "shadows", "rasters", "lidar"):  # fmt: skip
+            stable.add_column(col, justify="right", no_wrap=True)
+        for r in sensor_rows:
+            stable.add_row(
+                str(r["agents"]), str(r["vehicles"]), f"{r['env_ms_mean']:.3f}", f"{r['env_ms_median']:.3f}",
+                f"{r['sim_ms_mean']:.3f}", f"{r['obs_ms_mean']:.3f}", f"{r['shadows_ms_mean']:.3f}",
+                f"{r['rasters_ms_mean']:.3f}", f"{r['lidar_ms_mean']:.3f}",
+            )
+        console.print(stable)
+
     traffic_rows = []
     if engines:
         cases = [(e, n) for e in engines for n in vehicle_counts]
@@ -185,6 +293,7 @@ def main(argv: list[str] | None = None) -> int:
         "machine": {"python": sys.version.split()[0], "platform": platform.platform(), "processor": platform.processor()},
         "map": PERF_MAP,
         "cases": rows,
+        "sensor_cases": sensor_rows,
         "traffic_cases": traffic_rows,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)

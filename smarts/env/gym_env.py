@@ -16,6 +16,7 @@ from smarts.dynamics.limits import ReachLimits
 from smarts.env.assembly import as_spec
 from smarts.env.parallel_env import DrivingParallelEnv
 from smarts.scenario import ScenarioSpec
+from smarts.sensors.interface import AgentInterface
 from smarts.sensors.observation import ObservationConfig
 
 
@@ -27,10 +28,13 @@ class DrivingEnv(gym.Env):
         scenario: str | Path | ScenarioSpec = "straight_2lane_cruise",
         *,
         agent: str | None = None,
-        observation: ObservationConfig | None = None,
+        observation: AgentInterface | ObservationConfig | None = None,
         limits: ReachLimits | None = None,
         render_mode: str | None = None,
+        render_view: str = "map",
     ):
+        """``observation`` overrides the agent's interface from the scenario; ``render_view`` is
+        ``map`` or ``ego`` (the agent's ego-centred view)."""
         spec = as_spec(scenario)
         ids = [a.id for a in spec.agents]
         agent = ids[0] if agent is None else agent
@@ -38,7 +42,9 @@ class DrivingEnv(gym.Env):
             raise ValueError(f"{spec.source}: scenario has no agent {agent!r}; agents: {ids}")
         spec = dataclasses.replace(spec, agents=[a for a in spec.agents if a.id == agent])
         self.agent = agent
-        self.env = DrivingParallelEnv(spec, observation=observation, limits=limits, render_mode=render_mode)
+        self.env = DrivingParallelEnv(
+            spec, observation=observation, limits=limits, render_mode=render_mode, render_view=render_view
+        )
         self.observation_space = self.env.observation_space(agent)
         self.action_space = self.env.action_space(agent)
         self.render_mode = render_mode

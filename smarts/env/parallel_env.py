@@ -1,12 +1,14 @@
 """A PettingZoo ParallelEnv over the simulator: every agent acts each step.
 
-Observations for all live agents are built in one batched pass (``ObservationBuilder``); the per-agent
-dicts returned here are views into those batch arrays, so no per-agent work is done beyond the
-dict itself.
+Observations for all live agents are built in one batched pass per interface group
+(``ObservationSuite``: agents with equal ``AgentInterface`` share a space and a pass); the
+per-agent dicts returned here are views into those batch arrays, so no per-agent work is done
+beyond the dict itself.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +23,12 @@ from smarts.env.assembly import as_spec, build_simulation
 from smarts.env.reward import default_rewards
 from smarts.env.social import SocialAgents
 from smarts.scenario import ScenarioSpec
-from smarts.sensors.observation import ObservationBuilder, ObservationConfig
+from smarts.sensors.interface import AgentInterface
+from smarts.sensors.observation import ObservationConfig, as_interface
+from smarts.sensors.suite import Batch, ObservationSuite
+
+ObservationOption = AgentInterface | ObservationConfig
+RENDER_VIEWS = ("map", "ego")
 
 
 class DrivingParallelEnv(ParallelEnv):
@@ -33,32 +40,61 @@ class DrivingParallelEnv(ParallelEnv):
         self,
         scenario: str | Path | ScenarioSpec = "intersection_4way_left",
         *,
-        observation: ObservationConfig | None = None,
+        observation: ObservationOption | Mapping[str, ObservationOption] | None = None,
         limits: ReachLimits | None = None,
         render_mode: str | None = None,
+        render_view: str = "map",
     ):
+        """``observation`` overrides the scenario's agent interfaces: one interface (or the basic
+        ``ObservationConfig``) for every agent, or a mapping from agent id to one. ``render_view``
+        is ``map`` (the whole map), ``ego`` (centred on the first live agent) or ``ego:<agent
+        id>``."""
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.scenario = as_spec(scenario)
         self.limits = limits or ReachLimits()
         self.sim = build_simulation(self.scenario, self.limits)
-        self.builder = ObservationBuilder(observation)
+        self.sensors = ObservationSuite(self._interfaces(observation))
+        self.builder = self.sensors.builders[0]  # the only one when all agents share an interface
         self.render_mode = render_mode
+        self.render_view = render_view
+        self._ego_renderer = None
         self.social = SocialAgents(self.scenario, self.sim)
         self.possible_agents = [a for a, s in zip(self.sim.agent_ids, self.social.is_social) if not s]
         if not self.possible_agents:
             raise ValueError(f"{self.scenario.source}: every agent has a policy; at least one must learn")
         self.agents: list[str] = []
-        self._obs_spaces = {a: self.builder.space for a in self.possible_agents}
+        self._obs_spaces = {a: self.sensors.space(self.sim.agent_index[a]) for a in self.possible_agents}
         self._act_spaces = {
             a.id: action_space(a.action_space, self.limits, self.scenario.step_length)
             for a in self.scenario.agents
             if a.id in self.possible_agents
         }
-        self._last: tuple[dict[str, np.ndarray], np.ndarray] | None = None  # for social agents
+        self._last: list[Batch] = []  # for social agents
         self._renderer = None
+        self._step_listeners: list = []
         self._terminal_events = self.sim.event_config.terminate_on.copy()
         self._terminal_events[Event.MAX_STEPS] = False
+        if render_view not in RENDER_VIEWS and not (
+            render_view.startswith("ego:") and render_view[4:] in self.sim.agent_index
+        ):
+            raise ValueError(
+                f"render_view must be 'map', 'ego' or 'ego:<agent id>' with an agent of the scenario "
+                f"({', '.join(self.sim.agent_ids)}), got {render_view!r}"
+            )
+
+    def _interfaces(self, observation) -> list[AgentInterface]:
+        """Each agent's interface: the scenario's, unless ``observation`` overrides it."""
+        spec_agents = self.scenario.agents
+        chosen = [a.interface or AgentInterface() for a in spec_agents]
+        if observation is None:
+            return chosen
+        if isinstance(observation, Mapping):
+            unknown = [k for k in observation if k not in self.scenario.agent_ids]
+            if unknown:
+                raise ValueError(f"observation: no agents {unknown} in the scenario; agents: {self.scenario.agent_ids}")
+            return [as_interface(observation[a.id]) if a.id in observation else c for a, c in zip(spec_agents, chosen)]
+        return [as_interface(observation)] * len(spec_agents)
 
     # ------------------------------------------------------------------ spaces
     def observation_space(self, agent: str) -> gym.spaces.Dict:
@@ -71,11 +107,9 @@ class DrivingParallelEnv(ParallelEnv):
     def reset(self, seed: int | None = None, options: dict | None = None):
         self.sim.reset(seed if seed is not None else self.sim.seed)
         self.agents = list(self.possible_agents)
-        agents = self.sim.active_agents
-        batch = self.builder.build(self.sim, agents)
-        self._last = (batch, agents)
-        learners = ~self.social.is_social[agents]
-        obs = self._split({k: v[learners] for k, v in batch.items()}, agents[learners])
+        batches = self.sensors.build(self.sim, self.sim.active_agents)
+        self._last = batches
+        obs = self._split(self._learners(batches) if self.social.any else batches)
         return obs, {a: {} for a in self.agents}
 
     def step(self, actions: dict[str, Any]):
@@ -88,17 +122,18 @@ class DrivingParallelEnv(ParallelEnv):
             raise ActionError(f"no action given for live agents {missing}", missing)
         sim = self.sim
         if self.social.any:
-            actions = {**actions, **self.social.actions(sim, *self._last)}
+            actions = dict(actions)
+            for members, batch in self._last:
+                actions.update(self.social.actions(sim, batch, members))
         sim.step(actions)
         agents = sim.active_agents
-        batch = self.builder.build(sim, agents)
+        batches = self.sensors.build(sim, agents)
         if self.social.any:
-            self._last = (batch, agents)
-            learners = ~self.social.is_social[agents]
-            batch = {k: v[learners] for k, v in batch.items()}
-            agents = agents[learners]
+            self._last = batches
+            batches = self._learners(batches)
+            agents = agents[~self.social.is_social[agents]]
         ids = [sim.agent_ids[i] for i in agents]
-        obs = self._split(batch, agents)
+        obs = self._split(batches)
         reward = default_rewards(sim, agents, self.scenario.reward)
         events = sim.agent_events[agents]
         done = sim.agent_done[agents]
@@ -109,6 +144,8 @@ class DrivingParallelEnv(ParallelEnv):
         if events.any():
             for k in np.flatnonzero(events.any(axis=1)):
                 infos[ids[k]]["events"] = [EVENT_NAMES[e] for e in np.flatnonzero(events[k])]
+        for listener in self._step_listeners:
+            listener(sim)  # sees this step's state before finished agents leave the table
         sim.remove_done_agents()
         self.agents = [a for a, d in zip(ids, done.tolist()) if not d]
         return (
@@ -119,23 +156,58 @@ class DrivingParallelEnv(ParallelEnv):
             infos,
         )
 
-    def _split(self, batch: dict[str, np.ndarray], agents: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
+    def add_step_listener(self, listener) -> None:
+        """Call ``listener(sim)`` after every step, before agents that finished are removed (the
+        benchmark's episode recorder uses this to log the final step of every agent)."""
+        self._step_listeners.append(listener)
+
+    def _learners(self, batches: list[Batch]) -> list[Batch]:
+        """The batches without the social agents' rows."""
+        out = []
+        for members, batch in batches:
+            keep = ~self.social.is_social[members]
+            if keep.all():
+                out.append((members, batch))
+            elif keep.any():
+                out.append((members[keep], {k: v[keep] for k, v in batch.items()}))
+        return out
+
+    def _split(self, batches: list[Batch]) -> dict[str, dict[str, np.ndarray]]:
         """Per-agent dicts of row views into the batch arrays (iterating an array is the cheap way
         to get its row views)."""
         ids = self.sim.agent_ids
-        keys = list(batch)
-        per_agent = zip(*[list(v) for v in batch.values()])
-        return {ids[i]: dict(zip(keys, values)) for i, values in zip(agents.tolist(), per_agent)}
+        out: dict[str, dict[str, np.ndarray]] = {}
+        for agents, batch in batches:
+            keys = list(batch)
+            per_agent = zip(*[list(v) for v in batch.values()])
+            out.update((ids[i], dict(zip(keys, values))) for i, values in zip(agents.tolist(), per_agent))
+        return out
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:
             gym.logger.warn("render() called without render_mode='rgb_array'; nothing is drawn")
             return None
+        if self.render_view != "map":
+            follow = self._followed_agent()
+            if follow is not None:
+                if self._ego_renderer is None:
+                    from smarts.sensors.rasters import EgoViewRenderer
+
+                    self._ego_renderer = EgoViewRenderer()
+                return self._ego_renderer.render(self.sim, follow)
         if self._renderer is None:
             from smarts.sensors.topdown import TopDownRenderer
 
             self._renderer = TopDownRenderer(self.sim.road_map)
         return self._renderer.render(self.sim)
+
+    def _followed_agent(self) -> int | None:
+        """Agent index the ego view follows; None (the map view) once it has left."""
+        index = self.sim.agent_index
+        name = self.render_view[4:] if self.render_view.startswith("ego:") else (self.agents or [None])[0]
+        if name is None or not self.sim.agent_active[index[name]]:
+            return None
+        return index[name]
 
     def close(self) -> None:
         self.sim.close()

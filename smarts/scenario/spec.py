@@ -32,6 +32,12 @@ from smarts.scenario.traffic import (
     TripSpec,
     VehicleTypeSpec,
 )
+from smarts.sensors.interface import (
+    AgentInterface,
+    InterfaceError,
+    interface_from_dict,
+    interface_to_dict,
+)
 
 BUILTIN_PREFIX = "builtin:"
 MAP_FILE_SUFFIXES = (".net.xml", ".xodr")
@@ -141,6 +147,8 @@ class AgentSpec:
     policy: str | None = None
     """Zoo locator (``zoo:keep-lane`` or ``keep-lane``) of the policy that drives this agent inside
     the simulator: a social agent, not controlled by the learner. None: a learning agent."""
+    interface: AgentInterface | None = None
+    """Which sensors the agent has (``smarts.sensors.interface``); None: the default interface."""
 
     @property
     def is_social(self) -> bool:
@@ -334,6 +342,8 @@ def _agent_dict(agent: AgentSpec) -> dict[str, Any]:
         agent_d["policy"] = agent.policy
     agent_d["vehicle"] = vehicle
     agent_d["mission"] = mission
+    if agent.interface is not None:
+        agent_d["interface"] = interface_to_dict(agent.interface)
     return agent_d
 
 
@@ -622,7 +632,7 @@ class _Reader:
         return agents
 
     def agent(self, value: Any, path: str, index: int) -> AgentSpec:
-        d = self.mapping(value, path, ("id", "action_space", "policy", "vehicle", "mission"))
+        d = self.mapping(value, path, ("id", "action_space", "policy", "vehicle", "mission", "interface"))
         agent_id = self.string(d, "id", path, f"agent_{index}")
         action_space = self.choice(d, "action_space", path, ACTION_SPACES, "relative_target_pose")
         policy = self.policy(d, path)
@@ -631,8 +641,22 @@ class _Reader:
             raise self.error(_join(path, "mission"), "missing required field (start and goal)")
         mission = self.mission(d["mission"], _join(path, "mission"))
         return AgentSpec(
-            id=agent_id, mission=mission, action_space=action_space, vehicle=vehicle, policy=policy
+            id=agent_id,
+            mission=mission,
+            action_space=action_space,
+            vehicle=vehicle,
+            policy=policy,
+            interface=self.interface(d, path),
         )
+
+    def interface(self, d: dict, path: str) -> AgentInterface | None:
+        """The agent's sensors; validated by ``smarts.sensors.interface`` with this field's path."""
+        if d.get("interface") is None:
+            return None
+        try:
+            return interface_from_dict(d["interface"], _join(path, "interface"))
+        except InterfaceError as err:
+            raise self.error(err.path, err.problem) from None
 
     def policy(self, d: dict, path: str) -> str | None:
         """A zoo locator; only its form is checked here, the zoo resolves it when the env starts."""

@@ -1,24 +1,34 @@
-"""The basic observation, built for every agent in one batched pass.
+"""The observation, built for every agent of one interface group in one batched pass.
 
 Everything is expressed in the ego frame (x forward, y left, headings relative to the ego's), so a
-policy is invariant to where on the map it drives. Shapes are fixed; masks mark padding.
+policy is invariant to where on the map it drives. Shapes are fixed by the agent's interface
+(``smarts.sensors.interface.AgentInterface``); masks mark padding.
 
-Per agent:
+Per agent, with the default interface:
 - ``ego`` float32[12]: speed (m/s), longitudinal acceleration (m/s^2), longitudinal jerk (m/s^3),
   lateral acceleration (m/s^2), yaw rate (rad/s), steering (rad), heading error to the lane (rad),
   lateral offset from the lane centre (m, + left), lane width (m), lane speed limit (m/s), vehicle
-  length (m), vehicle width (m).
-- ``neighbours`` float32[K, 9]: the K nearest road users within ``neighbour_radius``: dx, dy (m),
+  length (m), vehicle width (m). ``ego.extended`` appends the angular acceleration (rad/s^2, the
+  change of yaw rate over the last step).
+- ``neighbours`` float32[K, 9]: the K nearest road users within ``neighbours.radius``: dx, dy (m),
   cos and sin of the relative heading, relative velocity vx, vy (m/s, ego frame), length, width
-  (m), 1 for a pedestrian (0 for a vehicle).
+  (m), 1 for a pedestrian (0 for a vehicle). ``neighbours.extended`` appends speed (m/s),
+  acceleration (m/s^2), yaw rate (rad/s), lane index on its road (0 = rightmost, -1 off the map),
+  1 if on the ego's road, and a one-hot of the type (passenger, bus, truck, motorcycle,
+  pedestrian). With occlusion on, a last column holds the visible fraction (0..1, see
+  ``smarts.sensors.occlusion``); in ``hide`` mode fully hidden road users are not listed.
+  ``neighbour_feature_names(interface)`` names the columns.
 - ``neighbour_mask`` float32[K]: 1 where a neighbour is present.
 - ``waypoints`` float32[3, W, 3]: paths along the route (0), the lane left of it (1) and right of it
-  (2), W points ``waypoint_spacing`` route points apart: x, y (m), relative heading (rad).
+  (2), W points ``waypoints.spacing`` route points apart: x, y (m), relative heading (rad).
 - ``waypoint_mask`` float32[3, W].
 - ``goal`` float32[4]: goal dx, dy (m), route distance left (m), 1 if the mission has a goal.
-- ``signal`` float32[4]: the next traffic signal on the route: red, yellow, green (one of them 1,
-  all 0 when there is none ahead) and the route distance to its stop line (m, 0 when none).
+- ``signal`` float32[4] (``signals: true``): the next traffic signal on the route: red, yellow,
+  green (one of them 1, all 0 when there is none ahead) and the route distance to its stop line (m,
+  0 when none).
 - ``events`` float32[8]: the events of ``smarts.core.events.Event`` this step, 0/1.
+Optional sensors add keys: ``rasters`` and ``rgb`` (``smarts.sensors.rasters``), ``lidar`` and
+``lidar_hit`` (``smarts.sensors.lidar``).
 """
 
 from __future__ import annotations
@@ -33,17 +43,37 @@ import numpy as np
 from smarts.core.events import NUM_EVENTS
 from smarts.core.geometry import wrap_scalar
 from smarts.core.simulation import Simulation
-from smarts.core.vehicle_table import COLUMN, Role
+from smarts.core.vehicle_table import COLUMN, Role, VehicleType
+from smarts.sensors.interface import (
+    AgentInterface,
+    NeighboursInterface,
+    WaypointsInterface,
+)
+from smarts.sensors.lidar import LidarSensor
+from smarts.sensors.occlusion import ShadowCaster, Shadows
+from smarts.sensors.rasters import RasterSensor
 
 EGO_FEATURES = 12
 NEIGHBOUR_FEATURES = 9
 GOAL_FEATURES = 4
 SIGNAL_FEATURES = 4
 NUM_PATHS = 3
+EGO_FEATURE_NAMES = (
+    "speed", "accel", "jerk", "lat_accel", "yaw_rate", "steering", "heading_error", "lane_offset",
+    "lane_width", "speed_limit", "length", "width",
+)  # fmt: skip
+NEIGHBOUR_FEATURE_NAMES = ("dx", "dy", "cos_heading", "sin_heading", "vx", "vy", "length", "width", "pedestrian")
+EXTENDED_NEIGHBOUR_FEATURE_NAMES = (
+    "speed", "accel", "yaw_rate", "lane_index", "same_road",
+    *(f"type_{t.name.lower()}" for t in VehicleType),
+)  # fmt: skip
+_VIS_OFF, _VIS_HIDE, _VIS_FLAG = 0, 1, 2
 
 
 @dataclass(frozen=True)
 class ObservationConfig:
+    """The basic observation's sizes (kept for existing callers; an ``AgentInterface`` says more)."""
+
     neighbours: int = 8
     neighbour_radius: float = 50.0
     waypoints: int = 20
@@ -59,43 +89,107 @@ class ObservationConfig:
                 f"observation.neighbour_radius: expected a positive number, got {self.neighbour_radius!r}"
             )
 
+    def interface(self) -> AgentInterface:
+        return AgentInterface(
+            neighbours=NeighboursInterface(count=self.neighbours, radius=float(self.neighbour_radius)),
+            waypoints=WaypointsInterface(count=self.waypoints, spacing=self.waypoint_spacing),
+        )
 
-def observation_space(config: ObservationConfig) -> gym.spaces.Dict:
-    def box(shape, low=-np.inf, high=np.inf):
-        return gym.spaces.Box(low=low, high=high, shape=shape, dtype=np.float32)
 
-    k, w = config.neighbours, config.waypoints
-    return gym.spaces.Dict(
-        {
-            "ego": box((EGO_FEATURES,)),
-            "neighbours": box((k, NEIGHBOUR_FEATURES)),
+def as_interface(config: AgentInterface | ObservationConfig | None) -> AgentInterface:
+    """An interface from either form (None: the default interface)."""
+    if config is None:
+        return AgentInterface()
+    if isinstance(config, ObservationConfig):
+        return config.interface()
+    if isinstance(config, AgentInterface):
+        return config
+    raise TypeError(f"expected an AgentInterface or ObservationConfig, got {type(config).__name__}")
+
+
+def ego_feature_names(interface: AgentInterface) -> tuple[str, ...]:
+    """Names of the ``ego`` columns, in order."""
+    return EGO_FEATURE_NAMES + (("angular_accel",) if interface.ego.extended else ())
+
+
+def neighbour_feature_names(interface: AgentInterface) -> tuple[str, ...]:
+    """Names of the ``neighbours`` columns, in order."""
+    names = NEIGHBOUR_FEATURE_NAMES
+    if interface.neighbours.extended:
+        names += EXTENDED_NEIGHBOUR_FEATURE_NAMES
+    if interface.occlusion.enabled:
+        names += ("visible_fraction",)
+    return names
+
+
+def observation_space(config: AgentInterface | ObservationConfig | None = None) -> gym.spaces.Dict:
+    """The observation space an interface gives."""
+    interface = as_interface(config)
+    return ObservationBuilder(interface).space
+
+
+class ObservationBuilder:
+    """Builds ``{key: array[A, ...]}`` for the agents given (all with this interface), all at once.
+
+    The basic parts come from one compiled pass; each optional sensor is an object with
+    ``spaces()`` and ``observe(...)`` whose keys are added after them (rasters, lidar; other
+    sensors such as received V2V messages plug in the same way). ``stream`` separates the noise of
+    builders that share a simulation (one per interface group).
+    """
+
+    def __init__(self, config: AgentInterface | ObservationConfig | None = None, stream: int = 0):
+        self.interface = interface = as_interface(config)
+        self.config = ObservationConfig(  # the basic sizes, for callers of the older API
+            interface.neighbours.count, interface.neighbours.radius, interface.waypoints.count, interface.waypoints.spacing
+        )
+        k, w = interface.neighbours.count, interface.waypoints.count
+        self._ego_features = len(ego_feature_names(interface))
+        self._neighbour_features = len(neighbour_feature_names(interface))
+        self._offsets = np.arange(w) * interface.waypoints.spacing
+        self._vis_mode = (
+            _VIS_OFF if not interface.occlusion.enabled
+            else _VIS_HIDE if interface.occlusion.mode == "hide" else _VIS_FLAG
+        )  # fmt: skip
+        self.shadows = ShadowCaster(interface.occlusion.range) if interface.needs_shadows else None
+        hide = interface.occlusion.enabled and interface.occlusion.mode == "hide"
+        self.rasters = RasterSensor(interface.rasters, hide) if interface.rasters is not None else None
+        self.lidar = LidarSensor(interface.lidar, stream) if interface.lidar is not None else None
+        self._lane_info_map = None
+        self._lane_info_cache = np.zeros((0, 4))
+        self._no_visible = np.zeros((1, 1), dtype=np.float32)
+        self._yaw = np.zeros((3, 0))  # previous yaw rate, its step, angular acceleration per agent
+        self.space = self._space(k, w)
+
+    def _space(self, k: int, w: int) -> gym.spaces.Dict:
+        def box(shape, low=-np.inf, high=np.inf):
+            return gym.spaces.Box(low=low, high=high, shape=shape, dtype=np.float32)
+
+        spaces = {
+            "ego": box((self._ego_features,)),
+            "neighbours": box((k, self._neighbour_features)),
             "neighbour_mask": box((k,), 0.0, 1.0),
             "waypoints": box((NUM_PATHS, w, 3)),
             "waypoint_mask": box((NUM_PATHS, w), 0.0, 1.0),
             "goal": box((GOAL_FEATURES,)),
-            "signal": box((SIGNAL_FEATURES,)),
-            "events": box((NUM_EVENTS,), 0.0, 1.0),
         }
-    )
-
-
-class ObservationBuilder:
-    """Builds ``{key: float32[A, ...]}`` for the agents given, all at once."""
-
-    def __init__(self, config: ObservationConfig | None = None):
-        self.config = config or ObservationConfig()
-        self.space = observation_space(self.config)
-        self._offsets = np.arange(self.config.waypoints) * self.config.waypoint_spacing
-        self._lane_info_map = None
-        self._lane_info_cache = np.zeros((0, 2))
+        if self.interface.signals:
+            spaces["signal"] = box((SIGNAL_FEATURES,))
+        spaces["events"] = box((NUM_EVENTS,), 0.0, 1.0)
+        if self.rasters is not None:
+            spaces.update(self.rasters.spaces())
+        if self.lidar is not None:
+            spaces.update(self.lidar.spaces())
+        return gym.spaces.Dict(spaces)
 
     def build(self, sim: Simulation, agents: np.ndarray) -> dict[str, np.ndarray]:
-        cfg = self.config
+        interface = self.interface
         ma = sim.mission_arrays
-        n, k, w = len(agents), cfg.neighbours, cfg.waypoints
+        n, k, w = len(agents), interface.neighbours.count, interface.waypoints.count
+        rows = sim.agent_row[agents]
+        shadows: Shadows | None = self.shadows.scan(sim, rows) if self.shadows is not None else None
         obs = {
-            "ego": np.empty((n, EGO_FEATURES), dtype=np.float32),
-            "neighbours": np.empty((n, k, NEIGHBOUR_FEATURES), dtype=np.float32),
+            "ego": np.empty((n, self._ego_features), dtype=np.float32),
+            "neighbours": np.empty((n, k, self._neighbour_features), dtype=np.float32),
             "neighbour_mask": np.empty((n, k), dtype=np.float32),
             "waypoints": np.empty((n, NUM_PATHS, w, 3), dtype=np.float32),
             "waypoint_mask": np.empty((n, NUM_PATHS, w), dtype=np.float32),
@@ -105,13 +199,25 @@ class ObservationBuilder:
         }
         signals = getattr(sim, "signals", None)
         via_colour = signals.via_colour if signals is not None else self._no_signals(sim.road_map)
+        if interface.ego.extended and self._yaw.shape[1] != len(sim.agent_ids):
+            self._yaw = np.zeros((3, len(sim.agent_ids)))
+            self._yaw[1] = -2.0
         _observe(
-            sim.table.data, sim.table.lane, sim.table.role, sim.alive, agents, sim.agent_row[agents],
+            sim.table.data, sim.table.lane, sim.table.role, sim.table.vtype, sim.alive, agents, rows,
             self._lane_info(sim.road_map), ma.flat_paths, ma.flat_valid, ma.stride,
             sim.route_index, self._offsets, ma.goal_kind, ma.goal_xy, ma.route_length,
             sim.route_progress, ma.signal_via, ma.signal_s, via_colour, sim.agent_events,
-            cfg.neighbour_radius**2, *obs.values(),
+            interface.neighbours.radius**2, interface.neighbours.extended,
+            shadows.visible if shadows is not None and self._vis_mode != _VIS_OFF else self._no_visible,
+            self._vis_mode, interface.ego.extended, self._yaw, sim.step_count, sim.dt,
+            *obs.values(),
         )
+        if not interface.signals:
+            del obs["signal"]
+        if self.rasters is not None:
+            obs.update(self.rasters.observe(sim, agents, rows, shadows))
+        if self.lidar is not None:
+            obs.update(self.lidar.observe(sim, rows))
         return obs
 
     def _no_signals(self, rm) -> np.ndarray:
@@ -120,21 +226,25 @@ class ObservationBuilder:
         return self._no_signal_colours
 
     def _lane_info(self, rm) -> np.ndarray:
-        """(width, speed limit) per lane, stacked once per map."""
+        """(width, speed limit, road, index on the road) per lane, stacked once per map."""
         if self._lane_info_map is not rm:
-            self._lane_info_cache = np.stack([rm.lane_width, rm.lane_speed_limit], axis=1)
+            self._lane_info_cache = np.stack(
+                [rm.lane_width, rm.lane_speed_limit, rm.lane_road.astype(np.float64), rm.lane_index.astype(np.float64)],
+                axis=1,
+            )
             self._lane_info_map = rm
         return self._lane_info_cache
 
 
 @numba.njit(cache=True, nogil=True)
 def _observe(
-    data, lane, role, alive, agents, rows, lane_info, flat_paths, flat_valid, stride, route_index,
+    data, lane, role, vtype, alive, agents, rows, lane_info, flat_paths, flat_valid, stride, route_index,
     offsets, goal_kind, goal_xy, route_length, route_progress, signal_via, signal_s, via_colour,
-    events, radius2,
+    events, radius2, extended, visible, vis_mode, ego_extended, yaw, step, dt,
     ego, neighbours, neighbour_mask, waypoints, waypoint_mask, goal, signal, events_out,
 ):  # pragma: no cover - compiled
     k_max = neighbours.shape[1]
+    vis_col = neighbours.shape[2] - 1
     near_d2 = np.empty(k_max)
     near_row = np.empty(k_max, dtype=np.int64)
     for i in range(agents.shape[0]):
@@ -156,6 +266,12 @@ def _observe(
         ego[i, 9] = lane_info[ln, 1] if ln >= 0 else 0.0
         ego[i, 10] = data[_LENGTH, r]
         ego[i, 11] = data[_WIDTH, r]
+        if ego_extended:
+            # yaw[0]: yaw rate seen at step yaw[1]; yaw[2]: angular acceleration at that step.
+            if yaw[1, a] != step:
+                yaw[2, a] = (data[_YAW_RATE, r] - yaw[0, a]) / dt if yaw[1, a] == step - 1 else 0.0
+                yaw[0, a], yaw[1, a] = data[_YAW_RATE, r], step
+            ego[i, 12] = yaw[2, a]
 
         # K nearest by insertion into a sorted list (K is small); equal distances keep row order.
         m = 0
@@ -164,6 +280,8 @@ def _observe(
                 continue
             d2 = (data[_X, j] - x) ** 2 + (data[_Y, j] - y) ** 2
             if d2 > radius2 or (m == k_max and d2 >= near_d2[m - 1]):
+                continue
+            if vis_mode == _VIS_HIDE and visible[i, j] <= 0.0:
                 continue
             pos = m if m < k_max else k_max - 1
             while pos > 0 and near_d2[pos - 1] > d2:
@@ -190,6 +308,17 @@ def _observe(
             neighbours[i, q, 6] = data[_LENGTH, j]
             neighbours[i, q, 7] = data[_WIDTH, j]
             neighbours[i, q, 8] = 1.0 if role[j] == _PEDESTRIAN else 0.0
+            if extended:
+                neighbours[i, q, 9] = nv
+                neighbours[i, q, 10] = data[_ACCEL, j]
+                neighbours[i, q, 11] = data[_YAW_RATE, j]
+                lj = lane[j]
+                neighbours[i, q, 12] = lane_info[lj, 3] if lj >= 0 else -1.0
+                neighbours[i, q, 13] = 1.0 if lj >= 0 and ln >= 0 and lane_info[lj, 2] == lane_info[ln, 2] else 0.0
+                if 0 <= vtype[j] < _NUM_TYPES:
+                    neighbours[i, q, 14 + vtype[j]] = 1.0
+            if vis_mode != _VIS_OFF:
+                neighbours[i, q, vis_col] = visible[i, j]
             neighbour_mask[i, q] = 1.0
 
         # Indices past a path's end clip onto the padding rows, which are marked invalid.
@@ -231,3 +360,4 @@ _LAT_ACCEL, _YAW_RATE, _STEERING = COLUMN["lat_accel"], COLUMN["yaw_rate"], COLU
 _LANE_HEADING, _T = COLUMN["lane_heading"], COLUMN["t"]
 _LENGTH, _WIDTH = COLUMN["length"], COLUMN["width"]
 _PEDESTRIAN = int(Role.PEDESTRIAN)
+_NUM_TYPES = len(VehicleType)

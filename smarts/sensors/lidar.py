@@ -1,0 +1,147 @@
+"""A 2D lidar: evenly spaced rays from the ego's centre hitting boxes and road edges.
+
+Per agent and ray: the distance to the first hit (the range when nothing is hit) and what was hit.
+Boxes (vehicles and pedestrians, not the ego) are intersected only by the rays inside their angular
+extent. Road edges are where a ray first leaves the drivable raster: the ray jumps ahead by the
+road clearance field (distance to the nearest off-road cell), so open road costs a few steps, and
+the crossing is refined by bisection. A ray that starts off the road hits an edge at 0.
+
+Noise (Gaussian, ``noise`` metres) is added to hit distances only, clipped to [0, range], from a
+generator seeded with the scenario seed and reseeded at every episode start.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numba
+import numpy as np
+
+from smarts.core.simulation import Simulation
+from smarts.core.vehicle_table import COLUMN, Role
+from smarts.sensors.interface import LidarInterface
+from smarts.sensors.map_fields import map_fields
+from smarts.sensors.rays import box_interval, ray_box
+
+HIT_NONE, HIT_VEHICLE, HIT_PEDESTRIAN, HIT_ROAD_EDGE = 0, 1, 2, 3
+_NOISE_STREAM = 0x1D4
+
+
+class LidarSensor:
+    """``lidar`` float32[rays] (m) and ``lidar_hit`` float32[rays] (``HIT_*`` codes)."""
+
+    def __init__(self, config: LidarInterface, stream: int = 0):
+        self.config = config
+        self._stream = stream
+        self._rng: np.random.Generator | None = None
+        self._rng_key: tuple[int, int] | None = None
+
+    def spaces(self) -> dict[str, gym.spaces.Box]:
+        r, rng = self.config.rays, np.float32(self.config.range)
+        return {
+            "lidar": gym.spaces.Box(0.0, rng, (r,), np.float32),
+            "lidar_hit": gym.spaces.Box(0.0, float(HIT_ROAD_EDGE), (r,), np.float32),
+        }
+
+    def observe(self, sim: Simulation, rows: np.ndarray) -> dict[str, np.ndarray]:
+        cfg = self.config
+        n = rows.shape[0]
+        dist = np.empty((n, cfg.rays), dtype=np.float32)
+        hit = np.empty((n, cfg.rays), dtype=np.float32)
+        f = map_fields(sim.road_map)
+        lidar_scan(
+            sim.table.data, sim.table.role, sim.alive, rows, cfg.range,
+            f.origin, f.inv_res, f.cell_max, f.width, f.road_clearance, dist, hit,
+        )
+        if cfg.noise > 0 and n:
+            noise = self._generator(sim).standard_normal(dist.shape, dtype=np.float32)
+            noise *= np.float32(cfg.noise)
+            noise[hit == HIT_NONE] = 0.0
+            dist += noise
+            np.clip(dist, 0.0, np.float32(cfg.range), out=dist)
+        return {"lidar": dist, "lidar_hit": hit}
+
+    def _generator(self, sim: Simulation) -> np.random.Generator:
+        # A new episode (step 0, or time went back) restarts the noise sequence of this seed.
+        key = (sim.seed, sim.step_count)
+        last = self._rng_key
+        if self._rng is None or last is None or key[0] != last[0] or key[1] == 0 or key[1] < last[1]:
+            self._rng = np.random.default_rng([sim.seed, _NOISE_STREAM, self._stream])
+        self._rng_key = key
+        return self._rng
+
+
+@numba.njit(cache=True, nogil=True)
+def lidar_scan(
+    data, role, alive, rows, max_range, origin, inv_res, cell_max, width, clearance, dist, hit,
+):  # pragma: no cover - compiled
+    n_rays = dist.shape[1]
+    step = 2.0 * math.pi / n_rays
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        px, py, h = data[_X, r], data[_Y, r], data[_H, r]
+        dist[i, :] = max_range
+        hit[i, :] = HIT_NONE
+        for j in alive:
+            if j == r:
+                continue
+            bx, by, bh = data[_X, j], data[_Y, j], data[_H, j]
+            hl, hw = 0.5 * data[_LENGTH, j], 0.5 * data[_WIDTH, j]
+            if math.hypot(bx - px, by - py) - math.hypot(hl, hw) > max_range:
+                continue
+            lo, hi, inside = box_interval(px, py, h, bx, by, bh, hl, hw)
+            if inside:
+                continue
+            kind = HIT_PEDESTRIAN if role[j] == _PEDESTRIAN else HIT_VEHICLE
+            bc, bs = math.cos(bh), math.sin(bh)
+            for k in range(int(math.ceil(lo / step)), int(math.floor(hi / step)) + 1):
+                a = k * step + h
+                t = ray_box(px, py, math.cos(a), math.sin(a), bx, by, bc, bs, hl, hw)
+                kk = k % n_rays
+                if t < dist[i, kk]:
+                    dist[i, kk] = t
+                    hit[i, kk] = kind
+        for k in range(n_rays):
+            a = k * step + h
+            t = _edge_distance(px, py, math.cos(a), math.sin(a), dist[i, k], origin, inv_res, cell_max, width, clearance)
+            if t < dist[i, k]:
+                dist[i, k] = t
+                hit[i, k] = HIT_ROAD_EDGE
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _clearance_at(x, y, origin, inv_res, cell_max, width, clearance):  # pragma: no cover - compiled
+    cx = min(max((x - origin[0]) * inv_res, 0.0), cell_max[0])
+    cy = min(max((y - origin[1]) * inv_res, 0.0), cell_max[1])
+    return clearance[int(cy) * width + int(cx)]
+
+
+@numba.njit(cache=True, nogil=True)
+def _edge_distance(px, py, dx, dy, limit, origin, inv_res, cell_max, width, clearance):  # pragma: no cover - compiled
+    """Distance along the ray to where it first leaves the road, or inf within ``limit``."""
+    res = 1.0 / inv_res
+    if _clearance_at(px, py, origin, inv_res, cell_max, width, clearance) == 0:
+        return 0.0
+    t_road = 0.0  # last distance known to be on the road
+    while t_road < limit:
+        c = _clearance_at(px + t_road * dx, py + t_road * dy, origin, inv_res, cell_max, width, clearance)
+        # Any point of an off-road cell lies at least (clearance - sqrt(2)) cells away.
+        t = min(t_road + max(c - 1.5, 0.5) * res, limit)
+        if _clearance_at(px + t * dx, py + t * dy, origin, inv_res, cell_max, width, clearance) == 0:
+            lo, hi = t_road, t
+            for _ in range(10):
+                mid = 0.5 * (lo + hi)
+                if _clearance_at(px + mid * dx, py + mid * dy, origin, inv_res, cell_max, width, clearance) == 0:
+                    hi = mid
+                else:
+                    lo = mid
+            return hi
+        t_road = t
+    return math.inf
+
+
+_PEDESTRIAN = int(Role.PEDESTRIAN)
+
+_X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
+_LENGTH, _WIDTH = COLUMN["length"], COLUMN["width"]

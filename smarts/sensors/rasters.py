@@ -1,0 +1,275 @@
+"""Ego-centred rasters and the RGB top-down view composed from them.
+
+Each raster is ``size`` x ``size`` pixels of ``resolution`` metres, centred on the ego's centre and
+rotated to its heading: row 0 is ahead, column 0 is to the left (the ego drives up the image).
+Layers (uint8 [L, size, size], in the interface's order):
+- ``drivable``: 1 on the road surface (the map's drivable raster);
+- ``lanes``: 1 within half a pixel of a lane centre line (junction-internal lanes left out);
+- ``route``: 1 on the ego's route path;
+- ``occupancy``: 1 under another road user's box (vehicles and pedestrians, not the ego; with
+  occlusion in ``hide`` mode, fully hidden ones are left out);
+- ``occlusion``: 2 visible, 1 occluded (in a box's shadow), 0 beyond the occlusion range.
+``rgb`` (uint8 [size, size, 3]) paints them: grass, grey road, light lane lines, the route, other
+road users by role, the ego in red, and shades occluded and out-of-range ground.
+
+Every output pixel is sampled by inverse mapping to map coordinates (one lookup in the map's
+drivable raster and lane-distance field, one comparison with the occlusion depth buffer, whose
+per-pixel bin and distance are fixed in the ego frame and precomputed); boxes and the route are
+drawn forward into the few pixels they cover.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numba
+import numpy as np
+
+from smarts.core.simulation import Simulation
+from smarts.core.vehicle_table import COLUMN
+from smarts.sensors.interface import RASTER_LAYERS, RasterInterface
+from smarts.sensors.map_fields import map_fields
+from smarts.sensors.occlusion import SHADOW_BINS, Shadows
+
+OCCLUSION_OUT_OF_RANGE, OCCLUSION_OCCLUDED, OCCLUSION_VISIBLE = 0, 1, 2
+
+# Palette rows: the scene, then one colour per ``Role`` value (index ROLE_BASE + role).
+BACKGROUND, ROAD, LANE, ROUTE, EGO = 0, 1, 2, 3, 4
+ROLE_BASE = 5
+PALETTE = np.array(
+    [
+        (34, 102, 51),  # background
+        (88, 88, 92),  # road
+        (190, 190, 190),  # lane centre lines
+        (60, 190, 230),  # route
+        (230, 50, 40),  # ego
+        (200, 200, 200),  # Role.NONE
+        (250, 140, 150),  # Role.AGENT (another learner)
+        (240, 160, 40),  # Role.SOCIAL_AGENT
+        (70, 120, 235),  # Role.TRAFFIC
+        (160, 90, 220),  # Role.REPLAY
+        (250, 250, 250),  # Role.PEDESTRIAN
+    ],
+    dtype=np.uint8,
+)
+OCCLUDED_SHADE = 0.55
+OUT_OF_RANGE_SHADE = 0.3
+SHADED_PALETTE = np.stack(
+    [(PALETTE * f).astype(np.uint8) for f in (OUT_OF_RANGE_SHADE, OCCLUDED_SHADE, 1.0)]
+)
+"""The palette per occlusion value (out of range, occluded, visible)."""
+_ROUTE_BACK = 400  # route points searched behind the ego's nearest one
+_ROUTE_AHEAD = 200  # ... and at most this many beyond the view's diameter ahead of it
+
+
+def pixel_geometry(size: int, resolution: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Ego-frame centre (x ahead, y left), depth-buffer bin and distance of every pixel, row-major."""
+    centre = (size / 2.0 - np.arange(size) - 0.5) * resolution
+    ex = np.repeat(centre, size)  # row -> ahead
+    ey = np.tile(centre, size)  # column -> left
+    angle = np.arctan2(ey, ex)
+    bins = np.floor((angle + np.pi) / (2 * np.pi / SHADOW_BINS)).astype(np.int64) % SHADOW_BINS
+    return ex, ey, bins, np.hypot(ex, ey)
+
+
+class RasterSensor:
+    """``rasters`` and ``rgb`` for the agents of one interface group; the per-pixel geometry and
+    scratch buffers are made once and reused every step."""
+
+    def __init__(self, config: RasterInterface, hide_hidden: bool = False):
+        self.config = config
+        self.hide_hidden = hide_hidden
+        s = config.size
+        self._ex, self._ey, self._bin, self._dist = pixel_geometry(s, config.resolution)
+        self._slot = np.full(len(RASTER_LAYERS), -1, dtype=np.int64)
+        for i, name in enumerate(config.layers):
+            self._slot[RASTER_LAYERS.index(name)] = i
+        self._occupant = np.zeros(s * s, dtype=np.int32)
+        self._route = np.zeros(s * s, dtype=np.uint8)
+        self._cell = np.zeros(s * s, dtype=np.int64)
+        self._on_road = np.zeros(s * s, dtype=np.uint8)
+        self._on_lane = np.zeros(s * s, dtype=np.uint8)
+        self._shade = np.zeros(s * s, dtype=np.uint8)
+        self._no_shadow = np.zeros((1, 1))
+        self._no_visible = np.zeros((1, 1), dtype=np.float32)
+
+    def spaces(self) -> dict[str, gym.spaces.Box]:
+        s, layers = self.config.size, len(self.config.layers)
+        out = {}
+        if layers:
+            out["rasters"] = gym.spaces.Box(0, OCCLUSION_VISIBLE, (layers, s, s), np.uint8)
+        if self.config.rgb:
+            out["rgb"] = gym.spaces.Box(0, 255, (s, s, 3), np.uint8)
+        return out
+
+    def observe(self, sim: Simulation, agents: np.ndarray, rows: np.ndarray, shadows: Shadows | None) -> dict[str, np.ndarray]:
+        cfg = self.config
+        n, s = rows.shape[0], cfg.size
+        layers = np.empty((n, len(cfg.layers), s, s), dtype=np.uint8)
+        rgb = np.empty((n, s, s, 3) if cfg.rgb else (0, s, s, 3), dtype=np.uint8)
+        f = map_fields(sim.road_map)
+        ma = sim.mission_arrays
+        # A pixel is on a lane line within half a pixel of it (at least one map cell).
+        lane_cells = max(0.5 * cfg.resolution * f.inv_res, 1.0)
+        draw_rasters(
+            sim.table.data, sim.table.role, sim.alive, agents, rows,
+            self._ex, self._ey, self._bin, self._dist, s, cfg.resolution,
+            f.origin, f.inv_res, f.cell_max, f.width, f.drivable, f.lane_distance, lane_cells,
+            ma.flat_paths, ma.flat_valid, ma.stride, ma.path_len, sim.route_index,
+            shadows.depth if shadows is not None else self._no_shadow,
+            shadows.visible if shadows is not None else self._no_visible,
+            shadows.range if shadows is not None else math.inf,
+            shadows is not None, self.hide_hidden and shadows is not None,
+            self._occupant, self._route, self._cell, self._on_road, self._on_lane, self._shade,
+            self._slot, layers, cfg.rgb, rgb, SHADED_PALETTE,
+        )
+        out = {}
+        if cfg.layers:
+            out["rasters"] = layers
+        if cfg.rgb:
+            out["rgb"] = rgb
+        return out
+
+
+@numba.njit(cache=True, nogil=True)
+def draw_rasters(
+    data, role, alive, agents, rows, px_ex, px_ey, px_bin, px_dist, size, res,
+    origin, inv_res, cell_max, width, drivable, lane_distance, lane_cells,
+    flat_paths, flat_valid, stride, path_len, route_index,
+    depth, visible, sensor_range, have_shadows, hide_hidden,
+    occupant, route, cell, on_road, on_lane, shade, slot, layers, want_rgb, rgb, shaded,
+):  # pragma: no cover - compiled
+    half = 0.5 * size * res
+    view = half * math.sqrt(2.0)  # farthest pixel corner from the ego
+    s_drv, s_lane, s_route, s_occ, s_occl = slot[0], slot[1], slot[2], slot[3], slot[4]
+    for i in range(rows.shape[0]):
+        r, a = rows[i], agents[i]
+        x, y, h = data[_X, r], data[_Y, r], data[_H, r]
+        c, s = math.cos(h), math.sin(h)
+
+        # Boxes: ego = -1, other road users = row + 1, into the pixels whose centre they cover.
+        occupant[:] = 0
+        for j in alive:
+            if j != r and hide_hidden and visible[i, j] <= 0.0:
+                continue
+            dx, dy = data[_X, j] - x, data[_Y, j] - y
+            bx, by = c * dx + s * dy, -s * dx + c * dy
+            hl, hw = 0.5 * data[_LENGTH, j], 0.5 * data[_WIDTH, j]
+            reach = math.hypot(hl, hw)
+            if abs(bx) - reach > half or abs(by) - reach > half:
+                continue
+            rel = data[_H, j] - h
+            rc, rs = math.cos(rel), math.sin(rel)
+            row0 = max(int(math.floor(0.5 * size - (bx + reach) / res)), 0)
+            row1 = min(int(math.floor(0.5 * size - (bx - reach) / res)), size - 1)
+            col0 = max(int(math.floor(0.5 * size - (by + reach) / res)), 0)
+            col1 = min(int(math.floor(0.5 * size - (by - reach) / res)), size - 1)
+            mark = -1 if j == r else j + 1
+            for pr in range(row0, row1 + 1):
+                for pc in range(col0, col1 + 1):
+                    q = pr * size + pc
+                    qx, qy = px_ex[q] - bx, px_ey[q] - by
+                    if abs(rc * qx + rs * qy) <= hl and abs(-rs * qx + rc * qy) <= hw:
+                        if j == r or occupant[q] <= 0:
+                            occupant[q] = mark
+
+        # Route: its path polyline sampled every half pixel, from where it enters the view.
+        route[:] = 0
+        base = a * stride
+        k0 = route_index[a]
+        while k0 > 0 and route_index[a] - k0 < _ROUTE_BACK:
+            p = flat_paths[base + k0 - 1, 0]
+            if math.hypot(p[0] - x, p[1] - y) > view + 2.0:
+                break
+            k0 -= 1
+        px_prev, py_prev = 0.0, 0.0
+        entered = False
+        last = min(path_len[a], route_index[a] + int(2.0 * view) + _ROUTE_AHEAD)  # ~1 m per point
+        for k in range(k0, last):
+            if not flat_valid[base + k, 0]:
+                break
+            p = flat_paths[base + k, 0]
+            dx, dy = p[0] - x, p[1] - y
+            ex, ey = c * dx + s * dy, -s * dx + c * dy
+            if k > k0:
+                seg = math.hypot(ex - px_prev, ey - py_prev)
+                n_sub = max(int(math.ceil(seg / (0.5 * res))), 1)
+                for u in range(n_sub + 1):
+                    f = u / n_sub
+                    qx, qy = px_prev + (ex - px_prev) * f, py_prev + (ey - py_prev) * f
+                    pr = int(math.floor(0.5 * size - qx / res))
+                    pc = int(math.floor(0.5 * size - qy / res))
+                    if 0 <= pr < size and 0 <= pc < size:
+                        route[pr * size + pc] = 1
+            px_prev, py_prev = ex, ey
+            near = math.hypot(ex, ey) <= view + 2.0
+            if entered and not near and k > route_index[a]:
+                break
+            entered = entered or near
+
+        # Every pixel: map lookups, shadows, then the layers and the composed colour. Simple
+        # loops over the flat pixel index, so the compiler can vectorise them.
+        n_px = size * size
+        for q in range(n_px):
+            ex, ey = px_ex[q], px_ey[q]
+            cx = min(max((x + c * ex - s * ey - origin[0]) * inv_res, 0.0), cell_max[0])
+            cy = min(max((y + s * ex + c * ey - origin[1]) * inv_res, 0.0), cell_max[1])
+            cell[q] = int(cy) * width + int(cx)
+        for q in range(n_px):
+            on_road[q] = drivable[cell[q]]
+            on_lane[q] = on_road[q] and lane_distance[cell[q]] <= lane_cells
+        if have_shadows:
+            for q in range(n_px):
+                d = px_dist[q]
+                shade[q] = (
+                    OCCLUSION_OUT_OF_RANGE if d > sensor_range
+                    else OCCLUSION_OCCLUDED if d > depth[i, px_bin[q]] else OCCLUSION_VISIBLE
+                )  # fmt: skip
+        else:
+            shade[:] = OCCLUSION_VISIBLE
+        flat = layers[i].reshape(layers.shape[1], n_px)
+        if s_drv >= 0:
+            for q in range(n_px):
+                flat[s_drv, q] = on_road[q]
+        if s_lane >= 0:
+            for q in range(n_px):
+                flat[s_lane, q] = on_lane[q]
+        if s_route >= 0:
+            flat[s_route, :] = route
+        if s_occ >= 0:
+            for q in range(n_px):
+                flat[s_occ, q] = occupant[q] > 0
+        if s_occl >= 0:
+            flat[s_occl, :] = shade
+        if want_rgb:
+            image = rgb[i].reshape(n_px, 3)
+            for q in range(n_px):
+                occ = occupant[q]
+                if occ != 0:
+                    colour = EGO if occ < 0 else ROLE_BASE + role[occ - 1]
+                    level = OCCLUSION_VISIBLE
+                else:
+                    colour = ROUTE if route[q] else LANE if on_lane[q] else ROAD if on_road[q] else BACKGROUND
+                    level = shade[q]
+                image[q, 0] = shaded[level, colour, 0]
+                image[q, 1] = shaded[level, colour, 1]
+                image[q, 2] = shaded[level, colour, 2]
+
+
+class EgoViewRenderer:
+    """An ego-centred RGB view for ``render()``: the rasters' RGB at a larger size, with shadows."""
+
+    def __init__(self, size: int = 256, resolution: float = 0.25, sensor_range: float = 50.0):
+        from smarts.sensors.occlusion import ShadowCaster
+
+        self.sensor = RasterSensor(RasterInterface(size=size, resolution=resolution, layers=(), rgb=True))
+        self.shadows = ShadowCaster(sensor_range)
+
+    def render(self, sim: Simulation, agent: int) -> np.ndarray:
+        agents = np.array([agent], dtype=np.int64)
+        rows = sim.agent_row[agents]
+        return self.sensor.observe(sim, agents, rows, self.shadows.scan(sim, rows))["rgb"][0]
+
+_X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
+_LENGTH, _WIDTH = COLUMN["length"], COLUMN["width"]
