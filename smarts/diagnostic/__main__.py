@@ -7,8 +7,9 @@ of them stay live for the measured steps (full load). Three timings per step are
 ``env`` (a whole PettingZoo ``step`` including both, rewards and the per-agent dicts).
 
 The sensor case (``--sensors``) puts 10 agents with every sensor on (occlusion, 64x64 rasters of all
-layers plus RGB, 64-ray lidar, extended neighbours) among 50 built-in traffic vehicles on the same
-highway and splits the observation time into its sensors.
+layers plus RGB, 64-ray lidar, extended neighbours) and V2V messaging (``SENSOR_COMMS``: every agent
+sends 8 floats a step, half the traffic broadcasts its state) among 50 built-in traffic vehicles on
+the same highway, and splits the observation time into its sensors and the V2V exchange.
 """
 
 from __future__ import annotations
@@ -39,6 +40,15 @@ SENSOR_INTERFACE = {
     "occlusion": {"enabled": True, "mode": "hide"},
     "rasters": {"size": 64, "resolution": 0.5, "layers": ["drivable", "lanes", "route", "occupancy", "occlusion"], "rgb": True},
     "lidar": {"rays": 64, "range": 30.0},
+}
+SENSOR_COMMS = {
+    "range": 100.0,
+    "latency": 1,
+    "loss": 0.05,
+    "message_size": 8,
+    "max_messages": 8,
+    "penetration": 0.5,
+    "traffic_channel": -1,
 }
 TRAFFIC_SPACING = 14.0  # metres between traffic rows: room for every trip to depart at once
 
@@ -72,6 +82,7 @@ def sensor_scenario(n_agents: int, n_vehicles: int, steps: int) -> ScenarioSpec:
             "vehicle_capacity": n_agents + n_vehicles + 16,
             "agents": agents,
             "traffic": {"engine": "builtin", "vehicle_types": {"cruise": cruise}, "trips": trips},
+            "comms": SENSOR_COMMS,
             "events": {"terminate_on": ["collision", "off_road", "max_steps"]},
         },
         source="smarts.diagnostic",
@@ -106,8 +117,14 @@ def time_case(n_agents: int, steps: int, warmup: int, vehicles: int | None = Non
         env = DrivingParallelEnv(sensor_scenario(n_agents, vehicles, steps + warmup))
     sim, builder = env.sim, env.builder
     parts: dict[str, list[float]] = {"shadows": [], "rasters": [], "lidar": []}
+    if env.comms is not None:
+        parts["v2v"] = []
     step_dx = np.array([CRUISE_SPEED * sim.dt, 0.0, 0.0], dtype=np.float32)
-    actions = {a: step_dx for a in env.possible_agents}
+    driving = {a: step_dx for a in env.possible_agents}
+    actions = driving  # what the env takes: with comms, the driving part then the message part
+    if env.comms is not None:
+        message = np.linspace(-1.0, 1.0, len(env.comms.message_components), dtype=np.float32)
+        actions = {a: np.concatenate([step_dx, message]) for a in env.possible_agents}
 
     def run(mode: str) -> np.ndarray:
         env.reset(seed=0)
@@ -117,15 +134,19 @@ def time_case(n_agents: int, steps: int, warmup: int, vehicles: int | None = Non
             if mode == "env":
                 env.step(actions)
             elif mode == "sim":
-                sim.step(actions)
+                sim.step(driving)
             else:
-                sim.step(actions)
+                sim.step(driving)
                 t0 = time.perf_counter()
                 builder.build(sim, sim.active_agents)
             if k >= warmup:
                 out[k - warmup] = (time.perf_counter() - t0) * 1e3
                 if mode == "obs" and vehicles is not None:
                     _time_sensors(builder, sim, parts)
+                    if env.comms is not None:
+                        _time_v2v(env, actions, parts)
+            elif mode == "obs" and env.comms is not None:
+                _time_v2v(env, actions, parts, record=False)  # keeps the message queues full
         live = int(sim.agent_active.sum())
         if live != n_agents:
             raise RuntimeError(f"{n_agents}-agent case lost agents during timing ({live} live at the end)")
@@ -161,6 +182,21 @@ def _time_sensors(builder, sim, parts: dict[str, list[float]]) -> None:
     parts["shadows"].append((t1 - t0) * 1e3)
     parts["rasters"].append((t2 - t1) * 1e3)
     parts["lidar"].append((t3 - t2) * 1e3)
+
+
+def _time_v2v(env, actions: dict, parts: dict[str, list[float]], record: bool = True) -> None:
+    """The env's V2V work in one step: split the message actions, send, broadcast connected
+    traffic, deliver and write the received-messages observation."""
+    from smarts.comms import received_to_observation
+
+    sim, comms = env.sim, env.comms
+    agents = sim.active_agents
+    ids = [sim.agent_ids[i] for i in agents]
+    t0 = time.perf_counter()
+    _, payloads, channels = comms.split(actions, ids, agents)
+    received_to_observation(comms.exchange(sim, agents, payloads, channels))
+    if record:
+        parts["v2v"].append((time.perf_counter() - t0) * 1e3)
 
 
 def _sumo_case(n: int, steps: int) -> dict:
@@ -261,16 +297,17 @@ def main(argv: list[str] | None = None) -> int:
     if sensor_case is not None:
         sensor_rows.append(time_case(sensor_case[0], args.steps, args.warmup, vehicles=sensor_case[1]))
         stable = Table(
-            title=f"All sensors (occlusion, 64x64 rasters + RGB, 64-ray lidar), {args.steps} timed steps (ms per step)"
+            title=f"All sensors (occlusion, 64x64 rasters + RGB, 64-ray lidar) and V2V, {args.steps} timed "
+            "steps (ms per step)"
         )
         for col in ("agents", "vehicles", "env step mean", "env step median", "sim mean", "obs mean",
-                    "shadows", "rasters", "lidar"):  # fmt: skip
+                    "shadows", "rasters", "lidar", "v2v"):  # fmt: skip
             stable.add_column(col, justify="right", no_wrap=True)
         for r in sensor_rows:
             stable.add_row(
                 str(r["agents"]), str(r["vehicles"]), f"{r['env_ms_mean']:.3f}", f"{r['env_ms_median']:.3f}",
                 f"{r['sim_ms_mean']:.3f}", f"{r['obs_ms_mean']:.3f}", f"{r['shadows_ms_mean']:.3f}",
-                f"{r['rasters_ms_mean']:.3f}", f"{r['lidar_ms_mean']:.3f}",
+                f"{r['rasters_ms_mean']:.3f}", f"{r['lidar_ms_mean']:.3f}", f"{r['v2v_ms_mean']:.3f}",
             )
         console.print(stable)
 

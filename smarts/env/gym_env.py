@@ -1,5 +1,7 @@
 """A single-agent Gymnasium env: one agent of a scenario, the others removed.
 
+With comms on, the agent hears connected traffic (and sends into the void: no other agent is left).
+
 Registered as ``smarts/Driving-v0``; ``gymnasium.make("smarts/Driving-v0", scenario=...)``.
 """
 
@@ -40,7 +42,11 @@ class DrivingEnv(gym.Env):
         agent = ids[0] if agent is None else agent
         if agent not in ids:
             raise ValueError(f"{spec.source}: scenario has no agent {agent!r}; agents: {ids}")
-        spec = dataclasses.replace(spec, agents=[a for a in spec.agents if a.id == agent])
+        comms = spec.comms
+        if comms is not None and comms.agent_channels:  # channels of the removed agents go too
+            kept = {a: c for a, c in comms.agent_channels.items() if a == agent}
+            comms = dataclasses.replace(comms, agent_channels=kept)
+        spec = dataclasses.replace(spec, agents=[a for a in spec.agents if a.id == agent], comms=comms)
         self.agent = agent
         self.env = DrivingParallelEnv(
             spec, observation=observation, limits=limits, render_mode=render_mode, render_view=render_view

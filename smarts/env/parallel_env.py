@@ -4,6 +4,9 @@ Observations for all live agents are built in one batched pass per interface gro
 (``ObservationSuite``: agents with equal ``AgentInterface`` share a space and a pass); the
 per-agent dicts returned here are views into those batch arrays, so no per-agent work is done
 beyond the dict itself.
+
+With a scenario ``comms`` section, actions carry a message part after the driving part and
+observations hold the messages received (``smarts.env.v2v``); without one, spaces are unchanged.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from smarts.dynamics.limits import ReachLimits
 from smarts.env.assembly import as_spec, build_simulation
 from smarts.env.reward import default_rewards
 from smarts.env.social import SocialAgents
+from smarts.env.v2v import V2VLink
 from smarts.scenario import ScenarioSpec
 from smarts.sensors.interface import AgentInterface
 from smarts.sensors.observation import ObservationConfig, as_interface
@@ -64,12 +68,18 @@ class DrivingParallelEnv(ParallelEnv):
         if not self.possible_agents:
             raise ValueError(f"{self.scenario.source}: every agent has a policy; at least one must learn")
         self.agents: list[str] = []
-        self._obs_spaces = {a: self.sensors.space(self.sim.agent_index[a]) for a in self.possible_agents}
+        driving = [action_space(a.action_space, self.limits, self.scenario.step_length) for a in self.scenario.agents]
+        self.comms: V2VLink | None = None
+        self._comms_spaces: dict[int, gym.spaces.Dict] = {}
+        if self.scenario.comms is not None:
+            self.comms = V2VLink(self.scenario.comms, self.sim, [box.shape[0] for box in driving])
+        self._obs_spaces = {a: self._observation_space(self.sim.agent_index[a]) for a in self.possible_agents}
         self._act_spaces = {
-            a.id: action_space(a.action_space, self.limits, self.scenario.step_length)
-            for a in self.scenario.agents
+            a.id: box if self.comms is None else self.comms.action_space(box)
+            for a, box in zip(self.scenario.agents, driving)
             if a.id in self.possible_agents
         }
+        self._live = np.zeros(0, dtype=np.int64)  # agent indices of ``self.agents``
         self._last: list[Batch] = []  # for social agents
         self._renderer = None
         self._step_listeners: list = []
@@ -96,6 +106,16 @@ class DrivingParallelEnv(ParallelEnv):
             return [as_interface(observation[a.id]) if a.id in observation else c for a, c in zip(spec_agents, chosen)]
         return [as_interface(observation)] * len(spec_agents)
 
+    def _observation_space(self, agent: int) -> gym.spaces.Dict:
+        """The agent's sensor space, plus the received messages with comms on (one object per
+        interface group, so agents of a group share it)."""
+        space = self.sensors.space(agent)
+        if self.comms is None:
+            return space
+        if id(space) not in self._comms_spaces:
+            self._comms_spaces[id(space)] = self.comms.observation_space(space)
+        return self._comms_spaces[id(space)]
+
     # ------------------------------------------------------------------ spaces
     def observation_space(self, agent: str) -> gym.spaces.Dict:
         return self._obs_spaces[agent]
@@ -105,12 +125,20 @@ class DrivingParallelEnv(ParallelEnv):
 
     # ------------------------------------------------------------------ episode
     def reset(self, seed: int | None = None, options: dict | None = None):
-        self.sim.reset(seed if seed is not None else self.sim.seed)
+        sim = self.sim
+        sim.reset(seed if seed is not None else sim.seed)
         self.agents = list(self.possible_agents)
-        batches = self.sensors.build(self.sim, self.sim.active_agents)
+        self._live = np.array([sim.agent_index[a] for a in self.agents], dtype=np.int64)
+        agents = sim.active_agents
+        batches = self.sensors.build(sim, agents)
+        infos: dict[str, dict] = {a: {} for a in self.agents}
+        if self.comms is not None:
+            received = self.comms.reset(sim)
+            self.comms.merge(batches, agents, received)
+            self._count_messages(infos, received.count, agents)
         self._last = batches
         obs = self._split(self._learners(batches) if self.social.any else batches)
-        return obs, {a: {} for a in self.agents}
+        return obs, infos
 
     def step(self, actions: dict[str, Any]):
         live = set(self.agents)
@@ -121,6 +149,10 @@ class DrivingParallelEnv(ParallelEnv):
         if missing:
             raise ActionError(f"no action given for live agents {missing}", missing)
         sim = self.sim
+        comms = self.comms
+        if comms is not None:  # checked before anything moves; social agents send nothing
+            actions, payloads, channels = comms.split(actions, self.agents, self._live)
+            senders = self._live
         if self.social.any:
             actions = dict(actions)
             for members, batch in self._last:
@@ -128,6 +160,9 @@ class DrivingParallelEnv(ParallelEnv):
         sim.step(actions)
         agents = sim.active_agents
         batches = self.sensors.build(sim, agents)
+        if comms is not None:
+            received = comms.exchange(sim, senders, payloads, channels)
+            comms.merge(batches, agents, received)
         if self.social.any:
             self._last = batches
             batches = self._learners(batches)
@@ -144,10 +179,17 @@ class DrivingParallelEnv(ParallelEnv):
         if events.any():
             for k in np.flatnonzero(events.any(axis=1)):
                 infos[ids[k]]["events"] = [EVENT_NAMES[e] for e in np.flatnonzero(events[k])]
+        if comms is not None:
+            self._count_messages(infos, received.count, sim.active_agents)
         for listener in self._step_listeners:
             listener(sim)  # sees this step's state before finished agents leave the table
         sim.remove_done_agents()
-        self.agents = [a for a, d in zip(ids, done.tolist()) if not d]
+        if done.any():
+            self.agents = [a for a, d in zip(ids, done.tolist()) if not d]
+            self._live = agents[~done]
+        else:
+            self.agents = ids
+            self._live = agents
         return (
             obs,
             dict(zip(ids, reward.tolist())),
@@ -160,6 +202,13 @@ class DrivingParallelEnv(ParallelEnv):
         """Call ``listener(sim)`` after every step, before agents that finished are removed (the
         benchmark's episode recorder uses this to log the final step of every agent)."""
         self._step_listeners.append(listener)
+
+    def _count_messages(self, infos: dict[str, dict], count: np.ndarray, agents: np.ndarray) -> None:
+        """``info["messages_received"]`` of each learner; ``count`` is in the order of ``agents``."""
+        if self.social.any:
+            count = count[~self.social.is_social[agents]]
+        for info, n in zip(infos.values(), count.tolist()):
+            info["messages_received"] = n
 
     def _learners(self, batches: list[Batch]) -> list[Batch]:
         """The batches without the social agents' rows."""

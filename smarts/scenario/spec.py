@@ -13,7 +13,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
@@ -38,6 +38,9 @@ from smarts.sensors.interface import (
     interface_from_dict,
     interface_to_dict,
 )
+
+if TYPE_CHECKING:  # the reader imports it only for scenarios with a comms section
+    from smarts.comms.config import CommsConfig
 
 BUILTIN_PREFIX = "builtin:"
 MAP_FILE_SUFFIXES = (".net.xml", ".xodr")
@@ -188,6 +191,9 @@ class ScenarioSpec:
     reward: RewardSpec = field(default_factory=RewardSpec)
     traffic: TrafficSpec | None = None
     """Flows, trips, vehicle types and pedestrians for a traffic engine; None: agents only."""
+    comms: CommsConfig | None = None
+    """V2V messaging between agents and connected traffic (``smarts.comms``); None: comms off, the
+    action and observation spaces have no message parts."""
     source: str = field(default="<dict>", compare=False, repr=False)
     """Where the spec was read from; prefixes every error message."""
     base_dir: Path | None = field(default=None, compare=False, repr=False)
@@ -253,6 +259,7 @@ class ScenarioSpec:
                 "step_penalty": self.reward.step_penalty,
             },
             "traffic": None if self.traffic is None else _traffic_dict(self.traffic),
+            "comms": None if self.comms is None else _comms_dict(self.comms),
         }
 
     def to_yaml(self) -> str:
@@ -370,6 +377,13 @@ def _traffic_dict(traffic: TrafficSpec) -> dict[str, Any]:
         "trips": [_without_none(trip) for trip in traffic.trips],
         "pedestrians": [_without_none(ped) for ped in traffic.pedestrians],
     }
+
+
+def _comms_dict(comms: CommsConfig) -> dict[str, Any]:
+    """Every comms field (a default written out reads back the same)."""
+    out = {f.name: getattr(comms, f.name) for f in fields(comms)}
+    out["agent_channels"] = dict(comms.agent_channels)
+    return out
 
 
 class _SpecDumper(yaml.SafeDumper):
@@ -555,7 +569,7 @@ class _Reader:
     def scenario(self, data: Any) -> ScenarioSpec:
         allowed = (
             "name", "map", "step_length", "episode_steps", "seed", "vehicle_capacity",
-            "agents", "events", "reward", "traffic",
+            "agents", "events", "reward", "traffic", "comms",
         )  # fmt: skip
         d = self.mapping(data, "", allowed)
         name = self.string(d, "name", "")
@@ -574,6 +588,7 @@ class _Reader:
         reward = self.reward(d.get("reward", {}))
         traffic = None if d.get("traffic") is None else self.traffic(d["traffic"])
         self.agents_and_traffic(agents, traffic)
+        comms = None if d.get("comms") is None else self.comms(d["comms"], agents)
         return ScenarioSpec(
             name=name,
             map=map_value,
@@ -585,6 +600,7 @@ class _Reader:
             events=events,
             reward=reward,
             traffic=traffic,
+            comms=comms,
             source=self.source,
             base_dir=self.base_dir,
         )
@@ -1046,6 +1062,15 @@ class _Reader:
                     f"{trip.id!r} is also the id of agents[{agent_index[trip.id]}]; "
                     "vehicle ids must be unique",
                 )
+
+    def comms(self, value: Any, agents: list[AgentSpec]) -> CommsConfig:
+        """The V2V settings, validated by ``smarts.comms`` (errors name ``comms.<field>``)."""
+        from smarts.comms.config import CommsConfig
+
+        where = f"{self.source}: comms"
+        config = CommsConfig.from_dict(value, where=where)
+        config.check_agents([a.id for a in agents], where=where)
+        return config
 
     def events(self, value: Any) -> EventsSpec:
         path = "events"
