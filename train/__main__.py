@@ -1,11 +1,14 @@
-"""``python -m train <command>``: benchmark (and, as they land, training and evaluation).
+"""``python -m train <command>``: train PPO, evaluate checkpoints, run the benchmark.
 
+    python -m train ppo --task platoon [--action-space rtp|continuous] [--total-steps N] [--envs E]
+    python -m train eval --agent runs/train/platoon/final.pt --suite adaptive
     python -m train benchmark --agent zoo:keep-lane --agent zoo:random --suite collaborative
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -32,6 +35,22 @@ def _benchmark(args: argparse.Namespace) -> int:
     return 0
 
 
+def _ppo(args: argparse.Namespace) -> int:
+    from train.config import TrainConfig, load_config
+
+    overrides = {f.name: getattr(args, f.name) for f in dataclasses.fields(TrainConfig) if getattr(args, f.name, None) is not None}
+    overrides.pop("task", None)
+    cfg = load_config(args.task, args.config, overrides)
+    if cfg.lib != "torchrl":
+        raise ValueError(f"--lib {cfg.lib}: only the torchrl trainer is available so far")
+    from train.ppo import train
+
+    out = Path(args.out_dir) if args.out_dir else Path(cfg.out)
+    final = train(cfg, out, progress=not args.quiet)
+    print(f"checkpoint: {final}\nTensorBoard: tensorboard --logdir {out / 'tensorboard'}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m train", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -44,6 +63,24 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--out", type=Path, default=None, help="output folder (default runs/benchmark/<suite>)")
     bench.add_argument("--quiet", action="store_true", help="no progress bar")
     bench.set_defaults(run=_benchmark)
+
+    evaluate = sub.add_parser("eval", help="benchmark a checkpoint or zoo agent on a suite (same as benchmark)")
+    for action in bench._actions[1:]:
+        evaluate._add_action(action)
+    evaluate.set_defaults(run=_benchmark)
+
+    from train.config import TrainConfig
+
+    ppo = sub.add_parser("ppo", help="train a PPO driving policy (torchrl collectors, GAE, ClipPPOLoss)")
+    ppo.add_argument("--task", default="platoon", help="platoon | drive (defaults in configs/train/<task>.yaml)")
+    ppo.add_argument("--config", default=None, help="a training config YAML instead of the task's")
+    ppo.add_argument("--out-dir", default=None, help="output folder (default: the config's out)")
+    ppo.add_argument("--quiet", action="store_true", help="no progress bar")
+    for f in dataclasses.fields(TrainConfig):
+        if f.name in ("task", "out"):
+            continue
+        ppo.add_argument("--" + f.name.replace("_", "-"), dest=f.name, default=None, help=f"override {f.name}")
+    ppo.set_defaults(run=_ppo)
     return parser
 
 

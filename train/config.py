@@ -1,0 +1,135 @@
+"""Training configuration: a dataclass schema, read from YAML, overridden by CLI flags.
+
+``configs/train/<task>.yaml`` holds the defaults of a task; ``--config FILE`` replaces them and
+every field can be overridden as ``--field value`` (``--total-steps 20000``). Values are
+validated once, with errors naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs" / "train"
+TASKS = ("platoon", "drive")
+ACTION_SPACES = {"rtp": "relative_target_pose", "continuous": "continuous"}
+LIBS = ("torchrl", "sb3")
+
+
+class ConfigError(ValueError):
+    pass
+
+
+@dataclass
+class TrainConfig:
+    task: str = "platoon"
+    scenarios: list[str] = field(default_factory=list)
+    """``suite:scenario`` names (e.g. ``adaptive:a01_straight_free``) or library scenario names."""
+    action_space: str = "rtp"
+    lib: str = "torchrl"
+    total_steps: int = 60_000
+    envs: int = 2
+    seed: int = 0
+    frames_per_batch: int = 2048
+    minibatch_size: int = 256
+    epochs: int = 4
+    lr: float = 3e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_epsilon: float = 0.2
+    entropy_coeff: float = 0.001
+    critic_coeff: float = 0.5
+    max_grad_norm: float = 0.5
+    hidden: list[int] = field(default_factory=lambda: [128, 128])
+    eval_every: int = 0
+    """Env steps between benchmark evaluations (0: only at the end)."""
+    eval_episodes: int = 1
+    """Episodes per scenario of the final benchmark evaluation (0: none)."""
+    out: str = "runs/train"
+    ray_address: str | None = None
+
+    def validate(self, source: str) -> "TrainConfig":
+        def fail(name: str, message: str) -> ConfigError:
+            return ConfigError(f"{source}: {name}: {message}")
+
+        if self.task not in TASKS:
+            raise fail("task", f"expected one of {', '.join(TASKS)}, got {self.task!r}")
+        if self.action_space not in ACTION_SPACES:
+            raise fail("action_space", f"expected one of {', '.join(ACTION_SPACES)}, got {self.action_space!r}")
+        if self.lib not in LIBS:
+            raise fail("lib", f"expected one of {', '.join(LIBS)}, got {self.lib!r}")
+        for name in ("total_steps", "envs", "frames_per_batch", "minibatch_size", "epochs"):
+            if getattr(self, name) < 1:
+                raise fail(name, f"expected a positive integer, got {getattr(self, name)}")
+        if self.minibatch_size > self.frames_per_batch:
+            raise fail("minibatch_size", f"must be <= frames_per_batch ({self.frames_per_batch})")
+        for name in ("lr", "clip_epsilon", "max_grad_norm"):
+            if not getattr(self, name) > 0:
+                raise fail(name, f"expected a positive number, got {getattr(self, name)}")
+        for name in ("gamma", "gae_lambda"):
+            if not 0 < getattr(self, name) <= 1:
+                raise fail(name, f"expected a number in (0, 1], got {getattr(self, name)}")
+        for name in ("entropy_coeff", "critic_coeff", "eval_every", "eval_episodes", "seed"):
+            if getattr(self, name) < 0:
+                raise fail(name, f"expected a non-negative number, got {getattr(self, name)}")
+        if not self.hidden or any(h < 1 for h in self.hidden):
+            raise fail("hidden", f"expected a list of positive layer sizes, got {self.hidden}")
+        if not self.scenarios:
+            raise fail("scenarios", "expected at least one training scenario")
+        return self
+
+
+def _coerce(name: str, value: Any, kind: Any, source: str) -> Any:
+    origin = getattr(kind, "__origin__", None)
+    text = str(kind)
+    try:
+        if isinstance(value, str) and ("int" in text and "list" not in text):
+            return int(value)
+        if isinstance(value, str) and text == "float":
+            return float(value)
+        if isinstance(value, str) and "list" in text:
+            items = [v for v in value.replace(",", " ").split() if v]
+            return [int(v) for v in items] if "int" in text else items
+        if text == "float" and isinstance(value, int) and not isinstance(value, bool):
+            return float(value)
+    except ValueError:
+        raise ConfigError(f"{source}: {name}: expected {text}, got {value!r}") from None
+    expected = {"int": int, "float": float, "str": str}.get(text)
+    if expected is not None and (not isinstance(value, expected) or isinstance(value, bool)):
+        raise ConfigError(f"{source}: {name}: expected {text}, got {value!r}")
+    del origin
+    return value
+
+
+def load_config(task: str | None = None, path: str | Path | None = None, overrides: dict | None = None) -> TrainConfig:
+    """Defaults of ``task`` (or ``path``), then ``overrides``; validated."""
+    if path is None:
+        if task not in TASKS:
+            raise ConfigError(f"unknown task {task!r}; expected one of {', '.join(TASKS)}")
+        path = CONFIG_DIR / f"{task}.yaml"
+    path = Path(path)
+    source = str(path)
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except OSError as err:
+        raise ConfigError(f"{source}: cannot read: {err.strerror or err}") from None
+    except yaml.YAMLError as err:
+        raise ConfigError(f"{source}: invalid YAML: {err}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: expected a mapping of training settings")
+    kinds = {f.name: f.type for f in fields(TrainConfig)}
+    values = {}
+    for name, value in {**data, **(overrides or {})}.items():
+        if name not in kinds:
+            raise ConfigError(f"{source}: {name}: unknown setting; known: {', '.join(kinds)}")
+        if value is None and name != "ray_address":
+            continue
+        origin = "command line" if overrides and name in overrides else source
+        values[name] = _coerce(name, value, kinds[name], origin)
+    if task is not None and "task" not in values:
+        values["task"] = task
+    return dataclasses.replace(TrainConfig(), **values).validate(source)

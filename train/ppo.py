@@ -1,0 +1,208 @@
+"""PPO on the simulator with TorchRL: collector, GAE and ClipPPOLoss (no hand-written PPO maths).
+
+The whole algorithm in one readable loop:
+
+1. ``envs`` worker processes each run one training scenario of the task (TorchRL ``ParallelEnv``);
+   a ``Collector`` gathers ``frames_per_batch`` steps with the current stochastic policy.
+2. The observation normaliser is updated from the batch; GAE computes advantages and value targets.
+3. ``epochs`` passes of minibatch updates of torchrl's ``ClipPPOLoss`` (clipped objective + value
+   loss + entropy bonus), Adam, gradient clipping.
+4. TensorBoard: episode return/length, losses, entropy, KL, learning rate, env steps/s; a checkpoint
+   after every batch (``last.pt``) and on Ctrl-C; at the end, the benchmark suite of the task is
+   run on the final checkpoint and its PR/RC/Humanness/MTE|SFD/S_bench logged.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from tensordict.nn import TensorDictModule
+from torch import nn
+from torchrl.collectors import Collector
+from torchrl.data import LazyTensorStorage, ReplayBuffer
+from torchrl.data.replay_buffers import SamplerWithoutReplacement
+from torchrl.envs import Compose, ParallelEnv, RewardSum, StepCounter, TransformedEnv
+from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
+from torchrl.objectives import ClipPPOLoss
+from torchrl.objectives.value import GAE
+
+from agents.ppo import Actor, Critic, ObservationLayout, ObsNormalizer, save_checkpoint
+from smarts.env.torchrl_env import env_factory
+from train.config import ACTION_SPACES, TrainConfig
+
+TASK_SUITE = {"platoon": "adaptive", "drive": "collaborative"}
+
+
+def training_spec(name: str, action_space: str):
+    """A scenario spec from ``suite:scenario`` or a library name, every agent on ``action_space``."""
+    from smarts.benchmark.suites import load_suite
+    from smarts.scenario import load_scenario
+
+    if ":" in name:
+        suite_name, scenario = name.split(":", 1)
+        suite = load_suite(suite_name)
+        matches = [s.spec for s in suite.scenarios if s.name == scenario]
+        if not matches:
+            raise ValueError(f"suite {suite_name!r} has no scenario {scenario!r}")
+        spec = matches[0]
+    else:
+        spec = load_scenario(name)
+    agents = [dataclasses.replace(a, action_space=ACTION_SPACES[action_space]) for a in spec.agents]
+    return dataclasses.replace(spec, agents=agents)
+
+
+def make_env(cfg: TrainConfig) -> TransformedEnv:
+    fns = [env_factory(training_spec(cfg.scenarios[i % len(cfg.scenarios)], cfg.action_space), single_agent=True)
+           for i in range(cfg.envs)]  # fmt: skip
+    base = ParallelEnv(cfg.envs, fns, mp_start_method="spawn") if cfg.envs > 1 else fns[0]()
+    env = TransformedEnv(base, Compose(RewardSum(), StepCounter()))
+    env.set_seed(cfg.seed)
+    return env
+
+
+class _FlatNormalised(nn.Module):
+    """Concatenate the observation entries and normalise them, then apply ``head``."""
+
+    def __init__(self, layout: ObservationLayout, normalizer: ObsNormalizer, head: nn.Module):
+        super().__init__()
+        self.layout, self.normalizer, self.head = layout, normalizer, head
+
+    def forward(self, *parts: torch.Tensor):
+        flat = self.layout.flatten(dict(zip(self.layout.keys, parts)))
+        return self.head(self.normalizer(flat))
+
+
+def build_modules(env, cfg: TrainConfig):
+    obs_spec = env.observation_spec["observation"]
+    keys = tuple(sorted(obs_spec.keys()))
+    batch_dims = len(env.batch_size)  # [envs] in front when the env is batched
+    layout = ObservationLayout(keys, tuple(tuple(obs_spec[k].shape[batch_dims:]) for k in keys))
+    action_spec = env.action_spec
+    low = action_spec.space.low.reshape(-1, action_spec.shape[-1])[0]
+    high = action_spec.space.high.reshape(-1, action_spec.shape[-1])[0]
+    normalizer = ObsNormalizer(layout.size)
+    actor_net = Actor(layout.size, action_spec.shape[-1], tuple(cfg.hidden))
+    critic_net = Critic(layout.size, tuple(cfg.hidden))
+    in_keys = [("observation", k) for k in layout.keys]
+    policy = TensorDictModule(_FlatNormalised(layout, normalizer, actor_net), in_keys=in_keys, out_keys=["loc", "scale"])
+    actor = ProbabilisticActor(
+        policy,
+        in_keys=["loc", "scale"],
+        spec=action_spec,
+        distribution_class=TanhNormal,
+        distribution_kwargs={"low": low, "high": high},
+        return_log_prob=True,
+    )
+    critic = ValueOperator(_FlatNormalised(layout, normalizer, critic_net), in_keys=in_keys)
+    return layout, normalizer, actor_net, critic_net, actor, critic, low.numpy(), high.numpy()
+
+
+def train(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
+    """Train, log and checkpoint under ``out``; returns the final checkpoint path."""
+    from rich.progress import Progress
+    from torch.utils.tensorboard import SummaryWriter
+
+    torch.manual_seed(cfg.seed)
+    np.random.seed(cfg.seed)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.json").write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
+    env = make_env(cfg)
+    layout, normalizer, actor_net, critic_net, actor, critic, low, high = build_modules(env, cfg)
+    advantage = GAE(gamma=cfg.gamma, lmbda=cfg.gae_lambda, value_network=critic, average_gae=True)
+    loss_module = ClipPPOLoss(actor, critic, clip_epsilon=cfg.clip_epsilon, entropy_coeff=cfg.entropy_coeff,
+                              critic_coeff=cfg.critic_coeff, loss_critic_type="smooth_l1")  # fmt: skip
+    optimizer = torch.optim.Adam(loss_module.parameters(), lr=cfg.lr)
+    frames = cfg.frames_per_batch
+    collector = Collector(env, actor, frames_per_batch=frames, total_frames=cfg.total_steps,
+                          auto_register_policy_transforms=False)
+    buffer = ReplayBuffer(storage=LazyTensorStorage(frames), sampler=SamplerWithoutReplacement(),
+                          batch_size=cfg.minibatch_size)  # fmt: skip
+    writer = SummaryWriter(log_dir=str(out / "tensorboard"))
+    step, metrics, start = 0, {}, time.perf_counter()
+    checkpoint = out / "last.pt"
+
+    def save(path: Path) -> Path:
+        return save_checkpoint(path, actor=actor_net, critic=critic_net, normalizer=normalizer, layout=layout,
+                               low=low, high=high, action_space=ACTION_SPACES[cfg.action_space],
+                               config=dataclasses.asdict(cfg), step=step, metrics=metrics,
+                               optimizer_state=optimizer.state_dict())  # fmt: skip
+
+    try:
+        with Progress(disable=not progress) as bar:
+            task = bar.add_task(f"PPO {cfg.task}", total=cfg.total_steps)
+            for data in collector:
+                collect_time = time.perf_counter()
+                data = data.reshape(-1)
+                normalizer.update(layout.flatten({k: data["observation", k] for k in layout.keys}))
+                for _ in range(cfg.epochs):
+                    with torch.no_grad():
+                        advantage(data)
+                    buffer.extend(data)
+                    for batch in buffer:
+                        losses = loss_module(batch)
+                        total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+                        optimizer.zero_grad()
+                        total.backward()
+                        nn.utils.clip_grad_norm_(loss_module.parameters(), cfg.max_grad_norm)
+                        optimizer.step()
+                collector.update_policy_weights_()
+                step += data.numel()
+                done = data["next", "done"].reshape(-1)
+                returns = data["next", "episode_reward"].reshape(-1)[done]
+                lengths = data["next", "step_count"].reshape(-1)[done].float()
+                losses = losses.detach()
+                metrics = {
+                    "loss/objective": float(losses["loss_objective"]),
+                    "loss/critic": float(losses["loss_critic"]),
+                    "loss/entropy": float(losses["loss_entropy"]),
+                    "policy/entropy": float(losses.get("entropy", torch.tensor(float("nan")))),
+                    "policy/kl_approx": float(losses.get("kl_approx", torch.tensor(float("nan")))),
+                    "train/lr": optimizer.param_groups[0]["lr"],
+                    "perf/env_steps_per_s": step / (time.perf_counter() - start),
+                    "perf/update_s": time.perf_counter() - collect_time,
+                }
+                if len(returns):
+                    metrics["episode/return"] = float(returns.mean())
+                    metrics["episode/length"] = float(lengths.mean())
+                for name, value in metrics.items():
+                    if np.isfinite(value):
+                        writer.add_scalar(name, value, step)
+                save(checkpoint)
+                bar.update(task, completed=min(step, cfg.total_steps),
+                           description=f"PPO {cfg.task} return {metrics.get('episode/return', float('nan')):.1f}")  # fmt: skip
+    except KeyboardInterrupt:
+        save(out / "interrupted.pt")
+        print(f"interrupted at {step} steps; checkpoint saved to {out / 'interrupted.pt'}")
+        raise
+    finally:
+        collector.shutdown()
+        env.close(raise_if_closed=False)  # the collector may have closed it already
+        writer.flush()
+    final = save(out / "final.pt")
+    if cfg.eval_episodes > 0:
+        metrics.update({f"eval/{k}": v for k, v in evaluate_into(final, cfg, out, writer, step).items()})
+    writer.close()
+    print(json.dumps({"steps": step, "wall_s": round(time.perf_counter() - start, 1), **metrics}, indent=2))
+    return final
+
+
+def evaluate_into(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int) -> dict:
+    """Run the task's benchmark suite on ``checkpoint`` and log its metrics to TensorBoard."""
+    from smarts.benchmark.report import write_report
+    from smarts.benchmark.runner import plan_jobs, run_jobs
+    from smarts.benchmark.suites import load_suite
+
+    suite = load_suite(TASK_SUITE[cfg.task])
+    jobs = plan_jobs([str(checkpoint)], suite, cfg.eval_episodes, out / "eval")
+    results = run_jobs(jobs, workers=max(1, min(cfg.envs, 2)), progress=False)
+    write_report(out / "eval", suite, [str(checkpoint)], results)
+    scores = json.loads((out / "eval" / "results.json").read_text())["agents"][str(checkpoint)]["scores"]
+    overall = scores["overall"] if scores else {}
+    for name, value in overall.items():
+        writer.add_scalar(f"eval/{name}", value, step)
+    return overall
