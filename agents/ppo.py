@@ -69,7 +69,9 @@ class Actor(nn.Module):
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         loc = self.net(x)
-        return loc, self.log_std.exp().expand_as(loc)
+        # Bounded spread: a collapsing std makes tanh-squashed log-probabilities (and PPO's ratios)
+        # numerically wild near the action bounds.
+        return loc, self.log_std.clamp(-3.0, 0.5).exp().expand_as(loc)
 
 
 class Critic(nn.Module):

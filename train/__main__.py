@@ -86,10 +86,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if getattr(args, "episodes", None) is not None and args.episodes < 1:
-        build_parser().error("--episodes must be >= 1")
-    if getattr(args, "workers", 1) < 1:
-        build_parser().error("--workers must be >= 1")
+    if args.command in ("benchmark", "eval"):
+        if args.episodes is not None and args.episodes < 1:
+            build_parser().error("--episodes must be >= 1")
+        if args.workers < 1:
+            build_parser().error("--workers must be >= 1")
     try:
         return args.run(args)
     except ValueError as err:  # unknown suite, agent or malformed config: say it plainly

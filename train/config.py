@@ -32,7 +32,9 @@ class TrainConfig:
     action_space: str = "rtp"
     lib: str = "torchrl"
     total_steps: int = 60_000
-    envs: int = 2
+    envs: int = 16
+    """Scenario copies stepped together (in this process, or split over ``workers``)."""
+    workers: int = 1
     seed: int = 0
     frames_per_batch: int = 2048
     minibatch_size: int = 256
@@ -62,9 +64,11 @@ class TrainConfig:
             raise fail("action_space", f"expected one of {', '.join(ACTION_SPACES)}, got {self.action_space!r}")
         if self.lib not in LIBS:
             raise fail("lib", f"expected one of {', '.join(LIBS)}, got {self.lib!r}")
-        for name in ("total_steps", "envs", "frames_per_batch", "minibatch_size", "epochs"):
+        for name in ("total_steps", "envs", "workers", "frames_per_batch", "minibatch_size", "epochs"):
             if getattr(self, name) < 1:
                 raise fail(name, f"expected a positive integer, got {getattr(self, name)}")
+        if self.workers > self.envs:
+            raise fail("workers", f"must be <= envs ({self.envs})")
         if self.minibatch_size > self.frames_per_batch:
             raise fail("minibatch_size", f"must be <= frames_per_batch ({self.frames_per_batch})")
         for name in ("lr", "clip_epsilon", "max_grad_norm"):

@@ -2,11 +2,13 @@
 
 The whole algorithm in one readable loop:
 
-1. ``envs`` worker processes each run one training scenario of the task (TorchRL ``ParallelEnv``);
-   a ``Collector`` gathers ``frames_per_batch`` steps with the current stochastic policy.
-2. The observation normaliser is updated from the batch; GAE computes advantages and value targets.
+1. ``envs`` copies of the task's training scenarios run as one batched env (in ``workers``
+   processes when > 1); a ``Collector`` gathers ``frames_per_batch`` steps with the current
+   stochastic policy.
+2. GAE computes advantages and value targets.
 3. ``epochs`` passes of minibatch updates of torchrl's ``ClipPPOLoss`` (clipped objective + value
-   loss + entropy bonus), Adam, gradient clipping.
+   loss + entropy bonus, normalised advantages), Adam, gradient clipping; then the observation
+   normaliser takes the batch's statistics for the next collection.
 4. TensorBoard: episode return/length, losses, entropy, KL, learning rate, env steps/s; a checkpoint
    after every batch (``last.pt``) and on Ctrl-C; at the end, the benchmark suite of the task is
    run on the final checkpoint and its PR/RC/Humanness/MTE|SFD/S_bench logged.
@@ -15,6 +17,7 @@ The whole algorithm in one readable loop:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import time
 from pathlib import Path
@@ -32,7 +35,7 @@ from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
 from agents.ppo import Actor, Critic, ObservationLayout, ObsNormalizer, save_checkpoint
-from smarts.env.torchrl_env import env_factory
+from smarts.env.torchrl_env import SmartsBatchedEnv
 from train.config import ACTION_SPACES, TrainConfig
 
 TASK_SUITE = {"platoon": "adaptive", "drive": "collaborative"}
@@ -57,9 +60,17 @@ def training_spec(name: str, action_space: str):
 
 
 def make_env(cfg: TrainConfig) -> TransformedEnv:
-    fns = [env_factory(training_spec(cfg.scenarios[i % len(cfg.scenarios)], cfg.action_space), single_agent=True)
-           for i in range(cfg.envs)]  # fmt: skip
-    base = ParallelEnv(cfg.envs, fns, mp_start_method="spawn") if cfg.envs > 1 else fns[0]()
+    """``envs`` scenario copies (cycling through the task's scenarios) stepped as one batched env in
+    this process, or, with ``workers`` > 1, that many such batches in worker processes (needed for
+    SUMO traffic: one SUMO per process)."""
+    specs = [training_spec(cfg.scenarios[i % len(cfg.scenarios)], cfg.action_space) for i in range(cfg.envs)]
+    if any(s.traffic is not None and s.traffic.engine == "sumo" for s in specs) and cfg.workers < cfg.envs:
+        raise ValueError("SUMO scenarios run one per process: set workers equal to envs")
+    if cfg.workers > 1:
+        per = [specs[w :: cfg.workers] for w in range(cfg.workers)]
+        base = ParallelEnv(cfg.workers, [functools.partial(SmartsBatchedEnv, p) for p in per], mp_start_method="spawn")
+    else:
+        base = SmartsBatchedEnv(specs)
     env = TransformedEnv(base, Compose(RewardSum(), StepCounter()))
     env.set_seed(cfg.seed)
     return env
@@ -115,7 +126,8 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
     layout, normalizer, actor_net, critic_net, actor, critic, low, high = build_modules(env, cfg)
     advantage = GAE(gamma=cfg.gamma, lmbda=cfg.gae_lambda, value_network=critic, average_gae=True)
     loss_module = ClipPPOLoss(actor, critic, clip_epsilon=cfg.clip_epsilon, entropy_coeff=cfg.entropy_coeff,
-                              critic_coeff=cfg.critic_coeff, loss_critic_type="smooth_l1")  # fmt: skip
+                              critic_coeff=cfg.critic_coeff, loss_critic_type="smooth_l1",
+                              normalize_advantage=True)  # fmt: skip
     optimizer = torch.optim.Adam(loss_module.parameters(), lr=cfg.lr)
     frames = cfg.frames_per_batch
     collector = Collector(env, actor, frames_per_batch=frames, total_frames=cfg.total_steps,
@@ -138,7 +150,6 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
             for data in collector:
                 collect_time = time.perf_counter()
                 data = data.reshape(-1)
-                normalizer.update(layout.flatten({k: data["observation", k] for k in layout.keys}))
                 for _ in range(cfg.epochs):
                     with torch.no_grad():
                         advantage(data)
@@ -150,6 +161,9 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
                         total.backward()
                         nn.utils.clip_grad_norm_(loss_module.parameters(), cfg.max_grad_norm)
                         optimizer.step()
+                # Refresh the observation statistics only now: during the update the policy must see
+                # its inputs exactly as it did when it acted, or PPO's probability ratios are off.
+                normalizer.update(layout.flatten({k: data["observation", k] for k in layout.keys}))
                 collector.update_policy_weights_()
                 step += data.numel()
                 done = data["next", "done"].reshape(-1)

@@ -341,3 +341,88 @@ def make_serial_env(
     if num_envs < 1:
         raise ValueError(f"num_envs must be at least 1, got {num_envs}")
     return SerialEnv(num_envs, env_factory(scenario, **env_kwargs))
+
+
+class SmartsBatchedEnv(EnvBase):
+    """K single-agent envs stepped in this process as one TorchRL env of batch size [K].
+
+    For collection throughput: one TensorDict per step for all K envs (instead of one per env and
+    a process hop each), observations stacked with one copy per key. Each sub-env may run a
+    different scenario (same observation/action spaces); a sub-env whose episode ended is reset
+    when TorchRL asks for it (``_reset`` mask), the others carry on. Built-in traffic only (libsumo
+    allows one SUMO per process: SUMO scenarios need ``make_parallel_env``).
+    """
+
+    def __init__(self, scenarios: list[ScenarioSource], *, device: torch.device | str = "cpu", **env_kwargs: Any):
+        if not scenarios:
+            raise ValueError("SmartsBatchedEnv needs at least one scenario")
+        self.envs = [SmartsTorchRLEnv(s, single_agent=True, device=device, **env_kwargs) for s in scenarios]
+        k = len(self.envs)
+        super().__init__(device=device, batch_size=torch.Size([k]))
+        first = self.envs[0]
+        for env in self.envs[1:]:
+            if _layout(env._obs_space) != _layout(first._obs_space):
+                raise ValueError(
+                    f"{env.env.scenario.source}: observation space differs from {first.env.scenario.source}; "
+                    "batched scenarios must share one"
+                )
+        self.observation_spec = first.observation_spec.expand(k)
+        self.action_spec = first.action_spec.expand(k, *first.action_spec.shape)
+        self.reward_spec = first.reward_spec.expand(k, *first.reward_spec.shape)
+        self.full_done_spec = first.full_done_spec.expand(k)
+        self._keys = first._obs_keys
+        self._agent = [e.possible_agents[0] for e in self.envs]
+        self._last_obs: list[dict[str, np.ndarray]] = [e._zero_obs for e in self.envs]
+        self._next_seed: int | None = None
+
+    def _set_seed(self, seed: int | None) -> None:
+        self._next_seed = None if seed is None else int(seed)
+
+    def _seed_for(self, i: int) -> int | None:
+        if self._next_seed is None:
+            return None
+        seed = self._next_seed + i * 100_003  # distinct streams per sub-env
+        return seed
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        mask = None
+        if tensordict is not None and "_reset" in tensordict.keys():
+            mask = tensordict.get("_reset").reshape(-1).cpu().numpy()
+        for i, env in enumerate(self.envs):
+            if mask is None or mask[i]:
+                seed = self._seed_for(i)
+                obs, _ = env.env.reset(seed=seed)
+                if self._next_seed is not None:
+                    self._next_seed += 1
+                self._last_obs[i] = {k: v.copy() for k, v in obs[self._agent[i]].items()}
+        k = len(self.envs)
+        out = {"observation": self._stack(), **_flags(np.zeros((k, 1), bool), np.zeros((k, 1), bool), np.zeros((k, 1), bool))}
+        return TensorDict(out, batch_size=self.batch_size, device=self.device)
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        actions = tensordict.get("action").detach().cpu().numpy()
+        k = len(self.envs)
+        reward = np.zeros((k, 1), dtype=np.float32)
+        term = np.zeros((k, 1), dtype=bool)
+        trunc = np.zeros((k, 1), dtype=bool)
+        for i, env in enumerate(self.envs):
+            agent = self._agent[i]
+            pz = env.env
+            if not pz.agents:  # finished, waiting for its reset
+                continue
+            obs, rewards, terms, truncs, _ = pz.step({agent: actions[i]})
+            reward[i, 0] = rewards.get(agent, 0.0)
+            term[i, 0] = terms.get(agent, False)
+            trunc[i, 0] = truncs.get(agent, False) or (not pz.agents and not term[i, 0])
+            if agent in obs:
+                self._last_obs[i] = {key: v.copy() for key, v in obs[agent].items()}
+        out = {"observation": self._stack(), "reward": torch.from_numpy(reward), **_flags(term | trunc, term, trunc)}
+        return TensorDict(out, batch_size=self.batch_size, device=self.device)
+
+    def _stack(self) -> dict[str, torch.Tensor]:
+        return {key: torch.from_numpy(np.array([o[key] for o in self._last_obs])) for key in self._keys}
+
+    def close(self, *, raise_if_closed: bool = True) -> None:
+        for env in self.envs:
+            env.env.close()
+        super().close(raise_if_closed=raise_if_closed)

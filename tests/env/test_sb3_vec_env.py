@@ -1,0 +1,169 @@
+import warnings
+
+import gymnasium
+import numpy as np
+import pytest
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.env_checker import check_env
+
+import smarts.env  # noqa: F401  (registers smarts/Driving-v0)
+from smarts.env import DrivingParallelEnv
+from smarts.env.sb3_vec_env import SmartsVecEnv, WorkerError
+from tests.builders import agent, make_spec
+
+CRUISE = np.array([1.0, 0.0, 0.0], dtype=np.float32)
+SWERVE_RIGHT = np.array([0.8, -0.05, -0.1], dtype=np.float32)
+
+
+def short_two_agent_spec(episode_steps: int = 40):
+    return make_spec([agent(lane=0, offset=10.0), agent(lane=1, offset=10.0)], episode_steps=episode_steps)
+
+
+def test_two_copies_of_a_two_agent_scenario_are_four_slots_with_stacked_dict_observations():
+    vec = SmartsVecEnv.from_scenario("straight_2lane_cruise", n_envs=2)
+    raw = DrivingParallelEnv("straight_2lane_cruise")
+    assert vec.num_envs == 4
+    assert vec.slot_agents == [(0, "agent_0"), (0, "agent_1"), (1, "agent_0"), (1, "agent_1")]
+    assert vec.observation_space == raw.observation_space("agent_0")
+    assert vec.action_space == raw.action_space("agent_0")
+
+    obs = vec.reset()
+    raw_obs, _ = raw.reset(seed=0)
+    assert set(obs) == set(vec.observation_space.spaces)
+    for key, space in vec.observation_space.spaces.items():
+        assert obs[key].shape == (4, *space.shape) and obs[key].dtype == space.dtype
+        for slot, (_, name) in enumerate(vec.slot_agents):
+            np.testing.assert_array_equal(obs[key][slot], raw_obs[name][key])
+
+    # Each slot's row is its own agent's: rewards and observations match the raw env slot by slot.
+    actions = np.stack([CRUISE, CRUISE * 0.5, CRUISE, CRUISE * 0.5])
+    obs, rewards, dones, infos = vec.step(actions)
+    raw_obs, raw_rewards, *_ = raw.step({"agent_0": CRUISE, "agent_1": CRUISE * 0.5})
+    assert rewards.shape == (4,) and rewards.dtype == np.float32
+    assert dones.shape == (4,) and dones.dtype == bool and not dones.any()
+    assert len(infos) == 4 and all(isinstance(i, dict) and "inactive" not in i for i in infos)
+    np.testing.assert_allclose(rewards, [raw_rewards["agent_0"], raw_rewards["agent_1"]] * 2, rtol=1e-6)
+    np.testing.assert_array_equal(obs["ego"][1], raw_obs["agent_1"]["ego"])
+    assert rewards[0] > rewards[1] > 0  # the faster agent progressed further
+    vec.close()
+    raw.close()
+
+
+def test_finished_agent_gets_terminal_observation_once_then_waits_inactive_until_its_copy_resets():
+    vec = SmartsVecEnv([lambda: DrivingParallelEnv(short_two_agent_spec(40))] * 2, seed=0)
+    first = vec.reset()
+    actions = np.stack([SWERVE_RIGHT, CRUISE, CRUISE, CRUISE])  # slot 0 leaves the road
+    finished_at = None
+    for step in range(40):
+        obs, rewards, dones, infos = vec.step(actions)
+        if finished_at is None and dones[0]:
+            finished_at = step
+            info = infos[0]
+            assert "off_road" in info["events"] and not info["TimeLimit.truncated"]
+            terminal = info["terminal_observation"]
+            assert set(terminal) == set(first) and vec.observation_space.contains(terminal)
+            assert terminal["events"].any()  # the final observation, not a zero filler
+            assert info["episode"]["l"] == step + 1 and info["episode"]["r"] < 0
+            assert not any(obs[k][0].any() for k in obs)  # its row is zero from now on
+        elif finished_at is not None and step < 39:
+            assert not dones[0] and rewards[0] == 0.0 and infos[0] == {"inactive": True}
+            assert not any(obs[k][0].any() for k in obs)
+            assert not dones[1:].any()
+    assert finished_at is not None and finished_at < 39
+    # Step 40: the step limit ends every other agent; both copies reset within the step.
+    assert dones.tolist() == [False, True, True, True]
+    for slot in (1, 2, 3):
+        assert infos[slot]["TimeLimit.truncated"]
+        assert infos[slot]["episode"]["l"] == 40
+        assert infos[slot]["terminal_observation"]["events"][-1] == 1.0  # max_steps flagged
+        assert not obs["events"][slot].any()  # a fresh episode
+    for key in obs:  # every slot holds its agent's first observation of the new episode
+        np.testing.assert_array_equal(obs[key], first[key])
+    obs, rewards, dones, infos = vec.step(np.stack([CRUISE] * 4))
+    assert all("inactive" not in i for i in infos) and (rewards > 0).all()
+    vec.close()
+
+
+def test_ppo_multi_input_policy_trains_on_the_slots_unchanged():
+    vec = SmartsVecEnv([lambda: DrivingParallelEnv(short_two_agent_spec(30))] * 2, normalize_actions=True)
+    assert vec.action_space == gymnasium.spaces.Box(-1.0, 1.0, (3,), np.float32)
+    model = PPO("MultiInputPolicy", vec, n_steps=64, batch_size=64, n_epochs=2, seed=0, device="cpu")
+    before = [p.detach().clone() for p in model.policy.parameters()]
+    model.learn(256)
+    assert model.num_timesteps == 256
+    # Episodes ended (by truncation: PPO bootstrapped from their terminal observations) and the
+    # adapter's episode records reached SB3's logger buffer.
+    assert len(model.ep_info_buffer) > 0
+    assert any(not torch.equal(a, b) for a, b in zip(before, model.policy.parameters()))
+    action, _ = model.predict(vec.reset(), deterministic=True)
+    assert action.shape == (4, 3)
+    vec.close()
+
+
+def test_normalized_actions_map_onto_the_agents_action_box():
+    vec = SmartsVecEnv.from_scenario("straight_2lane_cruise", n_envs=1, normalize_actions=True)
+    raw = DrivingParallelEnv("straight_2lane_cruise")
+    box = raw.action_space("agent_0")
+    vec.reset()
+    raw.reset(seed=0)
+    _, rewards, _, _ = vec.step(np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]], dtype=np.float32))
+    mid = (box.low + box.high) / 2
+    _, raw_rewards, *_ = raw.step(
+        {"agent_0": np.array([box.high[0], mid[1], mid[2]]), "agent_1": np.array([box.low[0], mid[1], mid[2]])}
+    )
+    np.testing.assert_allclose(rewards, [raw_rewards["agent_0"], raw_rewards["agent_1"]], rtol=1e-5)
+
+
+def test_sb3_check_env_passes_on_the_single_agent_gymnasium_env():
+    env = gymnasium.make("smarts/Driving-v0", scenario="straight_2lane_cruise")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # advice about shapes/scales, not failures
+        check_env(env, warn=True)
+    env.close()
+
+
+def test_worker_processes_give_the_same_rollout_as_in_process_copies():
+    def factory():
+        return DrivingParallelEnv(short_two_agent_spec(12))
+
+    in_process = SmartsVecEnv([factory] * 2)
+    workers = SmartsVecEnv([factory] * 2, processes=True)
+    try:
+        assert workers.num_envs == 4 and workers.observation_space == in_process.observation_space
+        a, b = workers.reset(), in_process.reset()
+        rng = np.random.default_rng(0)
+        space = workers.action_space
+        seen = set()
+        for _ in range(15):  # slot 0 leaves the road early; the others reach the step limit (12)
+            actions = rng.uniform(space.low / 4, space.high / 4, size=(4, *space.shape)).astype(np.float32)
+            actions[0] = SWERVE_RIGHT
+            a, ra, da, ia = workers.step(actions)
+            b, rb, db, ib = in_process.step(actions)
+            for key in a:
+                np.testing.assert_array_equal(a[key], b[key])
+            np.testing.assert_array_equal(ra, rb)
+            np.testing.assert_array_equal(da, db)
+            for x, y in zip(ia, ib):
+                assert sorted(x) == sorted(y)
+                if "terminal_observation" in x:
+                    np.testing.assert_array_equal(x["terminal_observation"]["ego"], y["terminal_observation"]["ego"])
+                    seen.add("truncated" if x["TimeLimit.truncated"] else "terminated")
+                seen.update({"inactive"} & set(x))
+        assert seen == {"terminated", "truncated", "inactive"}
+        assert workers.get_attr("possible_agents", indices=[0, 3]) == [["agent_0", "agent_1"]] * 2
+        # An error inside a worker comes back naming the agent, and the pipes stay usable.
+        with pytest.raises(WorkerError, match="agent_0.*is nan"):
+            workers.step(np.full((4, 3), np.nan, dtype=np.float32))
+        assert workers.env_method("observation_space", "agent_1", indices=[2]) == [workers.observation_space]
+    finally:
+        workers.close()
+        in_process.close()
+
+
+def test_spaces_must_be_shared_and_sumo_copies_need_processes():
+    mixed = make_spec([agent(lane=0), agent(lane=1, action_space="target_pose")])
+    with pytest.raises(ValueError, match="agent 'agent_1': action space .* differs"):
+        SmartsVecEnv([lambda: DrivingParallelEnv(mixed)])
+    with pytest.raises(ValueError, match="SUMO traffic.*processes=True"):
+        SmartsVecEnv.from_scenario("intersection_pedestrians", n_envs=2)
