@@ -144,6 +144,22 @@ class CheckpointError(ValueError):
     pass
 
 
+def load_policy_file(path: str | Path):
+    """The batched policy stored in a checkpoint file: a torchrl PPO or an exported SB3 policy."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"{path}: no such checkpoint file")
+    try:
+        blob = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as err:
+        raise CheckpointError(f"{path}: not a readable checkpoint ({type(err).__name__}: {err})") from None
+    if isinstance(blob, dict) and blob.get("format") == "smarts-sb3-ppo-v1":
+        from train.sb3_ppo import SB3Policy
+
+        return SB3Policy(blob)
+    return PPOPolicy.load(path)
+
+
 def load_checkpoint(path: Path) -> dict:
     """Read a checkpoint with ``weights_only=True``; a corrupted or foreign file is a clear error."""
     path = Path(path)

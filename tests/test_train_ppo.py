@@ -32,3 +32,22 @@ def test_bad_training_settings_name_the_field(tmp_path, capsys):
     assert "unknown task 'flying'" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["ppo", "--no-such-flag", "1"])
+
+
+def test_sb3_training_exports_a_checkpoint_the_benchmark_can_load(tmp_path):
+    from agents.ppo import load_policy_file
+
+    out = tmp_path / "sb3"
+    args = ["ppo", "--task", "platoon", "--lib", "sb3", "--total-steps", "128", "--envs", "2", "--frames-per-batch",
+            "64", "--minibatch-size", "32", "--epochs", "1", "--eval-episodes", "0", "--out-dir", str(out), "--quiet"]  # fmt: skip
+    assert main(args) == 0
+    assert list((out / "tensorboard").rglob("events.out.tfevents.*"))
+    policy = load_policy_file(out / "final.pt")  # weights_only load of the exported SB3 policy
+    import gymnasium
+
+    import smarts.env  # noqa: F401
+
+    env = gymnasium.make("smarts/Driving-v0", scenario="straight_2lane_cruise")
+    obs, _ = env.reset(seed=0)
+    action = policy.act({k: v[None] for k, v in obs.items()})
+    assert action.shape == (1, 3) and env.action_space.contains(action[0].astype("float32"))

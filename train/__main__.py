@@ -41,12 +41,15 @@ def _ppo(args: argparse.Namespace) -> int:
     overrides = {f.name: getattr(args, f.name) for f in dataclasses.fields(TrainConfig) if getattr(args, f.name, None) is not None}
     overrides.pop("task", None)
     cfg = load_config(args.task, args.config, overrides)
-    if cfg.lib != "torchrl":
-        raise ValueError(f"--lib {cfg.lib}: only the torchrl trainer is available so far")
-    from train.ppo import train
-
     out = Path(args.out_dir) if args.out_dir else Path(cfg.out)
-    final = train(cfg, out, progress=not args.quiet)
+    if cfg.lib == "sb3":
+        from train.sb3_ppo import train_sb3
+
+        final = train_sb3(cfg, out, progress=not args.quiet)
+    else:
+        from train.ppo import train
+
+        final = train(cfg, out, progress=not args.quiet)
     print(f"checkpoint: {final}\nTensorBoard: tensorboard --logdir {out / 'tensorboard'}")
     return 0
 

@@ -187,6 +187,8 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
                     if np.isfinite(value):
                         writer.add_scalar(name, value, step)
                 save(checkpoint)
+                if cfg.eval_every and cfg.eval_episodes and step // cfg.eval_every > (step - data.numel()) // cfg.eval_every:
+                    evaluate_into(checkpoint, cfg, out / f"eval_{step}", writer, step)
                 bar.update(task, completed=min(step, cfg.total_steps),
                            description=f"PPO {cfg.task} return {metrics.get('episode/return', float('nan')):.1f}")  # fmt: skip
     except KeyboardInterrupt:
@@ -199,24 +201,33 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
         writer.flush()
     final = save(out / "final.pt")
     if cfg.eval_episodes > 0:
-        metrics.update({f"eval/{k}": v for k, v in evaluate_into(final, cfg, out, writer, step).items()})
+        metrics.update({f"eval/{k}": v for k, v in evaluate_into(final, cfg, out / "eval", writer, step).items()})
     writer.close()
     print(json.dumps({"steps": step, "wall_s": round(time.perf_counter() - start, 1), **metrics}, indent=2))
     return final
 
 
 def evaluate_into(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int) -> dict:
-    """Run the task's benchmark suite on ``checkpoint`` and log its metrics to TensorBoard."""
+    """Run the task's benchmark suite on ``checkpoint`` (report under ``out``) and log its metrics
+    and a few evaluation trajectory figures to TensorBoard."""
+    from PIL import Image
+
     from smarts.benchmark.report import write_report
     from smarts.benchmark.runner import plan_jobs, run_jobs
     from smarts.benchmark.suites import load_suite
 
     suite = load_suite(TASK_SUITE[cfg.task])
-    jobs = plan_jobs([str(checkpoint)], suite, cfg.eval_episodes, out / "eval")
-    results = run_jobs(jobs, workers=max(1, min(cfg.envs, 2)), progress=False)
-    write_report(out / "eval", suite, [str(checkpoint)], results)
-    scores = json.loads((out / "eval" / "results.json").read_text())["agents"][str(checkpoint)]["scores"]
+    frozen = out / "policy.pt"  # the runner reads the file later: keep this step's weights
+    out.mkdir(parents=True, exist_ok=True)
+    frozen.write_bytes(Path(checkpoint).read_bytes())
+    jobs = plan_jobs([str(frozen)], suite, cfg.eval_episodes, out)
+    results = run_jobs(jobs, workers=2, progress=False)
+    write_report(out, suite, [str(frozen)], results)
+    scores = json.loads((out / "results.json").read_text())["agents"][str(frozen)]["scores"]
     overall = scores["overall"] if scores else {}
     for name, value in overall.items():
         writer.add_scalar(f"eval/{name}", value, step)
+    for figure in sorted((out / "plots").glob("trajectories_*.png"))[:3]:
+        image = np.asarray(Image.open(figure).convert("RGB"))
+        writer.add_image(f"eval_trajectories/{figure.stem[len('trajectories_'):]}", image, step, dataformats="HWC")
     return overall

@@ -45,9 +45,9 @@ def load_policy(locator: str, seed: int = 0):
     from zoo import make_policy
 
     if locator.endswith(".pt") or Path(locator).is_file():
-        from agents.ppo import PPOPolicy
+        from agents.ppo import load_policy_file
 
-        return PPOPolicy.load(locator)
+        return load_policy_file(locator)
     policy = make_policy(locator)
     if hasattr(policy, "seed"):
         policy.seed(seed)

@@ -1,0 +1,128 @@
+"""PPO with Stable-Baselines3 on the simulator (``--lib sb3``): the same tasks, configs and outputs.
+
+Every agent of every env copy is one VecEnv slot (``SmartsVecEnv``, parameter sharing); SB3's PPO
+trains on it unchanged with ``MultiInputPolicy``. The policy is exported in the project's
+checkpoint format (tensors + metadata, ``weights_only`` loadable) so evaluation and the benchmark
+load it like the torchrl checkpoints.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from train.config import ACTION_SPACES, TrainConfig
+
+SB3_FORMAT = "smarts-sb3-ppo-v1"
+
+
+def make_vec_env(cfg: TrainConfig):
+    from smarts.env import DrivingParallelEnv
+    from smarts.env.sb3_vec_env import SmartsVecEnv
+    from train.ppo import training_spec
+
+    specs = [training_spec(cfg.scenarios[i % len(cfg.scenarios)], cfg.action_space) for i in range(cfg.envs)]
+    specs = [dataclasses.replace(s, agents=s.agents[:1]) for s in specs]  # one learner per copy
+    return SmartsVecEnv([lambda spec=spec: DrivingParallelEnv(spec) for spec in specs], seed=cfg.seed,
+                        normalize_actions=True, processes=cfg.workers > 1)  # fmt: skip
+
+
+def train_sb3(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
+    from stable_baselines3 import PPO
+
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.json").write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
+    vec = make_vec_env(cfg)
+    model = PPO(
+        "MultiInputPolicy",
+        vec,
+        n_steps=max(cfg.frames_per_batch // vec.num_envs, 8),
+        batch_size=cfg.minibatch_size,
+        n_epochs=cfg.epochs,
+        learning_rate=cfg.lr,
+        gamma=cfg.gamma,
+        gae_lambda=cfg.gae_lambda,
+        clip_range=cfg.clip_epsilon,
+        ent_coef=cfg.entropy_coeff,
+        vf_coef=cfg.critic_coeff,
+        max_grad_norm=cfg.max_grad_norm,
+        policy_kwargs={"net_arch": list(cfg.hidden)},
+        tensorboard_log=str(out / "tensorboard"),
+        seed=cfg.seed,
+        device="cpu",
+        verbose=0,
+    )
+    start = time.perf_counter()
+    try:
+        model.learn(total_timesteps=cfg.total_steps, progress_bar=progress, tb_log_name="sb3")
+    except KeyboardInterrupt:
+        save_sb3(out / "interrupted.pt", model, vec, cfg)
+        raise
+    finally:
+        vec.close()
+    final = save_sb3(out / "final.pt", model, vec, cfg)
+    if cfg.eval_episodes > 0:
+        from torch.utils.tensorboard import SummaryWriter
+
+        from train.ppo import evaluate_into
+
+        with SummaryWriter(log_dir=str(out / "tensorboard" / "eval")) as writer:
+            evaluate_into(final, cfg, out / "eval", writer, int(model.num_timesteps))
+    rewards = [e["r"] for e in model.ep_info_buffer]
+    summary = {"steps": int(model.num_timesteps), "wall_s": round(time.perf_counter() - start, 1),
+               "env_steps_per_s": model.num_timesteps / (time.perf_counter() - start),
+               "episode/return": float(np.mean(rewards)) if rewards else float("nan")}  # fmt: skip
+    print(json.dumps(summary, indent=2))
+    return final
+
+
+def save_sb3(path: Path, model, vec, cfg: TrainConfig) -> Path:
+    spaces = vec.observation_space.spaces
+    blob = {
+        "format": SB3_FORMAT,
+        "policy": model.policy.state_dict(),
+        "observation": {k: list(s.shape) for k, s in spaces.items()},
+        "action": {
+            "space": ACTION_SPACES[cfg.action_space],
+            "low": vec._agent_action_space.low.tolist(),
+            "high": vec._agent_action_space.high.tolist(),
+        },
+        "net_arch": list(cfg.hidden),
+        "config": dataclasses.asdict(cfg),
+        "step": int(model.num_timesteps),
+    }
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(blob, tmp)
+    tmp.replace(path)
+    return path
+
+
+class SB3Policy:
+    """An exported SB3 PPO policy as a batched policy (deterministic actions)."""
+
+    def __init__(self, blob: dict):
+        import gymnasium as gym
+        from stable_baselines3.common.policies import MultiInputActorCriticPolicy
+
+        obs_space = gym.spaces.Dict(
+            {k: gym.spaces.Box(-np.inf, np.inf, tuple(shape), np.float32) for k, shape in blob["observation"].items()}
+        )
+        self.low = np.asarray(blob["action"]["low"], dtype=np.float32)
+        self.high = np.asarray(blob["action"]["high"], dtype=np.float32)
+        self.action_space = blob["action"]["space"]
+        act_space = gym.spaces.Box(-1.0, 1.0, self.low.shape, np.float32)
+        self.policy = MultiInputActorCriticPolicy(obs_space, act_space, lambda _: 0.0, net_arch=blob["net_arch"])
+        self.policy.load_state_dict(blob["policy"])
+        self.policy.eval()
+        self.keys = list(blob["observation"])
+
+    @torch.no_grad()
+    def act(self, obs: dict) -> np.ndarray:
+        action, _ = self.policy.predict({k: np.asarray(obs[k]) for k in self.keys}, deterministic=True)
+        action = np.clip(action, -1.0, 1.0)
+        return self.low + (action + 1.0) * 0.5 * (self.high - self.low)
