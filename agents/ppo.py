@@ -60,7 +60,7 @@ def mlp(sizes: list[int], out: int, final_gain: float = 1.0) -> nn.Sequential:
 
 
 class Actor(nn.Module):
-    """Flat observation -> (loc, scale) of a Gaussian before the tanh squash onto the action box."""
+    """Flat observation -> (pre-squash mean, relative spread) of the policy's Gaussian."""
 
     def __init__(self, obs_size: int, action_size: int, hidden: tuple[int, ...] = (128, 128)):
         super().__init__()
@@ -69,8 +69,7 @@ class Actor(nn.Module):
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         loc = self.net(x)
-        # Bounded spread: a collapsing std makes tanh-squashed log-probabilities (and PPO's ratios)
-        # numerically wild near the action bounds.
+        # A bounded spread keeps exploration alive and log-probabilities finite.
         return loc, self.log_std.clamp(-3.0, 0.5).exp().expand_as(loc)
 
 
@@ -108,8 +107,8 @@ class ObsNormalizer(nn.Module):
 
 
 def scale_action(pre_tanh: torch.Tensor, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:
-    """The actor's Gaussian lives before a tanh squash onto [low, high] (torchrl's TanhNormal
-    with low/high); the deterministic action squashes the mean."""
+    """The actor's output squashed onto [low, high]: the mean of the policy's Gaussian (training
+    samples around it) and the deterministic action."""
     return low + (torch.tanh(pre_tanh) + 1.0) * 0.5 * (high - low)
 
 

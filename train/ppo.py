@@ -30,11 +30,11 @@ from torchrl.collectors import Collector
 from torchrl.data import LazyTensorStorage, ReplayBuffer
 from torchrl.data.replay_buffers import SamplerWithoutReplacement
 from torchrl.envs import Compose, ParallelEnv, RewardSum, StepCounter, TransformedEnv
-from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
+from torchrl.modules import IndependentNormal, ProbabilisticActor, ValueOperator
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
-from agents.ppo import Actor, Critic, ObservationLayout, ObsNormalizer, save_checkpoint
+from agents.ppo import Actor, Critic, ObservationLayout, ObsNormalizer, save_checkpoint, scale_action
 from smarts.env.torchrl_env import SmartsBatchedEnv
 from train.config import ACTION_SPACES, TrainConfig
 
@@ -88,6 +88,23 @@ class _FlatNormalised(nn.Module):
         return self.head(self.normalizer(flat))
 
 
+class _GaussianInActionUnits(nn.Module):
+    """A Gaussian whose mean is the squashed actor output mapped onto [low, high] (the same mean
+    ``PPOPolicy`` acts with) and whose spread is relative to the action range. Samples may leave
+    the box; the action limits of the simulator clip them (no tanh Jacobian, so PPO's ratios and
+    entropy stay well behaved)."""
+
+    def __init__(self, actor: Actor, low: torch.Tensor, high: torch.Tensor):
+        super().__init__()
+        self.actor = actor
+        self.register_buffer("low", low.float())
+        self.register_buffer("high", high.float())
+
+    def forward(self, x: torch.Tensor):
+        pre, std = self.actor(x)
+        return scale_action(pre, self.low, self.high), std * 0.5 * (self.high - self.low)
+
+
 def build_modules(env, cfg: TrainConfig):
     obs_spec = env.observation_spec["observation"]
     keys = tuple(sorted(obs_spec.keys()))
@@ -100,13 +117,13 @@ def build_modules(env, cfg: TrainConfig):
     actor_net = Actor(layout.size, action_spec.shape[-1], tuple(cfg.hidden))
     critic_net = Critic(layout.size, tuple(cfg.hidden))
     in_keys = [("observation", k) for k in layout.keys]
-    policy = TensorDictModule(_FlatNormalised(layout, normalizer, actor_net), in_keys=in_keys, out_keys=["loc", "scale"])
+    head = _GaussianInActionUnits(actor_net, low, high)
+    policy = TensorDictModule(_FlatNormalised(layout, normalizer, head), in_keys=in_keys, out_keys=["loc", "scale"])
     actor = ProbabilisticActor(
         policy,
         in_keys=["loc", "scale"],
         spec=action_spec,
-        distribution_class=TanhNormal,
-        distribution_kwargs={"low": low, "high": high},
+        distribution_class=IndependentNormal,
         return_log_prob=True,
     )
     critic = ValueOperator(_FlatNormalised(layout, normalizer, critic_net), in_keys=in_keys)
@@ -135,7 +152,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
     buffer = ReplayBuffer(storage=LazyTensorStorage(frames), sampler=SamplerWithoutReplacement(),
                           batch_size=cfg.minibatch_size)  # fmt: skip
     writer = SummaryWriter(log_dir=str(out / "tensorboard"))
-    step, metrics, start = 0, {}, time.perf_counter()
+    step, metrics, start, best_return = 0, {}, time.perf_counter(), -np.inf
     checkpoint = out / "last.pt"
 
     def save(path: Path) -> Path:
@@ -187,6 +204,9 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
                     if np.isfinite(value):
                         writer.add_scalar(name, value, step)
                 save(checkpoint)
+                if metrics.get("episode/return", -np.inf) > best_return:  # by training return
+                    best_return = metrics["episode/return"]
+                    save(out / "best.pt")
                 if cfg.eval_every and cfg.eval_episodes and step // cfg.eval_every > (step - data.numel()) // cfg.eval_every:
                     evaluate_into(checkpoint, cfg, out / f"eval_{step}", writer, step)
                 bar.update(task, completed=min(step, cfg.total_steps),

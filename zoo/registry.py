@@ -7,7 +7,12 @@ returns their actions ``[n, k]``; ``policy.action_space`` names the action space
 from __future__ import annotations
 
 import importlib
+from pathlib import Path
 from typing import Any
+
+ZOO_DIR = Path(__file__).resolve().parent
+CHECKPOINT = "checkpoint"
+"""A ZOO entry whose module is CHECKPOINT names a checkpoint file under zoo/ instead of a class."""
 
 ZOO: dict[str, tuple[str, str, str]] = {
     "keep-lane": ("agents.keep_lane", "KeepLanePolicy", "IDM speed on the route's waypoints"),
@@ -21,5 +26,9 @@ def make_policy(locator: str, **kwargs: Any):
     name = locator[len("zoo:") :] if locator.startswith("zoo:") else locator
     if name not in ZOO:
         raise ValueError(f"unknown agent locator {locator!r}; known: {', '.join('zoo:' + n for n in ZOO)}")
-    module, cls, _ = ZOO[name]
-    return getattr(importlib.import_module(module), cls)(**kwargs)
+    module, target, _ = ZOO[name]
+    if module == CHECKPOINT:
+        from agents.ppo import load_policy_file
+
+        return load_policy_file(ZOO_DIR / target)
+    return getattr(importlib.import_module(module), target)(**kwargs)
