@@ -51,3 +51,18 @@ def test_sb3_training_exports_a_checkpoint_the_benchmark_can_load(tmp_path):
     obs, _ = env.reset(seed=0)
     action = policy.act({k: v[None] for k, v in obs.items()})
     assert action.shape == (1, 3) and env.action_space.contains(action[0].astype("float32"))
+
+
+def test_resume_continues_from_the_checkpoint_step(tmp_path):
+    out = tmp_path / "run"
+    base = ["ppo", "--task", "platoon", "--frames-per-batch", "128", "--minibatch-size", "64", "--epochs", "1",
+            "--envs", "2", "--eval-episodes", "0", "--out-dir", str(out), "--quiet"]  # fmt: skip
+    assert main([*base, "--total-steps", "128"]) == 0
+    first = torch.load(out / "final.pt", weights_only=True)
+    assert main([*base, "--total-steps", "256", "--resume", str(out / "final.pt")]) == 0
+    second = torch.load(out / "final.pt", weights_only=True)
+    assert first["step"] == 128 and second["step"] == 256
+    assert not torch.equal(first["actor"]["net.0.weight"], second["actor"]["net.0.weight"])
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"junk")
+    assert main([*base, "--total-steps", "256", "--resume", str(bad)]) == 2

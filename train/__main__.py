@@ -49,7 +49,7 @@ def _ppo(args: argparse.Namespace) -> int:
     else:
         from train.ppo import train
 
-        final = train(cfg, out, progress=not args.quiet)
+        final = train(cfg, out, progress=not args.quiet, resume=Path(args.resume) if args.resume else None)
     print(f"checkpoint: {final}\nTensorBoard: tensorboard --logdir {out / 'tensorboard'}")
     return 0
 
@@ -79,6 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
     ppo.add_argument("--config", default=None, help="a training config YAML instead of the task's")
     ppo.add_argument("--out-dir", default=None, help="output folder (default: the config's out)")
     ppo.add_argument("--quiet", action="store_true", help="no progress bar")
+    ppo.add_argument("--resume", default=None, help="continue from a checkpoint (torchrl trainer)")
     for f in dataclasses.fields(TrainConfig):
         if f.name in ("task", "out"):
             continue

@@ -34,7 +34,16 @@ from torchrl.modules import IndependentNormal, ProbabilisticActor, ValueOperator
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
-from agents.ppo import Actor, Critic, ObservationLayout, ObsNormalizer, save_checkpoint, scale_action
+from agents.ppo import (
+    Actor,
+    CheckpointError,
+    Critic,
+    ObservationLayout,
+    ObsNormalizer,
+    load_checkpoint,
+    save_checkpoint,
+    scale_action,
+)
 from smarts.env.torchrl_env import SmartsBatchedEnv
 from train.config import ACTION_SPACES, TrainConfig
 
@@ -130,8 +139,10 @@ def build_modules(env, cfg: TrainConfig):
     return layout, normalizer, actor_net, critic_net, actor, critic, low.numpy(), high.numpy()
 
 
-def train(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
-    """Train, log and checkpoint under ``out``; returns the final checkpoint path."""
+def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | None = None) -> Path:
+    """Train, log and checkpoint under ``out``; returns the final checkpoint path. ``resume``
+    continues from a checkpoint (networks, observation statistics, optimiser, step count) up to
+    ``total_steps``."""
     from rich.progress import Progress
     from torch.utils.tensorboard import SummaryWriter
 
@@ -146,13 +157,27 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
                               critic_coeff=cfg.critic_coeff, loss_critic_type="smooth_l1",
                               normalize_advantage=True)  # fmt: skip
     optimizer = torch.optim.Adam(loss_module.parameters(), lr=cfg.lr)
+    step = 0
+    if resume is not None:
+        blob = load_checkpoint(resume)
+        try:
+            actor_net.load_state_dict(blob["actor"])
+            critic_net.load_state_dict(blob["critic"])
+            normalizer.load_state_dict(blob["normalizer"])
+            if "optimizer" in blob:
+                optimizer.load_state_dict(blob["optimizer"])
+        except (RuntimeError, ValueError) as err:
+            raise CheckpointError(f"{resume}: does not match this training setup ({err})") from None
+        step = int(blob["step"])
+        if step >= cfg.total_steps:
+            raise ValueError(f"{resume}: already at {step} steps; raise --total-steps to continue")
     frames = cfg.frames_per_batch
-    collector = Collector(env, actor, frames_per_batch=frames, total_frames=cfg.total_steps,
+    collector = Collector(env, actor, frames_per_batch=frames, total_frames=cfg.total_steps - step,
                           auto_register_policy_transforms=False)
     buffer = ReplayBuffer(storage=LazyTensorStorage(frames), sampler=SamplerWithoutReplacement(),
                           batch_size=cfg.minibatch_size)  # fmt: skip
     writer = SummaryWriter(log_dir=str(out / "tensorboard"))
-    step, metrics, start, best_return = 0, {}, time.perf_counter(), -np.inf
+    metrics, start, best_return, first_step = {}, time.perf_counter(), -np.inf, step
     checkpoint = out / "last.pt"
 
     def save(path: Path) -> Path:
@@ -194,7 +219,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
                     "policy/entropy": float(losses.get("entropy", torch.tensor(float("nan")))),
                     "policy/kl_approx": float(losses.get("kl_approx", torch.tensor(float("nan")))),
                     "train/lr": optimizer.param_groups[0]["lr"],
-                    "perf/env_steps_per_s": step / (time.perf_counter() - start),
+                    "perf/env_steps_per_s": (step - first_step) / (time.perf_counter() - start),
                     "perf/update_s": time.perf_counter() - collect_time,
                 }
                 if len(returns):
