@@ -17,6 +17,8 @@ CHECKPOINT = "checkpoint"
 ZOO: dict[str, tuple[str, str, str]] = {
     "keep-lane": ("agents.keep_lane", "KeepLanePolicy", "IDM speed on the route's waypoints"),
     "random": ("agents.random_agent", "RandomPolicy", "uniform random relative-pose steps"),
+    "platoon-rtp": (CHECKPOINT, "checkpoints/platoon-rtp.pt", "PPO following, RelativeTargetPose (cards/)"),
+    "drive": (CHECKPOINT, "checkpoints/drive.pt", "PPO turning at intersections, RelativeTargetPose (cards/)"),
 }
 """name -> (module, class, one-line description)."""
 
