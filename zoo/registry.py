@@ -19,6 +19,7 @@ ZOO: dict[str, tuple[str, str, str]] = {
     "random": ("agents.random_agent", "RandomPolicy", "uniform random relative-pose steps"),
     "platoon-rtp": (CHECKPOINT, "checkpoints/platoon-rtp.pt", "PPO following, RelativeTargetPose (cards/)"),
     "drive": (CHECKPOINT, "checkpoints/drive.pt", "PPO turning at intersections, RelativeTargetPose (cards/)"),
+    "platoon-c": (CHECKPOINT, "checkpoints/platoon-c.pt", "PPO following, Continuous on the pybullet car (cards/)"),
 }
 """name -> (module, class, one-line description)."""
 
