@@ -132,8 +132,8 @@ class ObservationBuilder:
     """Builds ``{key: array[A, ...]}`` for the agents given (all with this interface), all at once.
 
     The basic parts come from one compiled pass; each optional sensor is an object with
-    ``spaces()`` and ``observe(...)`` whose keys are added after them (rasters, lidar; other
-    sensors such as received V2V messages plug in the same way). ``stream`` separates the noise of
+    ``spaces()`` and ``observe(...)`` whose keys are added after them (rasters, lidar). Received
+    V2V messages depend on the step's actions, so the env adds them (``smarts.env.v2v``). ``stream`` separates the noise of
     builders that share a simulation (one per interface group).
     """
 
