@@ -3,6 +3,7 @@
     python -m train ppo --task platoon [--action-space rtp|continuous] [--total-steps N] [--envs E]
     python -m train eval --agent runs/train/platoon/final.pt --suite adaptive
     python -m train benchmark --agent zoo:keep-lane --agent zoo:random --suite collaborative
+    add --ray-address auto|local|HOST:PORT to run episodes (benchmark, eval) or collectors (ppo) on Ray
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ def _benchmark(args: argparse.Namespace) -> int:
     out = args.out or Path("runs") / "benchmark" / suite.name
     jobs = plan_jobs(agents, suite, episodes, out, args.seed)
     print(f"{suite.name}: {len(suite.scenarios)} scenarios x {episodes} episodes x {len(agents)} agent(s) -> {out}")
-    results = run_jobs(jobs, workers=args.workers, progress=not args.quiet)
+    results = run_jobs(jobs, workers=args.workers, progress=not args.quiet, ray_address=args.ray_address)
     report = write_report(out, suite, agents, results)
     print(report.read_text())
     failed = [r for r in results if r.get("failure")]
@@ -65,6 +66,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--seed", type=int, default=None, help="first episode seed (default: the suite's)")
     bench.add_argument("--out", type=Path, default=None, help="output folder (default runs/benchmark/<suite>)")
     bench.add_argument("--quiet", action="store_true", help="no progress bar")
+    bench.add_argument("--ray-address", default=None,
+                       help="run episodes as Ray tasks: auto | local | HOST:PORT (needs the ray extra)")  # fmt: skip
     bench.set_defaults(run=_benchmark)
 
     evaluate = sub.add_parser("eval", help="benchmark a checkpoint or zoo agent on a suite (same as benchmark)")

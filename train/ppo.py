@@ -4,7 +4,8 @@ The whole algorithm in one readable loop:
 
 1. ``envs`` copies of the task's training scenarios run as one batched env (in ``workers``
    processes when > 1); a ``Collector`` gathers ``frames_per_batch`` steps with the current
-   stochastic policy.
+   stochastic policy. With ``ray_address``, each of the ``workers`` batches is stepped by its own
+   collector running as a Ray actor instead.
 2. GAE computes advantages and value targets.
 3. ``epochs`` passes of minibatch updates of torchrl's ``ClipPPOLoss`` (clipped objective + value
    loss + entropy bonus, normalised advantages), Adam, gradient clipping; then the observation
@@ -16,6 +17,7 @@ The whole algorithm in one readable loop:
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import json
@@ -85,6 +87,25 @@ def make_env(cfg: TrainConfig) -> TransformedEnv:
     return env
 
 
+def transformed_batched_env(specs: list, seed: int) -> TransformedEnv:
+    """One batch of scenario copies with the episode statistics training reads; module-level so
+    that ``functools.partial`` of it pickles to Ray actors."""
+    env = TransformedEnv(SmartsBatchedEnv(specs), Compose(RewardSum(), StepCounter()))
+    env.set_seed(seed)
+    return env
+
+
+def ray_env_factories(cfg: TrainConfig) -> list:
+    """Per Ray collector, a picklable factory of its share of the ``envs`` scenario copies."""
+    if cfg.envs % cfg.workers or cfg.frames_per_batch % cfg.workers:
+        raise ValueError(f"with ray_address, envs ({cfg.envs}) and frames_per_batch ({cfg.frames_per_batch}) "
+                         f"must be multiples of workers ({cfg.workers})")  # fmt: skip
+    specs = [training_spec(cfg.scenarios[i % len(cfg.scenarios)], cfg.action_space) for i in range(cfg.envs)]
+    per = [specs[w :: cfg.workers] for w in range(cfg.workers)]
+    # Seeds spaced by the batch size, as the in-process batch seeds its copies seed, seed + 1, ...
+    return [functools.partial(transformed_batched_env, p, cfg.seed + w * len(p)) for w, p in enumerate(per)]
+
+
 class _FlatNormalised(nn.Module):
     """Concatenate the observation entries and normalise them, then apply ``head``."""
 
@@ -150,7 +171,15 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
     np.random.seed(cfg.seed)
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.json").write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
-    env = make_env(cfg)
+    scale_out = contextlib.ExitStack()
+    if cfg.ray_address:
+        from smarts.ray_session import ray_session
+
+        factories = ray_env_factories(cfg)
+        env = factories[0]()  # only for the specs the networks are built from
+        scale_out.enter_context(ray_session(cfg.ray_address, num_cpus=max(2, cfg.workers)))
+    else:
+        env = make_env(cfg)
     layout, normalizer, actor_net, critic_net, actor, critic, low, high = build_modules(env, cfg)
     advantage = GAE(gamma=cfg.gamma, lmbda=cfg.gae_lambda, value_network=critic, average_gae=True)
     loss_module = ClipPPOLoss(actor, critic, clip_epsilon=cfg.clip_epsilon, entropy_coeff=cfg.entropy_coeff,
@@ -172,8 +201,15 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
         if step >= cfg.total_steps:
             raise ValueError(f"{resume}: already at {step} steps; raise --total-steps to continue")
     frames = cfg.frames_per_batch
-    collector = Collector(env, actor, frames_per_batch=frames, total_frames=cfg.total_steps - step,
-                          auto_register_policy_transforms=False)
+    if cfg.ray_address:
+        env.close()
+        collector = Collector(factories, actor, backend="ray", num_collectors=cfg.workers, sync=True,
+                              frames_per_batch=frames, total_frames=cfg.total_steps - step,
+                              remote_configs={"num_cpus": 1})  # fmt: skip
+        collector.update_policy_weights_()  # the actors start from these (possibly resumed) weights
+    else:
+        collector = Collector(env, actor, frames_per_batch=frames, total_frames=cfg.total_steps - step,
+                              auto_register_policy_transforms=False)
     buffer = ReplayBuffer(storage=LazyTensorStorage(frames), sampler=SamplerWithoutReplacement(),
                           batch_size=cfg.minibatch_size)  # fmt: skip
     writer = SummaryWriter(log_dir=str(out / "tensorboard"))
@@ -191,11 +227,12 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
             task = bar.add_task(f"PPO {cfg.task}", total=cfg.total_steps)
             for data in collector:
                 collect_time = time.perf_counter()
-                data = data.reshape(-1)
+                # GAE runs on [envs, time] so advantages stop at each env's trajectory end;
+                # the minibatches then mix all envs' steps.
                 for _ in range(cfg.epochs):
                     with torch.no_grad():
                         advantage(data)
-                    buffer.extend(data)
+                    buffer.extend(data.reshape(-1))
                     for batch in buffer:
                         losses = loss_module(batch)
                         total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
@@ -205,6 +242,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                         optimizer.step()
                 # Refresh the observation statistics only now: during the update the policy must see
                 # its inputs exactly as it did when it acted, or PPO's probability ratios are off.
+                data = data.reshape(-1)
                 normalizer.update(layout.flatten({k: data["observation", k] for k in layout.keys}))
                 collector.update_policy_weights_()
                 step += data.numel()
@@ -244,6 +282,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
         collector.shutdown()
         env.close(raise_if_closed=False)  # the collector may have closed it already
         writer.flush()
+        scale_out.close()
     final = save(out / "final.pt")
     if cfg.eval_episodes > 0:
         metrics.update({f"eval/{k}": v for k, v in evaluate_into(final, cfg, out / "eval", writer, step).items()})

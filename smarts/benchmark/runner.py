@@ -3,7 +3,8 @@
 Each (agent, scenario, episode) is one job: build the scenario's env, reset it with the episode's
 seed, drive every mission vehicle with the agent's batched policy, record the episode log and
 write it to disk at once (so nothing is lost if a later job fails). Jobs run in worker processes
-(libsumo allows one SUMO per process), results are scored by ``smarts.benchmark.metrics`` from
+(libsumo allows one SUMO per process) or, with a Ray address, as Ray tasks on a cluster (each
+worker needs this package installed and the output folder on a shared file system), results are scored by ``smarts.benchmark.metrics`` from
 the written logs only. An agent that raises or returns a malformed action fails its episode with
 the reason recorded; the suite goes on.
 """
@@ -112,28 +113,40 @@ def plan_jobs(agents: list[str], suite: Suite, episodes: int, out_dir: Path, see
     return jobs
 
 
-def run_jobs(jobs: list[Job], workers: int = 1, progress: bool = True) -> list[dict]:
-    """Run jobs in ``workers`` processes (inline when 1); results in job order."""
+def run_jobs(jobs: list[Job], workers: int = 1, progress: bool = True, ray_address: str | None = None) -> list[dict]:
+    """Run jobs in ``workers`` processes (inline when 1), or as Ray tasks when ``ray_address`` is
+    given (``auto``, ``local`` or ``HOST:PORT``); results in job order either way."""
     from rich.progress import Progress
 
     results: list[dict | None] = [None] * len(jobs)
     with Progress(disable=not progress, transient=False) as bar:
         task = bar.add_task("episodes", total=len(jobs))
-        if workers <= 1:
+        if ray_address:
+            from smarts.ray_session import ray_session
+
+            with ray_session(ray_address, num_cpus=max(2, workers)) as ray:
+                remote = ray.remote(run_episode_guarded)
+                pending = {remote.remote(job): k for k, job in enumerate(jobs)}
+                while pending:
+                    done, _ = ray.wait(list(pending), num_returns=1)
+                    for ref in done:
+                        results[pending.pop(ref)] = ray.get(ref)
+                        bar.advance(task)
+        elif workers <= 1:
             for k, job in enumerate(jobs):
-                results[k] = _guarded(job)
+                results[k] = run_episode_guarded(job)
                 bar.advance(task)
         else:
             ctx = multiprocessing.get_context("spawn")
             with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-                futures = {pool.submit(_guarded, job): k for k, job in enumerate(jobs)}
+                futures = {pool.submit(run_episode_guarded, job): k for k, job in enumerate(jobs)}
                 for future in cf.as_completed(futures):
                     results[futures[future]] = future.result()
                     bar.advance(task)
     return results  # type: ignore[return-value]
 
 
-def _guarded(job: Job) -> dict:
+def run_episode_guarded(job: Job) -> dict:
     """``run_episode`` that turns a crash of the episode itself into a recorded failure."""
     try:
         return run_episode(job)
