@@ -37,11 +37,7 @@ def resident_mb() -> float:
 def measure(resets: int = 1000, steps: int = 5, density: str = "medium") -> dict:
     """Reset ``resets`` times with ``steps`` steps each; returns RSS readings in MB."""
     from smarts.env.assembly import build_simulation
-    from smarts.maps import sumo_net_path
     from smarts.scenario import ScenarioSpec
-    from smarts.scenario.traffic import TrafficSpec
-    from smarts.traffic.signals import SignalState
-    from smarts.traffic.sumo_provider import SumoTrafficProvider
 
     spec = ScenarioSpec.from_dict(
         {
@@ -56,18 +52,11 @@ def measure(resets: int = 1000, steps: int = 5, density: str = "medium") -> dict
                     },
                 }
             ],
+            "traffic": {"engine": "sumo", "density": density},
         },
         source="reset-memory",
     )
-    sim = build_simulation(spec)
-    provider = SumoTrafficProvider(
-        TrafficSpec(engine="sumo", density=density),
-        sim.road_map,
-        sumo_net_path(sim.road_map.source),
-        sim.dt,
-        SignalState(sim.road_map),
-    )
-    sim.add_provider(provider)
+    sim = build_simulation(spec)  # engine: sumo, so the assembly adds SUMO and its signals
     actions = {a: np.array([0.5, 0.0, 0.0]) for a in sim.agent_ids}
     try:
         for seed in range(WARMUP_RESETS):

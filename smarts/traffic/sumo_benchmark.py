@@ -10,12 +10,12 @@ agent waits on the on-ramp, because a simulation needs an agent; its SUMO twin c
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
 
 from smarts.core.vehicle_table import Role
-from smarts.maps import sumo_net_path
 from smarts.scenario import ScenarioSpec
 from smarts.scenario.traffic import FlowSpec, TrafficSpec
 from smarts.traffic.sumo_provider import SumoTrafficProvider
@@ -71,11 +71,8 @@ def sumo_step_benchmark(n_vehicles: int, steps: int = 200, seed: int = 42) -> di
         },
         source="sumo-benchmark",
     )
-    sim = build_simulation(spec)
-    provider = SumoTrafficProvider(
-        benchmark_traffic(n_vehicles), sim.road_map, sumo_net_path(sim.road_map.source), sim.dt
-    )
-    sim.add_provider(provider)
+    sim = build_simulation(dataclasses.replace(spec, traffic=benchmark_traffic(n_vehicles)))
+    (provider,) = [p for p in sim.providers if isinstance(p, SumoTrafficProvider)]
     sumo_times: list[float] = []
     step = provider.step
 
