@@ -9,6 +9,7 @@ Errors name the file and the field.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -128,5 +129,12 @@ def _read_suite(data, source: str) -> Suite:
                 raise fail(f"{where}.follow.{agent_id}", f"lead {lead!r} is not a trip of the scenario's traffic")
         if task == "adaptive" and not follow:
             raise fail(f"{where}.follow", "adaptive scenarios need a lead vehicle to follow")
+        if follow:  # the followers' missions name their lead (observations, rewards, SFD)
+            agents = [
+                dataclasses.replace(a, mission=dataclasses.replace(a.mission, follow=follow[a.id]))
+                if a.id in follow else a
+                for a in spec.agents
+            ]  # fmt: skip
+            spec = dataclasses.replace(spec, agents=agents)
         scenarios.append(SuiteScenario(name, difficulty, float(limit), spec, dict(follow)))
     return Suite(str(data.get("name", Path(source).stem)), task, episodes, seed, scenarios, source)

@@ -37,6 +37,7 @@ class ResolvedMission:
     goal_lane: int  # -1 for any lane of the goal road
     goal_s: float  # road goals are reached at or past this offset on the goal lane
     on_end: str = "remove"  # or "traffic": the vehicle goes back to traffic when the mission ends
+    follow: str | None = None  # id of the vehicle this agent follows (its lead), None for none
 
 
 def lane_pose_at(road_map: RoadMap, lane: int, s: float) -> tuple[np.ndarray, float]:
@@ -174,6 +175,7 @@ def resolve_mission(
         goal_lane=goal_lane,
         goal_s=goal_s,
         on_end=getattr(mission, "on_end", "remove"),
+        follow=getattr(mission, "follow", None),
     )
 
 

@@ -58,6 +58,8 @@ class Simulation:
         self.mission_arrays: MissionArrays = stack_missions(road_map, missions)
         self.agent_ids: list[str] = [m.agent_id for m in missions]
         self.agent_index = {a: i for i, a in enumerate(self.agent_ids)}
+        self.lead_ids: list[str | None] = [m.follow for m in missions]
+        """Per agent, the id of the vehicle it follows (``smarts.core.following``), or None."""
         n = len(missions)
         self.agent_row = np.full(n, -1, dtype=np.int64)
         self.agent_active = np.zeros(n, dtype=bool)

@@ -46,6 +46,11 @@ BUILTIN_PREFIX = "builtin:"
 MAP_FILE_SUFFIXES = (".net.xml", ".xodr")
 
 ACTION_SPACES = ("relative_target_pose", "target_pose", "continuous", "lane")
+CONTROLLERS = ("direct", "lane_relative")
+"""How an agent's actions reach its action space: ``direct`` (the space's own actions) or
+``lane_relative`` (acceleration and lane-change commands turned into that space's actions by
+``smarts.dynamics.lane_relative``)."""
+LANE_RELATIVE_SPACES = ("relative_target_pose", "target_pose", "continuous")
 TERMINATION_EVENTS = (
     "collision",
     "off_road",
@@ -139,6 +144,9 @@ class MissionSpec:
     route_via: list[str] = field(default_factory=list)
     on_end: str = "remove"
     """``remove``: the vehicle leaves when the mission ends; ``traffic``: traffic drives it on."""
+    follow: str | None = None
+    """Id of the vehicle this agent follows (a traffic trip or another agent): the lead of the
+    following task, seen in the ``lead`` observation block and scored by SFD. None: no lead."""
 
 
 @dataclass
@@ -146,6 +154,9 @@ class AgentSpec:
     id: str
     mission: MissionSpec
     action_space: str = "relative_target_pose"
+    controller: str = "direct"
+    """``direct``: actions are the action space's own; ``lane_relative``: (acceleration, lane
+    change) commands that ``smarts.dynamics.lane_relative`` turns into the action space's actions."""
     vehicle: VehicleSpec = field(default_factory=VehicleSpec)
     policy: str | None = None
     """Zoo locator (``zoo:keep-lane`` or ``keep-lane``) of the policy that drives this agent inside
@@ -344,7 +355,11 @@ def _agent_dict(agent: AgentSpec) -> dict[str, Any]:
         mission["route_via"] = list(agent.mission.route_via)
     if agent.mission.on_end != "remove":
         mission["on_end"] = agent.mission.on_end
+    if agent.mission.follow is not None:
+        mission["follow"] = agent.mission.follow
     agent_d: dict[str, Any] = {"id": agent.id, "action_space": agent.action_space}
+    if agent.controller != "direct":
+        agent_d["controller"] = agent.controller
     if agent.policy is not None:
         agent_d["policy"] = agent.policy
     agent_d["vehicle"] = vehicle
@@ -648,9 +663,17 @@ class _Reader:
         return agents
 
     def agent(self, value: Any, path: str, index: int) -> AgentSpec:
-        d = self.mapping(value, path, ("id", "action_space", "policy", "vehicle", "mission", "interface"))
+        d = self.mapping(
+            value, path, ("id", "action_space", "controller", "policy", "vehicle", "mission", "interface")
+        )
         agent_id = self.string(d, "id", path, f"agent_{index}")
         action_space = self.choice(d, "action_space", path, ACTION_SPACES, "relative_target_pose")
+        controller = self.choice(d, "controller", path, CONTROLLERS, "direct")
+        if controller == "lane_relative" and action_space not in LANE_RELATIVE_SPACES:
+            raise self.error(
+                _join(path, "controller"),
+                f"lane_relative drives {', '.join(LANE_RELATIVE_SPACES)}; got action_space {action_space!r}",
+            )
         policy = self.policy(d, path)
         vehicle = self.vehicle(d.get("vehicle", {}), _join(path, "vehicle"))
         if "mission" not in d:
@@ -660,6 +683,7 @@ class _Reader:
             id=agent_id,
             mission=mission,
             action_space=action_space,
+            controller=controller,
             vehicle=vehicle,
             policy=policy,
             interface=self.interface(d, path),
@@ -698,7 +722,7 @@ class _Reader:
         )
 
     def mission(self, value: Any, path: str) -> MissionSpec:
-        d = self.mapping(value, path, ("start", "goal", "route_via", "on_end"))
+        d = self.mapping(value, path, ("start", "goal", "route_via", "on_end", "follow"))
         if "start" not in d:
             raise self.error(
                 _join(path, "start"),
@@ -712,7 +736,8 @@ class _Reader:
         goal = self.goal(d["goal"], _join(path, "goal"))
         route_via = self.string_list(d, "route_via", path, [])
         on_end = self.choice(d, "on_end", path, MISSION_END_ACTIONS, "remove")
-        return MissionSpec(start=start, goal=goal, route_via=route_via, on_end=on_end)
+        follow = self.string(d, "follow", path, None)
+        return MissionSpec(start=start, goal=goal, route_via=route_via, on_end=on_end, follow=follow)
 
     def start(self, value: Any, path: str) -> StartSpec:
         pose = ("road", "lane", "offset", "speed", "heading")
@@ -1055,6 +1080,21 @@ class _Reader:
                     "section",
                 )
         agent_index = {a.id: i for i, a in enumerate(agents)}
+        for i, agent in enumerate(agents):
+            lead = agent.mission.follow
+            if lead is None:
+                continue
+            if lead == agent.id:
+                raise self.error(f"agents[{i}].mission.follow", "an agent cannot follow itself")
+            if lead not in trips and lead not in agent_index:
+                known = [*trips, *agent_index]
+                hint = difflib.get_close_matches(lead, known, n=1)
+                suggestion = f" (did you mean {hint[0]!r}?)" if hint else ""
+                raise self.error(
+                    f"agents[{i}].mission.follow",
+                    f"no vehicle {lead!r} to follow{suggestion}; traffic.trips and agents: "
+                    f"{', '.join(known) or 'none'}",
+                )
         for j, trip in enumerate(traffic.trips if traffic is not None else []):
             if trip.id in agent_index:
                 raise self.error(

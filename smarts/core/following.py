@@ -1,0 +1,153 @@
+"""Which vehicle an agent follows and where that lead is: one definition for every consumer.
+
+The lead observation block (``smarts.sensors``), the platoon reward (``smarts.env``) and the
+benchmark's SFD columns (``smarts.benchmark.recorder``) all read :func:`lead_state`, so "the lead
+is in my lane" and "the gap to the lead" mean the same thing to a policy, its reward and its score.
+
+Lane continuity: the lead is *in the follower's lane* when it is ahead on the follower's own lane,
+or on a lane reached from it by successor lanes (through junctions, any branch), with at most
+``sight`` metres of lane between their centres. The gap is then the distance along those lanes
+from the follower's front bumper to the lead's rear bumper, so a lead straight ahead stays in lane
+across road-segment boundaries. Inside junctions, where internal lanes overlap and the projection
+may put two vehicles on neighbouring connections, a lead less than half a lane width to the side
+of the follower's heading line also counts as in lane.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from smarts.core.vehicle_table import COLUMN
+
+_X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
+_SPEED, _ACCEL, _LENGTH, _S = COLUMN["speed"], COLUMN["accel"], COLUMN["length"], COLUMN["s"]
+
+LEAD_SIGHT = 50.0
+"""Metres between the centres (along the lane, or straight) within which the lead is visible."""
+
+
+@dataclass
+class LeadState:
+    """Per agent (in the order asked for): the lead's state relative to the agent."""
+
+    present: np.ndarray  # bool[n] the agent follows a vehicle that is in the simulation now
+    visible: np.ndarray  # bool[n] present and within sight (centre distance <= sight)
+    in_lane: np.ndarray  # bool[n] visible, ahead and in the follower's lane (lane continuity)
+    gap: np.ndarray  # float64[n] bumper-to-bumper metres: along the lanes when in lane, else
+    # along the follower's heading; NaN when not visible
+    dx: np.ndarray  # float64[n] lead centre in the follower's frame (m, x forward, y left)
+    dy: np.ndarray
+    rel_heading: np.ndarray  # float64[n] lead heading minus follower heading (rad, wrapped)
+    rel_vx: np.ndarray  # float64[n] lead velocity minus follower velocity, follower frame (m/s)
+    rel_vy: np.ndarray
+    lead_speed: np.ndarray  # float64[n] m/s
+    lead_accel: np.ndarray  # float64[n] m/s^2
+
+    @classmethod
+    def empty(cls, n: int) -> "LeadState":
+        z = np.zeros(n)
+        f = np.zeros(n, dtype=bool)
+        return cls(f, f.copy(), f.copy(), np.full(n, np.nan), z, z.copy(), z.copy(), z.copy(), z.copy(),
+                   z.copy(), z.copy())  # fmt: skip
+
+
+def lead_rows(sim, agents: np.ndarray) -> np.ndarray:
+    """Table row of each agent's lead vehicle, -1 where it follows none or the lead is gone."""
+    out = np.full(len(agents), -1, dtype=np.int64)
+    ids = sim.lead_ids
+    row_of = sim.table.row_of
+    for k, a in enumerate(np.asarray(agents).tolist()):
+        lead = ids[a]
+        if lead is not None:
+            out[k] = row_of.get(lead, -1)
+    return out
+
+
+def lead_state(sim, agents: np.ndarray, sight: float = LEAD_SIGHT) -> LeadState:
+    """The lead of each agent in ``agents`` (agent indices), from the simulation's current state."""
+    agents = np.asarray(agents, dtype=np.int64)
+    n = len(agents)
+    if n == 0 or not any(sim.lead_ids[a] is not None for a in agents.tolist()):
+        return LeadState.empty(n)
+    leads = lead_rows(sim, agents)
+    rows = sim.agent_row[agents]
+    rm = sim.road_map
+    out = LeadState.empty(n)
+    _lead_kernel(
+        sim.table.data, sim.table.lane, rows, leads, rm.succ_offsets, rm.succ, rm.lane_length,
+        rm.lane_width, rm.lane_internal, float(sight), out.present, out.visible, out.in_lane, out.gap,
+        out.dx, out.dy, out.rel_heading, out.rel_vx, out.rel_vy, out.lead_speed, out.lead_accel,
+    )  # fmt: skip
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def lane_distance_ahead(succ_offsets, succ, lane_length, from_lane, from_s, to_lane, to_s, limit):  # pragma: no cover - compiled
+    """Metres along the lane graph from (from_lane, from_s) forward to (to_lane, to_s); inf when
+    ``to_lane`` is not reached within ``limit`` metres (or lies behind on the same lane)."""
+    if from_lane == to_lane:
+        return to_s - from_s if to_s >= from_s else np.inf
+    stack_lane = np.empty(128, dtype=np.int64)
+    stack_d = np.empty(128)
+    top = 0
+    rest = max(lane_length[from_lane] - from_s, 0.0)
+    for k in range(succ_offsets[from_lane], succ_offsets[from_lane + 1]):
+        if top < 128:
+            stack_lane[top], stack_d[top] = succ[k], rest
+            top += 1
+    best = np.inf
+    while top > 0:
+        top -= 1
+        lane, d = stack_lane[top], stack_d[top]
+        if d > limit or d >= best:
+            continue
+        if lane == to_lane:
+            best = min(best, d + max(to_s, 0.0))
+            continue
+        nd = d + lane_length[lane]
+        for k in range(succ_offsets[lane], succ_offsets[lane + 1]):
+            if top < 128:
+                stack_lane[top], stack_d[top] = succ[k], nd
+                top += 1
+    return best
+
+
+@numba.njit(cache=True, nogil=True)
+def _lead_kernel(
+    data, lane, rows, leads, succ_offsets, succ, lane_length, lane_width, lane_internal, sight,
+    present, visible, in_lane, gap, dx_out, dy_out, rel_h, rel_vx, rel_vy, lead_speed, lead_accel,
+):  # pragma: no cover - compiled
+    for i in range(rows.shape[0]):
+        r, j = rows[i], leads[i]
+        if j < 0 or r < 0:
+            continue
+        present[i] = True
+        x, y, h, v = data[_X, r], data[_Y, r], data[_H, r], data[_SPEED, r]
+        c, s = math.cos(h), math.sin(h)
+        ddx, ddy = data[_X, j] - x, data[_Y, j] - y
+        if ddx * ddx + ddy * ddy > sight * sight:
+            continue
+        visible[i] = True
+        fx, fy = c * ddx + s * ddy, c * ddy - s * ddx
+        dh = data[_H, j] - h
+        dh = dh - 2.0 * math.pi * math.floor((dh + math.pi) / (2.0 * math.pi))
+        vj = data[_SPEED, j]
+        dx_out[i], dy_out[i], rel_h[i] = fx, fy, dh
+        rel_vx[i] = vj * math.cos(dh) - v
+        rel_vy[i] = vj * math.sin(dh)
+        lead_speed[i], lead_accel[i] = vj, data[_ACCEL, j]
+        half_lengths = 0.5 * (data[_LENGTH, r] + data[_LENGTH, j])
+        gap[i] = fx - half_lengths
+        lf, lj = lane[r], lane[j]
+        if lf < 0 or lj < 0:
+            continue
+        along = lane_distance_ahead(succ_offsets, succ, lane_length, lf, data[_S, r], lj, data[_S, j], sight)
+        if along <= sight and along > 0.0:
+            in_lane[i] = True
+            gap[i] = along - half_lengths
+        elif (lane_internal[lf] or lane_internal[lj]) and fx > 0.0 and abs(fy) < 0.5 * lane_width[lf]:
+            in_lane[i] = True
