@@ -265,3 +265,23 @@ def test_log_error_survives_pickling():
         str(back) == str(err) == "runs/e.npz: agent 'a': column 'speed': missing column"
     )
     assert (back.source, back.agent, back.column) == ("runs/e.npz", "a", "speed")
+
+
+def test_rows_follow_the_step_contract():
+    # Row k is the state after step k+1: a row at time 0 is the reset state and is refused.
+    trace = make_trace(3, time=np.array([0.0, 0.1, 0.2]))
+    with pytest.raises(LogError, match="reset state is not a row") as err:
+        score_episode(make_episode({"a": trace}))
+    assert err.value.column == "time"
+    # No row after the time limit: a late arrival cannot count for PR (nor for MTE).
+    late = np.zeros(12, dtype=bool)
+    late[-1] = True
+    trace = make_trace(12, goal_reached=late)  # the last row is at 1.2 s
+    with pytest.raises(LogError, match=r"row 11 at 1.2.* after the time limit 1.1") as err:
+        score_episode(make_episode({"a": trace}, time_limit=1.1))
+    assert err.value.agent == "a" and err.value.column == "time"
+    ok = make_episode({"a": make_trace(11, goal_reached=late[1:])}, time_limit=1.1)
+    assert score_episode(ok)["PR"] == 1.0  # arriving on the limit's own step counts
+    # Float noise in the clock is tolerated.
+    noisy = make_trace(11, time=0.1 * np.arange(1, 12) + 1e-9)
+    score_episode(make_episode({"a": noisy}, time_limit=1.1))

@@ -19,7 +19,7 @@ from smarts.benchmark.metrics import (
     time_gap_to_margin,
 )
 from smarts.benchmark.metrics.params import HumannessParams
-from smarts.benchmark.metrics.scores import comfort_window, penalty_steps
+from smarts.benchmark.metrics.scores import comfort_window, penalty_steps, s_bench
 from smarts.benchmark.metrics.synthetic import make_episode, make_trace
 
 P = MetricParams()
@@ -312,6 +312,7 @@ def test_failed_episode_scores_worst_by_default():
         {
             "scenario": "s",
             "episode": 1,
+            "seed": 0,
             "failure": "agent raised RuntimeError",
             "source": None,
             "excluded": False,
@@ -369,3 +370,58 @@ def test_multi_agent_episode_means_over_vehicles():
     s = score_episode(log, P)
     assert s["cost.overspeed"] == pytest.approx(0.5)
     assert s["RC"] == pytest.approx(1 - 0.5 / 3)
+
+
+def _pr_episodes(scenario: str, lefts: list[float], seed0: int = 100) -> list:
+    logs = [_progress_episode(scenario, e, left) for e, left in enumerate(lefts)]
+    for e, log in enumerate(logs):
+        log.seed = seed0 + e
+    return logs
+
+
+def test_confidence_intervals_stratified_bootstrap_by_hand():
+    # Scenario "a": PR 1 in both episodes (no spread); "b": PR 0 and 1. A resample of "b" has mean
+    # 0, 0.5 or 1 (p = 1/4, 1/2, 1/4), so the overall PR (scenarios equal) is 0.5, 0.75 or 1.0 and
+    # its central 95% is [0.5, 1.0]; per episode resampling would mix the scenarios' weights.
+    logs = _pr_episodes("a", [0.0, 0.0]) + _pr_episodes("b", [100.0, 0.0], seed0=200)
+    suite = score_suite(logs, P)
+    assert suite.overall["PR"] == pytest.approx(0.75)
+    assert suite.overall_ci["PR"] == pytest.approx((0.5, 1.0))
+    assert suite.scenario_ci["a"]["PR"] == pytest.approx((1.0, 1.0))
+    assert suite.scenario_ci["b"]["PR"] == pytest.approx((0.0, 1.0))
+    # S_bench is recomputed per resample: only PR varies, so its interval is S_bench at the PR ends.
+    other = {m: suite.overall[m] for m in ("RC", "Humanness", "MTE")}
+    ends = [s_bench({"PR": pr, **other}, "collaborative", P) for pr in (0.5, 1.0)]
+    assert suite.overall_ci["S_bench"] == pytest.approx(tuple(ends))
+    for m in suite.metric_names:
+        lo, hi = suite.overall_ci[m]
+        assert lo <= suite.overall[m] <= hi
+    assert suite.seeds == {"a": {0: 100, 1: 101}, "b": {0: 200, 1: 201}}
+    assert [e["PR"] for e in suite.episode_scores["b"]] == [0.0, 1.0]
+    assert suite.ci["resamples"] == 2000 and "stratified" in suite.ci["method"]
+
+
+def test_confidence_intervals_are_reproducible_and_narrow_with_more_episodes():
+    rng = np.random.default_rng(1)
+    lefts = list(rng.uniform(0, 100, 30))
+    few = score_suite(_pr_episodes("s", lefts[:4]), P)
+    again = score_suite(_pr_episodes("s", lefts[:4]), P)
+    assert few.overall_ci == again.overall_ci  # fixed bootstrap seed: reports repeat exactly
+    many = score_suite(_pr_episodes("s", lefts), P)
+    width = lambda s: s.overall_ci["PR"][1] - s.overall_ci["PR"][0]  # noqa: E731
+    assert 0 < width(many) < width(few)
+    other_seed = score_suite(_pr_episodes("s", lefts[:4]), P, ci_seed=5)
+    assert other_seed.overall == few.overall
+    with pytest.raises(ValueError, match="ci level"):
+        score_suite(_pr_episodes("s", lefts[:4]), P, ci_level=1.5)
+
+
+def test_failed_episodes_enter_the_bootstrap_as_worst():
+    logs = _pr_episodes("s", [0.0, 0.0, 0.0])
+    logs[2].failure = "agent raised"
+    suite = score_suite(logs, P)
+    assert suite.scenario_ci["s"]["S_bench"][0] == pytest.approx(0.0)  # all three resampled as the failure
+    assert suite.failed[0]["seed"] == 102
+    table = suite.format_table()
+    assert "[0.000," in table and "s: 0=100, 1=101, 2=102" in table and "#2 (seed 102)" in table
+    assert "bootstrap" in table

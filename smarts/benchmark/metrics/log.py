@@ -6,10 +6,13 @@ the benchmark runner and anyone with their own simulator score with the same cod
 Layout
 ------
 One episode = one :class:`EpisodeLog`: metadata plus, per mission vehicle (agent), an
-:class:`AgentTrace` of equal-length 1-D arrays over the agent's steps. Row ``k`` is the state
-*after* the agent's ``k``-th step; an agent's rows end when its mission ends (goal, collision,
-time out, ...). The initial route distance, measured at the mission start before any step, is
-metadata.
+:class:`AgentTrace` of equal-length 1-D arrays over the agent's steps. Row ``k`` (counting from
+0) is the state *after* the agent's ``k+1``-th step, so the first row's ``time`` is one step
+after the start (> 0): the reset state is not a row. An agent's rows end when its mission ends
+(goal, collision, time out, ...) and never go past the scenario's time limit: a row with
+``time > time_limit + 1e-6`` is an error, so no metric can count an arrival after the limit.
+The initial route distance, measured at the mission start (the reset state) before any step, is
+metadata. Values that need a previous state (jerks) use the reset state for the first row.
 
 Per-step columns (SI units):
 
@@ -38,6 +41,13 @@ follow_time_gap            float  s, time gap to the follow margin (see ``follow
 in_follow_margin           bool   the ego is inside the follow margin of its lead
 lead_in_lane_and_visible   bool   the lead is in the ego's lane and in sight
 =========================  =====  =====================================================
+
+"In the ego's lane" is lane continuity, not equal lane ids: the lead is in lane when it is ahead
+on the ego's own lane or on a lane reached from it through successor lanes (any branch, across
+road-segment boundaries and junctions), within sight (50 m between centres, along the lanes);
+the gap behind ``follow_time_gap`` is then bumper to bumper along those lanes. A lead in a
+neighbouring lane is not in lane. The simulator side is ``smarts.core.following.lead_state``,
+the same definition the lead observation and the platoon reward read.
 
 The three following columns are required for the ``adaptive`` task (unless the episode failed)
 and optional otherwise.
@@ -268,7 +278,9 @@ def validate_episode(log: EpisodeLog) -> None:
     1-D, of the right kind (bool columns boolean, the rest numeric) and as long as ``time``;
     finiteness (``lane_offset``/``lane_width`` may be NaN only where ``off_road``;
     ``follow_time_gap`` may be NaN only where it is not read); ``time`` strictly increasing;
-    ``speed_limit`` > 0, ``lane_width`` > 0 on road, ``route_distance_to_goal`` >= 0.
+    ``speed_limit`` > 0, ``lane_width`` > 0 on road, ``route_distance_to_goal`` >= 0;
+    ``time`` of the first row > 0 (the reset state is not a row) and of every row
+    <= ``time_limit`` + 1e-6 (no row after the time limit).
     An episode that did not fail needs at least one agent and one step per agent.
     """
     src = log.source
@@ -280,7 +292,7 @@ def validate_episode(log: EpisodeLog) -> None:
                 source=src,
                 agent=agent_id,
             )
-        _validate_trace(trace, agent_id, log.task, log.failed, src)
+        _validate_trace(trace, agent_id, log.task, log.failed, src, float(log.time_limit))
 
 
 def _validate_metadata(log: EpisodeLog) -> None:
@@ -340,8 +352,17 @@ def _validate_metadata(log: EpisodeLog) -> None:
             )
 
 
+TIME_LIMIT_TOLERANCE = 1e-6
+"""Seconds a row's time may exceed the time limit (float noise), no more."""
+
+
 def _validate_trace(
-    trace: AgentTrace, agent: str, task: str, failed: bool, src: str | None
+    trace: AgentTrace,
+    agent: str,
+    task: str,
+    failed: bool,
+    src: str | None,
+    time_limit: float = math.inf,
 ) -> None:
     def bad(column: str, problem: str) -> LogError:
         return LogError(problem, source=src, agent=agent, column=column)
@@ -403,6 +424,20 @@ def _validate_trace(
         raise bad(
             "time",
             f"must be strictly increasing; step {step} is {trace.time[step].item()!r} after {trace.time[step - 1].item()!r}",
+        )
+    if not trace.time[0] > 0:
+        raise bad(
+            "time",
+            f"first row at {trace.time[0].item()!r} s; row k is the state after step k+1, so "
+            "the first row is one step after the start (> 0; the reset state is not a row)",
+        )
+    late = trace.time > time_limit + TIME_LIMIT_TOLERANCE
+    if late.any():
+        step = int(np.argmax(late))
+        raise bad(
+            "time",
+            f"row {step} at {trace.time[step].item()!r} s is after the time limit "
+            f"{time_limit!r} s (rows end at the time limit)",
         )
     _check_range(trace.speed_limit > 0, trace.speed_limit, bad, "speed_limit", "> 0")
     _check_range(

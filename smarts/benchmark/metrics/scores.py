@@ -28,10 +28,23 @@ Per-vehicle costs (``p`` = :class:`MetricParams`):
   with ``goal_reached`` (clipped to ``T_limit``), ``T_limit`` when the goal is never reached.
 - follow gap (SFD, adaptive): mean over steps of ``gap``; ``gap = 1`` when the lead is out of the
   ego's lane or out of sight, when the ego is inside the follow margin, or when the time gap to
-  the margin exceeds ``max_time_gap_s``; else ``time_gap / max_time_gap_s``.
+  the margin exceeds ``max_time_gap_s``; else ``time_gap / max_time_gap_s``. "In the ego's lane"
+  is lane continuity (the lead ahead on the ego's lane or on a successor lane reached from it,
+  across segment boundaries; see ``smarts.benchmark.metrics.log``), not equal lane ids.
+
+Rows never run past the time limit (the log validator rejects them), so PR and MTE agree on what
+arrived: an agent still driving at the limit has not arrived for either.
 
 ``S_bench = (w_pr PR + w_rc RC + w_h Humanness + w_task M_task) / (w_pr + w_rc + w_h + w_task)``
 with ``M_task`` = MTE (collaborative) or SFD (adaptive).
+
+Uncertainty: :func:`score_suite` gives every metric (overall and per scenario) a confidence
+interval from a stratified percentile bootstrap: episodes are resampled with replacement within
+each scenario (``resamples`` times, 2000 by default, from a fixed ``ci_seed`` so reports repeat
+exactly), each resample's overall value averages its scenario means equally like the point
+estimate, and S_bench is recomputed from each resample's PR, RC, Humanness and task metric. The
+interval is the central ``ci_level`` (95%) of the resampled values. A scenario with one episode
+has no spread (its interval is its value); with few episodes the interval is optimistic.
 
 Failed episodes (a log with a failure reason): under the default policy ``worst`` every cost of
 the episode is 1 (every metric 0) and it counts like any other episode; under ``exclude`` it is
@@ -68,6 +81,7 @@ __all__ = [
     "AgentCosts",
     "SuiteScores",
     "agent_costs",
+    "bootstrap_ci",
     "comfort_cost",
     "comfort_window",
     "follow_gap_cost",
@@ -317,9 +331,82 @@ def score_episode(
 
 
 # ---------------------------------------------------------------------------------- per suite
+CI_LEVEL = 0.95
+CI_RESAMPLES = 2000
+CI_SEED = 0
+
+
+def ci_method(level: float = CI_LEVEL, resamples: int = CI_RESAMPLES, seed: int = CI_SEED) -> str:
+    """The sentence a report prints under its tables to say how its intervals were made."""
+    return (
+        f"{level:.0%} confidence intervals: stratified percentile bootstrap over episodes "
+        f"({resamples} resamples, seed {seed}): episodes are resampled with replacement within each "
+        "scenario, scenarios are averaged equally as in the point estimate, and S_bench is recomputed "
+        "per resample. A scenario with one episode has no spread; with few episodes the intervals "
+        "are optimistic."
+    )
+
+
+def _weights(task: str, params: MetricParams) -> np.ndarray:
+    w = params.weights
+    return np.array([w.pr, w.rc, w.humanness, w.mte if TASK_METRIC[task] == "MTE" else w.sfd])
+
+
+def bootstrap_ci(
+    per_scenario: dict[str, Sequence[dict[str, float]]],
+    task: str,
+    params: MetricParams,
+    level: float = CI_LEVEL,
+    resamples: int = CI_RESAMPLES,
+    seed: int = CI_SEED,
+) -> tuple[dict[str, tuple[float, float]], dict[str, dict[str, tuple[float, float]]]]:
+    """``(overall, per scenario)`` intervals ``(low, high)`` for every metric of ``task``.
+
+    ``per_scenario`` maps a scenario to its scored episodes (:func:`score_episode` dicts).
+    Stratified bootstrap: within each scenario (in sorted order, from one generator seeded with
+    ``seed``) its ``n`` episodes are resampled ``n`` at a time with replacement, ``resamples``
+    times; the overall value of a resample is the equal-weight mean of its scenario means, and
+    S_bench is computed from the resampled PR, RC, Humanness and task metric.
+    """
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"ci level must be in (0, 1), got {level!r}")
+    if resamples < 1:
+        raise ValueError(f"resamples must be >= 1, got {resamples!r}")
+    names = metric_names(task)
+    base = names[:-1]
+    w = _weights(task, params)
+    rng = np.random.default_rng(seed)
+    q = [(1.0 - level) / 2.0, 1.0 - (1.0 - level) / 2.0]
+    means = {}
+    scenario_ci: dict[str, dict[str, tuple[float, float]]] = {}
+
+    def interval(values: np.ndarray, point: float) -> tuple[float, float]:
+        lo, hi = np.quantile(values, q)
+        # Rounding noise aside, a percentile interval of a mean contains the mean.
+        return (float(min(lo, point)), float(max(hi, point)))
+
+    for name in sorted(per_scenario):
+        rows = per_scenario[name]
+        m = np.array([[r[k] for k in base] for r in rows], dtype=np.float64)  # [n, 4]
+        idx = rng.integers(0, len(m), size=(resamples, len(m)))
+        sample = m[idx].mean(axis=1)  # [B, 4]
+        means[name] = sample
+        point = m.mean(axis=0)
+        with_s = np.concatenate([sample, (sample @ w / w.sum())[:, None]], axis=1)
+        point_s = np.append(point, point @ w / w.sum())
+        scenario_ci[name] = {k: interval(with_s[:, i], float(point_s[i])) for i, k in enumerate(names)}
+    overall = np.mean(np.stack(list(means.values())), axis=0)  # [B, 4]
+    overall = np.concatenate([overall, (overall @ w / w.sum())[:, None]], axis=1)
+    point_all = np.mean([[np.mean([r[k] for r in per_scenario[n]]) for k in base] for n in per_scenario], axis=0)
+    point_all = np.append(point_all, point_all @ w / w.sum())
+    overall_ci = {k: interval(overall[:, i], float(point_all[i])) for i, k in enumerate(names)}
+    return overall_ci, scenario_ci
+
+
 @dataclass
 class SuiteScores:
-    """A suite's scores: the overall metrics, a per-scenario table and the failed episodes."""
+    """A suite's scores: the overall metrics, a per-scenario table and the failed episodes, with
+    confidence intervals and the episodes' seeds."""
 
     task: str
     overall: dict[str, float]
@@ -329,8 +416,18 @@ class SuiteScores:
     episodes: dict[str, int]
     """Scenario -> number of episodes that entered its mean."""
     failed: list[dict[str, Any]] = field(default_factory=list)
-    """One entry per failed episode: scenario, episode, failure, source, excluded."""
+    """One entry per failed episode: scenario, episode, seed, failure, source, excluded."""
     policy: str = "worst"
+    overall_ci: dict[str, tuple[float, float]] = field(default_factory=dict)
+    """Metric -> (low, high) confidence interval of the overall value (see ``ci``)."""
+    scenario_ci: dict[str, dict[str, tuple[float, float]]] = field(default_factory=dict)
+    """Scenario -> metric -> (low, high) confidence interval of the scenario mean."""
+    seeds: dict[str, dict[int, int | None]] = field(default_factory=dict)
+    """Scenario -> episode index -> seed, for every episode given (failed ones included)."""
+    episode_scores: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
+    """Scenario -> one entry per episode (episode, seed, failed, excluded and its metrics)."""
+    ci: dict[str, Any] = field(default_factory=dict)
+    """How the intervals were made: level, resamples, seed and method (a sentence)."""
 
     @property
     def metric_names(self) -> tuple[str, ...]:
@@ -340,38 +437,55 @@ class SuiteScores:
         return asdict(self)
 
     def format_table(self) -> str:
-        """A plain-text table: one row per scenario, then the overall row."""
+        """A plain-text table: one row per scenario, then the overall row, each metric with its
+        confidence interval; then the episodes' seeds and the failed episodes."""
         names = self.metric_names
         width = max([len("overall"), *map(len, self.scenarios)])
-        head = f"{'scenario':<{width}}  {'episodes':>8}  " + "  ".join(
-            f"{n:>9}" for n in names
-        )
+        cell = 21
+
+        def fmt(value: float, ci: tuple[float, float] | None) -> str:
+            text = f"{value:.3f}" + (f" [{ci[0]:.3f},{ci[1]:.3f}]" if ci else "")
+            return f"{text:>{cell}}"
+
+        head = f"{'scenario':<{width}}  {'episodes':>8}  " + "  ".join(f"{n:>{cell}}" for n in names)
         lines = [f"task: {self.task}", head, "-" * len(head)]
         for scenario, row in self.scenarios.items():
-            values = "  ".join(f"{row[n]:>9.4f}" for n in names)
-            lines.append(
-                f"{scenario:<{width}}  {self.episodes[scenario]:>8d}  {values}"
-            )
+            cis = self.scenario_ci.get(scenario, {})
+            values = "  ".join(fmt(row[n], cis.get(n)) for n in names)
+            lines.append(f"{scenario:<{width}}  {self.episodes[scenario]:>8d}  {values}")
         lines.append("-" * len(head))
         total = sum(self.episodes.values())
         lines.append(
             f"{'overall':<{width}}  {total:>8d}  "
-            + "  ".join(f"{self.overall[n]:>9.4f}" for n in names)
+            + "  ".join(fmt(self.overall[n], self.overall_ci.get(n)) for n in names)
         )
+        if self.ci:
+            lines.append(self.ci.get("method", ""))
+        if self.seeds:
+            lines.append("episodes (index=seed):")
+            for scenario, seeds in self.seeds.items():
+                lines.append(f"  {scenario}: " + ", ".join(f"{e}={s}" for e, s in seeds.items()))
         if self.failed:
             verb = "excluded" if self.policy == "exclude" else "scored as worst"
             lines.append(f"failed episodes ({verb}):")
             lines += [
-                f"  {f['scenario']} #{f['episode']}: {f['failure']}"
+                f"  {f['scenario']} #{f['episode']} (seed {f.get('seed')}): {f['failure']}"
                 for f in self.failed
             ]
         return "\n".join(lines)
 
 
 def score_suite(
-    logs: Sequence[EpisodeLog], params: MetricParams | None = None
+    logs: Sequence[EpisodeLog],
+    params: MetricParams | None = None,
+    *,
+    ci_level: float = CI_LEVEL,
+    resamples: int = CI_RESAMPLES,
+    ci_seed: int = CI_SEED,
 ) -> SuiteScores:
-    """Score a suite: episodes are averaged per scenario first, then scenarios equally.
+    """Score a suite: episodes are averaged per scenario first, then scenarios equally; every
+    mean gets a confidence interval (:func:`bootstrap_ci`, ``ci_level``, ``resamples``,
+    ``ci_seed``).
 
     All logs must share one task (S_bench's fourth metric differs between tasks: score each task
     separately). The same (scenario, episode index) twice is an error, as is a scenario whose
@@ -392,7 +506,10 @@ def score_suite(
     seen: dict[tuple[str, int], str | None] = {}
     per_scenario: dict[str, list[dict[str, float]]] = {}
     failed: list[dict[str, Any]] = []
+    seeds: dict[str, dict[int, int | None]] = {}
+    episode_scores: dict[str, list[dict[str, Any]]] = {}
     exclude = params.failed_episodes == "exclude"
+    names = metric_names(task)
     for log in logs:
         scores = score_episode(log, params)
         key = (log.scenario, int(log.episode))
@@ -402,11 +519,18 @@ def score_suite(
                 source=log.source,
             )
         seen[key] = log.source
+        seed = None if log.seed is None else int(log.seed)
+        seeds.setdefault(log.scenario, {})[int(log.episode)] = seed
+        episode_scores.setdefault(log.scenario, []).append(
+            {"episode": int(log.episode), "seed": seed, "failed": log.failed,
+             "excluded": log.failed and exclude, **{m: scores[m] for m in names}}  # fmt: skip
+        )
         if log.failed:
             failed.append(
                 {
                     "scenario": log.scenario,
                     "episode": int(log.episode),
+                    "seed": seed,
                     "failure": log.failure,
                     "source": log.source,
                     "excluded": exclude,
@@ -426,9 +550,10 @@ def score_suite(
         scenarios[name] = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
     overall = {
         m: float(np.mean([row[m] for row in scenarios.values()]))
-        for m in metric_names(task)[:-1]
+        for m in names[:-1]
     }
     overall["S_bench"] = s_bench(overall, task, params)
+    overall_ci, scenario_ci = bootstrap_ci(per_scenario, task, params, ci_level, resamples, ci_seed)
     failed.sort(key=lambda f: (f["scenario"], f["episode"]))
     return SuiteScores(
         task=task,
@@ -437,4 +562,9 @@ def score_suite(
         episodes={name: len(per_scenario[name]) for name in scenarios},
         failed=failed,
         policy=params.failed_episodes,
+        overall_ci=overall_ci,
+        scenario_ci=scenario_ci,
+        seeds={name: dict(sorted(seeds[name].items())) for name in sorted(seeds)},
+        episode_scores={name: sorted(rows, key=lambda r: r["episode"]) for name, rows in sorted(episode_scores.items())},
+        ci={"level": ci_level, "resamples": resamples, "seed": ci_seed, "method": ci_method(ci_level, resamples, ci_seed)},
     )
