@@ -1,7 +1,17 @@
 """Ready agents by locator: ``zoo:<name>`` (or just ``<name>``) -> a policy object.
 
 A policy is batched: ``policy.act(obs)`` takes ``{key: [n, ...]}`` observations of n agents and
-returns their actions ``[n, k]``; ``policy.action_space`` names the action space it uses.
+returns their actions ``[n, k]``; ``policy.action_space`` names the simulator action space it
+acts in (relative_target_pose | target_pose | continuous | lane). It may also declare
+``policy.controller`` (``direct`` when absent, or ``lane_relative``) and ``policy.interface`` (an
+``AgentInterface``; None or absent: the scenario's observation). The benchmark runs every agent
+in its own action space, controller and interface.
+
+Reference agents (benchmarked beside every agent, ``smarts.benchmark.runner.REFERENCE_AGENTS``):
+``zoo:keep-lane`` (IDM on the route's waypoints), ``zoo:random`` (uniform random steps) and
+``zoo:stand-still`` (brakes gently to a stop: the floor that doing nothing scores). PPO baselines
+are checkpoints with model cards under ``zoo/cards/`` (``cards/stand-still.md`` describes the
+floor).
 """
 
 from __future__ import annotations
@@ -17,6 +27,7 @@ CHECKPOINT = "checkpoint"
 ZOO: dict[str, tuple[str, str, str]] = {
     "keep-lane": ("agents.keep_lane", "KeepLanePolicy", "IDM speed on the route's waypoints"),
     "random": ("agents.random_agent", "RandomPolicy", "uniform random relative-pose steps"),
+    "stand-still": ("agents.stand_still", "StandStillPolicy", "brakes gently to a stop and stays (the do-nothing floor)"),
     "platoon-rtp": (CHECKPOINT, "checkpoints/platoon-rtp.pt", "PPO following, RelativeTargetPose (cards/)"),
     "drive": (CHECKPOINT, "checkpoints/drive.pt", "PPO turning at intersections, RelativeTargetPose (cards/)"),
     "platoon-c": (CHECKPOINT, "checkpoints/platoon-c.pt", "PPO following, Continuous on the pybullet car (cards/)"),
