@@ -22,7 +22,8 @@ def test_benchmark_on_ray_scores_the_same_as_the_process_pool(tmp_path):
     base = ["benchmark", "--suite", TINY, "--episodes", "1", "--agent", "zoo:keep-lane", "--quiet"]
     assert main([*base, "--workers", "2", "--out", str(tmp_path / "pool")]) == 0
     assert main([*base, "--ray-address", "local", "--out", str(tmp_path / "ray")]) == 0
-    assert len(list((tmp_path / "ray" / "logs").rglob("*.npz"))) == 2  # one episode per scenario
+    assert len(list((tmp_path / "ray" / "logs" / "zoo_keep-lane").rglob("*.npz"))) == 2  # one episode per scenario
+    assert len(list((tmp_path / "ray" / "logs").rglob("*.npz"))) == 3 * 2  # with the other reference agents
     pool, ray = _overall(tmp_path / "pool"), _overall(tmp_path / "ray")
     assert pool and ray == pool
 

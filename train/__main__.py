@@ -16,17 +16,18 @@ from pathlib import Path
 
 def _benchmark(args: argparse.Namespace) -> int:
     from smarts.benchmark.report import write_report
-    from smarts.benchmark.runner import REFERENCE_AGENTS, load_policy, plan_jobs, run_jobs
+    from smarts.benchmark.runner import REFERENCE_AGENTS, plan_jobs, run_jobs
     from smarts.benchmark.suites import load_suite
 
     suite = load_suite(args.suite)
-    agents = args.agent or list(REFERENCE_AGENTS)
-    for agent in agents:
-        load_policy(agent)  # an unknown locator is an error now, not a failure per episode
+    agents = list(dict.fromkeys(args.agent or []))
     episodes = args.episodes or suite.episodes
     out = args.out or Path("runs") / "benchmark" / suite.name
+    # Loads every agent and checks the suite hosts its action space before any episode runs.
     jobs = plan_jobs(agents, suite, episodes, out, args.seed)
-    print(f"{suite.name}: {len(suite.scenarios)} scenarios x {episodes} episodes x {len(agents)} agent(s) -> {out}")
+    shown = agents + [a for a in REFERENCE_AGENTS if a not in agents]
+    print(f"{suite.name}: {len(suite.scenarios)} scenarios x {episodes} episodes x {len(shown)} agent(s) "
+          f"({', '.join(shown)}; references always included) -> {out}")  # fmt: skip
     results = run_jobs(jobs, workers=args.workers, progress=not args.quiet, ray_address=args.ray_address)
     report = write_report(out, suite, agents, results)
     print(report.read_text())
@@ -59,7 +60,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m train", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     bench = sub.add_parser("benchmark", help="run agents through a benchmark suite and write a report")
-    bench.add_argument("--agent", action="append", help="agent locator (repeatable); default: the reference agents")
+    bench.add_argument("--agent", action="append",
+                       help="agent locator or checkpoint (repeatable); the reference agents zoo:keep-lane, "
+                            "zoo:random and zoo:stand-still are always benchmarked beside them")  # fmt: skip
     bench.add_argument("--suite", default="collaborative", help="collaborative | adaptive | path to a suite YAML")
     bench.add_argument("--episodes", type=int, default=None, help="episodes per scenario (default: the suite's)")
     bench.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")

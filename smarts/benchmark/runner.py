@@ -1,28 +1,64 @@
 """Run agents through a benchmark suite and write logs, scores and the report.
 
-Each (agent, scenario, episode) is one job: build the scenario's env, reset it with the episode's
-seed, drive every mission vehicle with the agent's batched policy, record the episode log and
-write it to disk at once (so nothing is lost if a later job fails). Jobs run in worker processes
-(libsumo allows one SUMO per process) or, with a Ray address, as Ray tasks on a cluster (each
-worker needs this package installed and the output folder on a shared file system), results are scored by ``smarts.benchmark.metrics`` from
-the written logs only. An agent that raises or returns a malformed action fails its episode with
-the reason recorded; the suite goes on.
+Each (agent, scenario, episode) is one job: load the agent's batched policy, build the scenario
+with every learning (non-social) agent in the policy's own action space and controller (and the
+policy's observation interface when it declares one), reset it with the episode's seed, drive
+every mission vehicle with the policy, record the episode log and write it to disk at once (so
+nothing is lost if a later job fails). A policy whose action space the suite does not host is an
+error before any episode runs (:func:`check_agents`), never a silent conversion. Jobs run in
+worker processes (libsumo allows one SUMO per process) or, with a Ray address, as Ray tasks on a
+cluster (each worker needs this package installed and the output folder on a shared file
+system). Results are scored by ``smarts.benchmark.metrics`` from the written logs only. An agent
+that raises or returns a malformed action fails its episode with the reason recorded; the suite
+goes on.
+
+Reference agents (:data:`REFERENCE_AGENTS`) are benchmarked beside the requested ones with the
+same suite, seeds and episode count, so every report has its floor and its simple baseline.
 """
 
 from __future__ import annotations
 
 import concurrent.futures as cf
+import dataclasses
+import hashlib
 import multiprocessing
 import re
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from smarts.benchmark.suites import Suite, load_suite
+from smarts.benchmark.suites import Suite, SuiteScenario, load_suite
+from smarts.scenario.spec import ACTION_SPACES, CONTROLLERS, LANE_RELATIVE_SPACES, ScenarioSpec
+from smarts.sensors.interface import AgentInterface, interface_to_dict
 
-REFERENCE_AGENTS = ("zoo:keep-lane", "zoo:random")
+REFERENCE_AGENTS = ("zoo:keep-lane", "zoo:random", "zoo:stand-still")
+"""Benchmarked with every suite run unless asked not to: a simple baseline, chance, doing nothing."""
+
+
+class AgentSetupError(ValueError):
+    """A policy cannot be benchmarked as declared (unknown action space or controller, or one the
+    suite does not host); the message names the agent."""
+
+
+@dataclass(frozen=True)
+class PolicySetup:
+    """How a policy drives: the simulator action space its actions are in, the controller that
+    turns them into that space's actions, and the observation interface it reads (None: the
+    scenario's)."""
+
+    action_space: str
+    controller: str = "direct"
+    interface: AgentInterface | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "action_space": self.action_space,
+            "controller": self.controller,
+            "interface": None if self.interface is None else interface_to_dict(self.interface),
+        }
 
 
 @dataclass(frozen=True)
@@ -33,6 +69,8 @@ class Job:
     episode: int
     seed: int
     log_path: str
+    reuse: bool = False
+    """Reuse ``log_path`` when it already holds a readable log (cached reference episodes)."""
 
 
 def agent_label(locator: str) -> str:
@@ -55,15 +93,95 @@ def load_policy(locator: str, seed: int = 0):
     return policy
 
 
+def policy_setup(policy, locator: str) -> PolicySetup:
+    """Read a policy's ``action_space``, ``controller`` (default ``direct``) and ``interface``
+    (default None); :class:`AgentSetupError` naming the agent when one is not valid."""
+    space = getattr(policy, "action_space", None)
+    if space not in ACTION_SPACES:
+        raise AgentSetupError(
+            f"agent {locator!r}: action_space {space!r} is not a simulator action space; expected one of {', '.join(ACTION_SPACES)}"
+        )
+    controller = getattr(policy, "controller", None) or "direct"
+    if controller not in CONTROLLERS:
+        raise AgentSetupError(f"agent {locator!r}: controller {controller!r}; expected one of {', '.join(CONTROLLERS)}")
+    if controller == "lane_relative" and space not in LANE_RELATIVE_SPACES:
+        raise AgentSetupError(
+            f"agent {locator!r}: the lane_relative controller drives {', '.join(LANE_RELATIVE_SPACES)}, not {space!r}"
+        )
+    interface = getattr(policy, "interface", None)
+    if interface is not None and not isinstance(interface, AgentInterface):
+        raise AgentSetupError(
+            f"agent {locator!r}: interface must be a smarts.sensors.interface.AgentInterface or None, got {type(interface).__name__}"
+        )
+    return PolicySetup(space, controller, interface)
+
+
+def check_hosted(locator: str, setup: PolicySetup, suite: Suite) -> None:
+    """:class:`AgentSetupError` when ``suite`` does not host the policy's action space."""
+    if setup.action_space not in suite.action_spaces:
+        raise AgentSetupError(
+            f"agent {locator!r} acts in action space {setup.action_space!r} (controller {setup.controller}), "
+            f"which suite {suite.name!r} does not host; hosted: {', '.join(suite.action_spaces)}"
+        )
+
+
+def check_agents(agents: list[str], suite: Suite) -> dict[str, PolicySetup]:
+    """Load every agent and check the suite hosts its action space, before any episode runs;
+    returns each agent's setup. An unknown locator or unloadable checkpoint raises too."""
+    setups = {}
+    for locator in agents:
+        setup = policy_setup(load_policy(locator), locator)
+        check_hosted(locator, setup, suite)
+        setups[locator] = setup
+    return setups
+
+
+def scenario_for(spec: ScenarioSpec, setup: PolicySetup) -> ScenarioSpec:
+    """``spec`` with every learning (non-social) agent in the policy's action space and controller."""
+    agents = [
+        a if a.is_social else dataclasses.replace(a, action_space=setup.action_space, controller=setup.controller)
+        for a in spec.agents
+    ]
+    return dataclasses.replace(spec, agents=agents)
+
+
+def build_env(entry: SuiteScenario, setup: PolicySetup):
+    """The env of a suite scenario for a policy: its action space, controller and interface."""
+    from smarts.env import DrivingParallelEnv
+
+    spec = scenario_for(entry.spec, setup)
+    if setup.interface is not None:
+        return DrivingParallelEnv(spec, observation=setup.interface)
+    return DrivingParallelEnv(spec)
+
+
+def _summary(job: Job, scenario: str, failure: str | None, info: dict) -> dict:
+    return {"agent": job.agent, "scenario": scenario, "episode": job.episode, "seed": job.seed,
+            "failure": failure, "log": job.log_path, **{k: info.get(k) for k in ("action_space", "controller")}}  # fmt: skip
+
+
 def run_episode(job: Job) -> dict:
     """Run one episode and write its log; returns a short summary (never raises for agent faults)."""
-    from smarts.benchmark.metrics import write_episode
+    from smarts.benchmark.metrics import EpisodeLog, write_episode
     from smarts.benchmark.recorder import EpisodeRecorder
-    from smarts.env import DrivingParallelEnv
 
     suite = load_suite(job.suite_source)
     entry = suite.scenarios[job.scenario_index]
-    env = DrivingParallelEnv(entry.spec)
+    info: dict[str, Any] = {"agent": job.agent}
+    try:
+        policy = load_policy(job.agent, job.seed)
+        setup = policy_setup(policy, job.agent)
+        check_hosted(job.agent, setup, suite)
+    except Exception as err:  # an unknown, broken or misdeclared agent fails every episode, visibly
+        log = EpisodeLog(
+            scenario=entry.name, task=suite.task, episode=job.episode, seed=job.seed,
+            dt=entry.spec.step_length, time_limit=entry.time_limit, goal_radius=0.0, agents={},
+            initial_route_distance={}, failure=f"could not load agent {job.agent!r}: {err}", info=info,
+        )  # fmt: skip
+        write_episode(log, Path(job.log_path))
+        return _summary(job, entry.name, log.failure, info)
+    info.update(setup.to_dict())
+    env = build_env(entry, setup)
     try:
         obs, _ = env.reset(seed=job.seed)
         recorder = EpisodeRecorder(
@@ -75,16 +193,18 @@ def run_episode(job: Job) -> dict:
             seed=job.seed,
             time_limit=entry.time_limit,
             follow=entry.follow,
+            info=info,
         )
-        recorder.record()
         env.add_step_listener(lambda sim: recorder.record())
-        try:
-            policy = load_policy(job.agent, job.seed)
-        except Exception as err:  # an unknown or broken agent fails every episode, visibly
-            recorder.fail(f"could not load agent {job.agent!r}: {err}")
-            policy = None
+        running = True
+        if hasattr(policy, "check_space") and env.possible_agents:
+            try:  # a checkpoint that reads other observation keys or shapes fails here, plainly
+                policy.check_space(env.observation_space(env.possible_agents[0]))
+            except Exception as err:
+                recorder.fail(f"{type(err).__name__}: {err}")
+                running = False
         leads = set(entry.follow.values())
-        while policy is not None and env.agents:
+        while running and env.agents and env.sim.time < entry.time_limit - 1e-9:
             try:
                 batch = {k: np.stack([obs[a][k] for a in env.agents]) for k in obs[env.agents[0]]}
                 actions = np.asarray(policy.act(batch))
@@ -99,17 +219,56 @@ def run_episode(job: Job) -> dict:
         env.close()
     Path(job.log_path).parent.mkdir(parents=True, exist_ok=True)
     write_episode(log, Path(job.log_path))
-    return {"agent": job.agent, "scenario": entry.name, "episode": job.episode, "failure": log.failure, "log": job.log_path}
+    return _summary(job, entry.name, log.failure, info)
 
 
-def plan_jobs(agents: list[str], suite: Suite, episodes: int, out_dir: Path, seed: int | None = None) -> list[Job]:
+def reference_cache_key(suite: Suite, seed: int) -> str:
+    """Folder name of a suite's cached reference episodes: the suite's name, first seed and a hash
+    of its file and of the reference agents' code (a changed suite or agent is a new folder)."""
+    digest = hashlib.sha256(Path(suite.source).read_bytes() if suite.source else suite.name.encode())
+    root = Path(__file__).resolve().parents[2]
+    for module in ("agents/keep_lane.py", "agents/random_agent.py", "agents/stand_still.py", "zoo/registry.py"):
+        path = root / module
+        if path.is_file():
+            digest.update(path.read_bytes())
+    return f"{suite.name}-seed{seed}-{digest.hexdigest()[:12]}"
+
+
+def plan_jobs(
+    agents: list[str],
+    suite: Suite,
+    episodes: int,
+    out_dir: Path,
+    seed: int | None = None,
+    *,
+    references: bool = True,
+    reference_cache: Path | None = None,
+    check: bool = True,
+) -> list[Job]:
+    """One job per (agent, scenario, episode); episode ``e`` of every scenario has seed
+    ``seed + e`` (``seed`` defaults to the suite's).
+
+    ``references``: add the :data:`REFERENCE_AGENTS` not already requested, with the same
+    scenarios, seeds and episodes. ``reference_cache``: a folder where reference episodes are
+    kept and reused when already there (keyed by :func:`reference_cache_key`; for repeated
+    evaluations during training; the logs do not depend on the agent under test). ``check``:
+    load every agent and refuse one whose action space the suite does not host
+    (:func:`check_agents`) before any job exists."""
     base = suite.seed if seed is None else seed
+    out_dir = Path(out_dir)
+    agents = list(agents)
+    extra = [a for a in REFERENCE_AGENTS if a not in agents] if references else []
+    if check:
+        check_agents(agents + extra, suite)
+    cache = Path(reference_cache) / reference_cache_key(suite, base) if reference_cache is not None else None
     jobs = []
-    for agent in agents:
+    for agent in agents + extra:
+        reuse = cache is not None and agent in REFERENCE_AGENTS
+        root = cache if reuse else out_dir / "logs"
         for i, scenario in enumerate(suite.scenarios):
             for episode in range(episodes):
-                path = out_dir / "logs" / agent_label(agent) / scenario.name / f"episode_{episode:03d}.npz"
-                jobs.append(Job(agent, suite.source, i, episode, base + episode, str(path)))
+                path = root / agent_label(agent) / scenario.name / f"episode_{episode:03d}.npz"
+                jobs.append(Job(agent, suite.source, i, episode, base + episode, str(path), reuse))
     return jobs
 
 
@@ -147,9 +306,25 @@ def run_jobs(jobs: list[Job], workers: int = 1, progress: bool = True, ray_addre
 
 
 def run_episode_guarded(job: Job) -> dict:
-    """``run_episode`` that turns a crash of the episode itself into a recorded failure."""
+    """``run_episode`` that turns a crash of the episode itself into a recorded failure (and
+    reuses a cached log for a job marked ``reuse``)."""
+    if job.reuse and Path(job.log_path).is_file():
+        from smarts.benchmark.metrics import read_episode
+
+        try:
+            log = read_episode(job.log_path)
+        except Exception:
+            pass  # unreadable: run it again
+        else:
+            if log.seed == job.seed and log.episode == job.episode:
+                return _summary(job, log.scenario, log.failure, log.info)
     try:
         return run_episode(job)
     except Exception as err:
-        return {"agent": job.agent, "episode": job.episode, "failure": f"{type(err).__name__}: {err}",
-                "log": None, "traceback": traceback.format_exc()}  # fmt: skip
+        scenario = None
+        try:
+            scenario = load_suite(job.suite_source).scenarios[job.scenario_index].name
+        except Exception:
+            pass
+        return {"agent": job.agent, "scenario": scenario, "episode": job.episode, "seed": job.seed,
+                "failure": f"{type(err).__name__}: {err}", "log": None, "traceback": traceback.format_exc()}  # fmt: skip

@@ -4,7 +4,11 @@ A suite file (``configs/benchmark/<name>.yaml``) holds ``name``, ``task`` (colla
 adaptive), ``episodes`` and ``seed`` defaults, and ``scenarios``: each with ``name``,
 ``difficulty`` (easy | medium | hard), ``time_limit`` (s), an inline ``scenario`` spec (the schema
 of the scenario library) and, for adaptive tasks, ``follow`` (mission agent -> lead vehicle id).
-Errors name the file and the field.
+An optional ``action_spaces`` lists the simulator action spaces the suite hosts (default: the
+benchmark's three, ``relative_target_pose``, ``target_pose`` and ``continuous``; ``lane`` is a
+different kinematic vehicle model and is hosted only where a suite says so). The runner drives
+every learning agent of a scenario in the benchmarked policy's own action space and refuses a
+policy whose space the suite does not host. Errors name the file and the field.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from pathlib import Path
 import yaml
 
 from smarts.scenario import ScenarioError, ScenarioSpec
+from smarts.scenario.spec import ACTION_SPACES
 
 SUITES_DIR = Path(__file__).resolve().parents[2] / "configs" / "benchmark"
 TASKS = ("collaborative", "adaptive")
@@ -26,6 +31,8 @@ TERMINATE_ON = {
     "adaptive": ["collision", "off_road", "max_steps"],
 }
 """Events that end a mission vehicle's episode, by task (a scenario may set its own)."""
+DEFAULT_ACTION_SPACES = ("relative_target_pose", "target_pose", "continuous")
+"""The benchmark's action spaces, hosted by every suite that does not list its own."""
 
 
 @dataclass
@@ -45,6 +52,8 @@ class Suite:
     seed: int
     scenarios: list[SuiteScenario]
     source: str = ""
+    action_spaces: tuple[str, ...] = DEFAULT_ACTION_SPACES
+    """Simulator action spaces a benchmarked policy may act in on this suite."""
 
 
 def suite_names() -> list[str]:
@@ -74,7 +83,7 @@ def _read_suite(data, source: str) -> Suite:
 
     if not isinstance(data, dict):
         raise ScenarioError(f"{source}: expected a mapping with name, task and scenarios")
-    allowed = {"name", "task", "episodes", "seed", "scenarios", "vehicle_types"}
+    allowed = {"name", "task", "episodes", "seed", "scenarios", "vehicle_types", "action_spaces"}
     for key in data:
         if key not in allowed:
             raise fail(str(key), f"unknown field; allowed: {', '.join(sorted(allowed))}")
@@ -87,6 +96,14 @@ def _read_suite(data, source: str) -> Suite:
     seed = data.get("seed", 0)
     if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
         raise fail("seed", f"expected a non-negative integer, got {seed!r}")
+    spaces = data.get("action_spaces", list(DEFAULT_ACTION_SPACES))
+    if (
+        not isinstance(spaces, list)
+        or not spaces
+        or any(sp not in ACTION_SPACES for sp in spaces)
+        or len(set(spaces)) != len(spaces)
+    ):
+        raise fail("action_spaces", f"expected a non-empty list of distinct names from {', '.join(ACTION_SPACES)}, got {spaces!r}")
     items = data.get("scenarios")
     if not isinstance(items, list) or not items:
         raise fail("scenarios", "expected a non-empty list")
@@ -137,4 +154,4 @@ def _read_suite(data, source: str) -> Suite:
             ]  # fmt: skip
             spec = dataclasses.replace(spec, agents=agents)
         scenarios.append(SuiteScenario(name, difficulty, float(limit), spec, dict(follow)))
-    return Suite(str(data.get("name", Path(source).stem)), task, episodes, seed, scenarios, source)
+    return Suite(str(data.get("name", Path(source).stem)), task, episodes, seed, scenarios, source, tuple(spaces))

@@ -1,12 +1,25 @@
 """Benchmark suites, the runner and the report, end to end on real scenarios."""
 
+import dataclasses
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import zoo.registry
 from smarts.benchmark.metrics import read_episode
+from smarts.benchmark.report import write_report
+from smarts.benchmark.runner import (
+    REFERENCE_AGENTS,
+    AgentSetupError,
+    PolicySetup,
+    build_env,
+    load_policy,
+    plan_jobs,
+    policy_setup,
+    run_jobs,
+)
 from smarts.benchmark.suites import load_suite
 from smarts.scenario import ScenarioError
 from train.__main__ import main
@@ -58,15 +71,20 @@ def test_runner_writes_logs_results_report_plots_and_tensorboard(tmp_path, capsy
     assert _run(tmp_path / "a", "--agent", "zoo:keep-lane", "--agent", "zoo:random") == 0
     out = tmp_path / "a"
     logs = sorted((out / "logs").rglob("*.npz"))
-    assert len(logs) == 2 * 2 * 2  # agents x scenarios x episodes
+    assert len(logs) == 3 * 2 * 2  # agents (stand-still added as a reference) x scenarios x episodes
     log = read_episode(logs[0])
     assert log.task == "collaborative" and log.agents
+    assert log.info["action_space"] == "relative_target_pose" and log.info["controller"] == "direct"
     results = json.loads((out / "results.json").read_text())
     keep, rand = (results["agents"][a]["scores"]["overall"] for a in ("zoo:keep-lane", "zoo:random"))
     assert 0.0 <= rand["S_bench"] < keep["S_bench"] <= 1.0
+    assert results["references"] == ["zoo:stand-still"]
+    assert results["seeds"] == {"t1_left": {"0": 7, "1": 8}, "t2_straight_traffic": {"0": 7, "1": 8}}
     report = (out / "report.md").read_text()
-    assert "| zoo:keep-lane |" in report and "S_bench" in report
-    assert (out / "results.csv").read_text().count("overall") == 2
+    assert "| zoo:keep-lane (reference) | relative_target_pose | direct |" in report and "S_bench" in report
+    assert "| zoo:stand-still (reference) |" in report and "bootstrap" in report
+    assert "| t1_left | easy | 4 | 0=7, 1=8 | none |" in report
+    assert (out / "results.csv").read_text().count("overall") == 3
     assert (out / "plots" / "metric_S_bench.png").stat().st_size > 1000
     assert (out / "plots" / "trajectories_t1_left.png").stat().st_size > 1000
     assert list((out / "tensorboard").rglob("events.out.tfevents.*"))
@@ -99,3 +117,83 @@ def test_unknown_agent_or_suite_is_a_clear_cli_error(tmp_path, capsys):
     assert "unknown agent locator 'zoo:nobody'" in capsys.readouterr().err
     assert main(["benchmark", "--suite", "nonexistent", "--quiet", "--out", str(tmp_path)]) == 2
     assert "unknown benchmark suite" in capsys.readouterr().err
+
+
+@pytest.fixture
+def space_agents(monkeypatch):
+    for name, cls in (("throttle", "ThrottlePolicy"), ("lane-model", "LanePolicy"),
+                      ("extended-ego", "ExtendedEgoPolicy"), ("bad-controller", "BadControllerPolicy")):  # fmt: skip
+        monkeypatch.setitem(zoo.registry.ZOO, name, ("tests.benchmark.space_agents", cls, ""))
+
+
+def test_a_continuous_policy_drives_a_continuous_vehicle(tmp_path, space_agents):
+    suite = load_suite(TINY)
+    setup = policy_setup(load_policy("zoo:throttle"), "zoo:throttle")
+    assert setup == PolicySetup("continuous", "direct", None)
+    env = build_env(suite.scenarios[1], setup)
+    try:
+        assert [a.action_space for a in env.scenario.agents] == ["continuous", "continuous"]
+        assert env.action_space("agent_0").shape == (3,)
+    finally:
+        env.close()
+    jobs = plan_jobs(["zoo:throttle"], suite, 1, tmp_path, references=False)
+    assert [j.agent for j in jobs] == ["zoo:throttle"] * 2
+    results = run_jobs(jobs, workers=1, progress=False)
+    assert [r["failure"] for r in results] == [None, None]
+    assert {(r["action_space"], r["controller"]) for r in results} == {("continuous", "direct")}
+    log = read_episode(results[1]["log"])
+    assert log.info["action_space"] == "continuous" and log.info["agent"] == "zoo:throttle"
+    trace = log.agents["agent_0"]
+    # Throttle 0.6 on the pybullet car speeds it up from its 8 m/s start; read as a relative pose
+    # (0.6 m forward per 0.1 s step) the same numbers would brake it towards 6 m/s.
+    assert trace.speed[-1] > 8.5 and (np.diff(trace.speed) > 0).mean() > 0.8
+
+
+def test_a_policy_in_an_action_space_the_suite_does_not_host_is_refused_before_any_episode(tmp_path, capsys, space_agents):
+    assert _run(tmp_path / "a", "--agent", "zoo:lane-model") == 2
+    err = capsys.readouterr().err
+    assert "agent 'zoo:lane-model' acts in action space 'lane'" in err
+    assert "hosted: relative_target_pose, target_pose, continuous" in err
+    assert not (tmp_path / "a").exists()  # no episode ran
+    suite = load_suite(TINY)
+    narrow = dataclasses.replace(suite, action_spaces=("relative_target_pose",))
+    with pytest.raises(AgentSetupError, match=r"'continuous' .*hosted: relative_target_pose$"):
+        plan_jobs(["zoo:throttle"], narrow, 1, tmp_path / "b")
+    with pytest.raises(AgentSetupError, match="controller 'telepathy'"):
+        plan_jobs(["zoo:bad-controller"], suite, 1, tmp_path / "b")
+    # A suite may host the lane model by saying so.
+    lane_suite = tmp_path / "lane.yaml"
+    lane_suite.write_text(Path(TINY).read_text().replace("episodes: 2", "episodes: 2\naction_spaces: [lane]"))
+    assert load_suite(lane_suite).action_spaces == ("lane",)
+    assert len(plan_jobs(["zoo:lane-model"], load_suite(lane_suite), 1, tmp_path / "c", references=False)) == 2
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(Path(TINY).read_text().replace("episodes: 2", "episodes: 2\naction_spaces: [warp]"))
+    with pytest.raises(ScenarioError, match="bad.yaml: action_spaces"):
+        load_suite(bad)
+
+
+def test_the_runner_observes_with_the_policy_interface(tmp_path, space_agents):
+    jobs = plan_jobs(["zoo:extended-ego"], load_suite(TINY), 1, tmp_path, references=False)
+    results = run_jobs(jobs, workers=1, progress=False)
+    assert [r["failure"] for r in results] == [None, None]
+    assert read_episode(results[0]["log"]).info["interface"] == {"ego": {"extended": True}}
+
+
+def test_reference_agents_are_added_and_can_be_cached(tmp_path):
+    suite = load_suite(TINY)
+    cache = tmp_path / "cache"
+    jobs = plan_jobs(["zoo:keep-lane"], suite, 1, tmp_path / "a", reference_cache=cache)
+    assert [j.agent for j in jobs[::2]] == list(REFERENCE_AGENTS)
+    assert [j.seed for j in jobs] == [7] * 6
+    cached = [Path(j.log_path) for j in jobs if j.reuse]
+    assert len(cached) == 6 and all(cache in p.parents for p in cached)  # every reference agent's episodes
+    first = run_jobs(jobs, workers=1, progress=False)
+    stamps = [p.stat().st_mtime_ns for p in cached]
+    again = run_jobs(plan_jobs(["zoo:keep-lane"], suite, 1, tmp_path / "b", reference_cache=cache), workers=1, progress=False)
+    assert [p.stat().st_mtime_ns for p in cached] == stamps  # reused, not re-run
+    assert [r["log"] for r in again] == [str(p) for p in cached]
+    write_report(tmp_path / "b", suite, ["zoo:keep-lane"], again)
+    doc = json.loads((tmp_path / "b" / "results.json").read_text())
+    assert doc["references"] == ["zoo:random", "zoo:stand-still"]
+    assert all(doc["agents"][a]["reference"] for a in REFERENCE_AGENTS)
+    assert first[0]["failure"] is None
