@@ -28,6 +28,7 @@ def test_zoo_cards_exist_for_checkpoints():
             assert (registry.ZOO_DIR / target).is_file()
             card = registry.ZOO_DIR / "cards" / f"{name}.md"
             assert "S_bench" in card.read_text() and Path(target).stem == name
+    assert "S_bench" in (registry.ZOO_DIR / "cards" / "stand-still.md").read_text()  # the reference floor
 
 
 def test_unknown_locator_lists_the_known_ones():
