@@ -19,6 +19,7 @@ from smarts.benchmark.runner import (
     plan_jobs,
     policy_setup,
     run_jobs,
+    scenario_for,
 )
 from smarts.benchmark.suites import load_suite
 from smarts.scenario import ScenarioError
@@ -197,3 +198,27 @@ def test_reference_agents_are_added_and_can_be_cached(tmp_path):
     assert doc["references"] == ["zoo:random", "zoo:stand-still"]
     assert all(doc["agents"][a]["reference"] for a in REFERENCE_AGENTS)
     assert first[0]["failure"] is None
+
+
+def test_only_learning_agents_take_the_policy_action_space_and_controller():
+    spec = load_suite(TINY).scenarios[1].spec
+    social = dataclasses.replace(spec.agents[1], policy="zoo:keep-lane")
+    spec = dataclasses.replace(spec, agents=[spec.agents[0], social])
+    built = scenario_for(spec, PolicySetup("target_pose", "lane_relative"))
+    assert (built.agents[0].action_space, built.agents[0].controller) == ("target_pose", "lane_relative")
+    assert (built.agents[1].action_space, built.agents[1].controller) == ("relative_target_pose", "direct")
+    assert spec.agents[0].action_space == "relative_target_pose"  # the suite's spec is not changed
+
+
+def test_a_checkpoint_evaluates_like_train_ppo_does(tmp_path):
+    # The call sequence of train.ppo.evaluate_into: plan_jobs, run_jobs, write_report.
+    frozen = tmp_path / "policy.pt"
+    frozen.write_bytes((Path(zoo.registry.ZOO_DIR) / "checkpoints" / "platoon-c.pt").read_bytes())
+    suite = load_suite(TINY)
+    jobs = plan_jobs([str(frozen)], suite, 1, tmp_path)
+    results = run_jobs(jobs, workers=2, progress=False)
+    write_report(tmp_path, suite, [str(frozen)], results)
+    doc = json.loads((tmp_path / "results.json").read_text())
+    mine = doc["agents"][str(frozen)]
+    assert mine["action_space"] == "continuous" and mine["scores"]["overall"]["S_bench"] >= 0.0
+    assert doc["references"] == list(REFERENCE_AGENTS)
