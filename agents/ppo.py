@@ -62,10 +62,12 @@ def mlp(sizes: list[int], out: int, final_gain: float = 1.0) -> nn.Sequential:
 class Actor(nn.Module):
     """Flat observation -> (pre-squash mean, relative spread) of the policy's Gaussian."""
 
-    def __init__(self, obs_size: int, action_size: int, hidden: tuple[int, ...] = (128, 128)):
+    def __init__(
+        self, obs_size: int, action_size: int, hidden: tuple[int, ...] = (128, 128), init_log_std: float = -0.5
+    ):
         super().__init__()
         self.net = mlp([obs_size, *hidden], action_size, final_gain=0.01)
-        self.log_std = nn.Parameter(torch.full((action_size,), -0.5))
+        self.log_std = nn.Parameter(torch.full((action_size,), float(init_log_std)))
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         loc = self.net(x)
@@ -83,14 +85,24 @@ class Critic(nn.Module):
 
 
 class ObsNormalizer(nn.Module):
-    """Running mean/std of the flat observation (updated during training, frozen at test)."""
+    """Running mean/std of the flat observation (updated during training, frozen at test).
 
-    def __init__(self, size: int, clip: float = 10.0):
+    Flags and masks (``raw``) pass through unchanged: normalising a 0/1 feature that is almost
+    always 0 turns its rare 1 into a huge input. Every other feature is divided by its standard
+    deviation, but by at least ``std_floor`` (in the feature's own units), so near-constant
+    features (lane width, vehicle length) cannot blow up to the clip when they do vary. (torchrl's
+    ``ObservationNorm``/``VecNorm`` transforms live in the env; this one lives in the policy, so a
+    checkpoint carries its statistics to evaluation and the benchmark.)
+    """
+
+    def __init__(self, size: int, clip: float = 5.0, std_floor: float = 0.1, raw: torch.Tensor | None = None):
         super().__init__()
         self.register_buffer("mean", torch.zeros(size))
         self.register_buffer("var", torch.ones(size))
         self.register_buffer("count", torch.tensor(1e-4))
-        self.clip = clip
+        self.register_buffer("raw", torch.zeros(size) if raw is None else torch.as_tensor(raw, dtype=torch.float32))
+        self.register_buffer("std_floor", torch.tensor(float(std_floor)))
+        self.register_buffer("clip_value", torch.tensor(float(clip)))
 
     @torch.no_grad()
     def update(self, x: torch.Tensor) -> None:
@@ -103,20 +115,53 @@ class ObsNormalizer(nn.Module):
         self.count = total
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return ((x - self.mean) / torch.sqrt(self.var + 1e-8)).clamp(-self.clip, self.clip)
+        std = torch.sqrt(self.var + 1e-8).clamp(min=float(self.std_floor))
+        scaled = ((x - self.mean) / std).clamp(-float(self.clip_value), float(self.clip_value))
+        return torch.where(self.raw > 0, x, scaled)
+
+    def clipped_fraction(self, x: torch.Tensor) -> float:
+        """Share of the (non-raw) normalised inputs that sit at the clip: a health check."""
+        std = torch.sqrt(self.var + 1e-8).clamp(min=float(self.std_floor))
+        at_clip = ((x - self.mean) / std).abs() >= float(self.clip_value)
+        keep = self.raw <= 0
+        return float(at_clip[..., keep].float().mean()) if bool(keep.any()) else 0.0
+
+    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
+        """Checkpoints written before flags and the std floor existed normalise every feature."""
+        state = dict(state_dict)
+        if "raw" not in state:
+            state["raw"] = torch.zeros_like(state["mean"])
+            state["std_floor"] = torch.tensor(0.0)
+            state["clip_value"] = torch.tensor(10.0)
+        return super().load_state_dict(state, strict=strict, assign=assign)
 
 
-def scale_action(pre_tanh: torch.Tensor, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:
-    """The actor's output squashed onto [low, high]: the mean of the policy's Gaussian (training
-    samples around it) and the deterministic action."""
-    return low + (torch.tanh(pre_tanh) + 1.0) * 0.5 * (high - low)
+MEAN_MAPS = ("linear", "tanh")
+"""How the actor's output becomes the action mean: ``linear`` maps [-1, 1] onto [low, high] and the
+deterministic action is clipped to the box; ``tanh`` (checkpoints of earlier versions) squashes it."""
+
+
+def scale_action(pre: torch.Tensor, low: torch.Tensor, high: torch.Tensor, mean_map: str = "linear") -> torch.Tensor:
+    """The mean of the policy's Gaussian in action units: the actor's output mapped onto [low, high].
+
+    ``linear`` (the default) leaves it unbounded, so a mean pushed past the box still gets
+    gradients and can come back (a tanh squash saturates there and sticks); the simulator clips
+    the actions it receives."""
+    if mean_map == "tanh":
+        pre = torch.tanh(pre)
+    return low + (pre + 1.0) * 0.5 * (high - low)
 
 
 def save_checkpoint(path: Path, *, actor: Actor, critic: Critic, normalizer: ObsNormalizer,
                     layout: ObservationLayout, low: np.ndarray, high: np.ndarray,
                     action_space: str, config: dict, step: int, metrics: dict,
-                    optimizer_state: dict | None = None) -> Path:  # fmt: skip
-    """Write tensors + JSON-able metadata atomically (``weights_only`` loadable)."""
+                    optimizer_state: dict | None = None, controller: str = "direct",
+                    interface: dict | None = None) -> Path:  # fmt: skip
+    """Write tensors + JSON-able metadata atomically (``weights_only`` loadable).
+
+    ``action_space`` and ``controller`` say how the actions drive a vehicle and ``interface`` (the
+    plain-data form of ``smarts.sensors.interface.AgentInterface``) which observation the policy
+    reads, so evaluation and the benchmark build the env this policy was trained in."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     blob = {
@@ -125,7 +170,9 @@ def save_checkpoint(path: Path, *, actor: Actor, critic: Critic, normalizer: Obs
         "critic": critic.state_dict(),
         "normalizer": normalizer.state_dict(),
         "layout": {"keys": list(layout.keys), "shapes": [list(s) for s in layout.shapes]},
-        "action": {"space": action_space, "low": [float(v) for v in low], "high": [float(v) for v in high]},
+        "action": {"space": action_space, "controller": controller, "mean": "linear",
+                   "low": [float(v) for v in low], "high": [float(v) for v in high]},
+        "interface": interface,
         "hidden": list(config.get("hidden", (128, 128))),
         "config": config,
         "step": int(step),
@@ -184,6 +231,16 @@ class PPOPolicy:
         layout = ObservationLayout(tuple(blob["layout"]["keys"]), tuple(tuple(s) for s in blob["layout"]["shapes"]))
         self.layout = layout
         self.action_space = blob["action"]["space"]
+        self.controller = blob["action"].get("controller", "direct")
+        self.mean_map = blob["action"].get("mean", "tanh")
+        self.interface = None
+        if blob.get("interface") is not None:
+            from smarts.sensors.interface import InterfaceError, interface_from_dict
+
+            try:
+                self.interface = interface_from_dict(blob["interface"])
+            except InterfaceError as err:
+                raise CheckpointError(f"{source}: recorded observation interface is invalid ({err})") from None
         self.low = torch.tensor(blob["action"]["low"], dtype=torch.float32)
         self.high = torch.tensor(blob["action"]["high"], dtype=torch.float32)
         self.actor = Actor(layout.size, len(self.low), tuple(blob["hidden"]))
@@ -210,4 +267,5 @@ class PPOPolicy:
     def act(self, obs: dict) -> np.ndarray:
         x = self.normalizer(self.layout.flatten(obs))
         loc, _ = self.actor(x)
-        return scale_action(loc, self.low, self.high).numpy()
+        action = scale_action(loc, self.low, self.high, self.mean_map)
+        return torch.minimum(torch.maximum(action, self.low), self.high).numpy()

@@ -43,20 +43,23 @@ def test_sb3_training_exports_a_checkpoint_the_benchmark_can_load(tmp_path):
     assert main(args) == 0
     assert list((out / "tensorboard").rglob("events.out.tfevents.*"))
     policy = load_policy_file(out / "final.pt")  # weights_only load of the exported SB3 policy
-    import gymnasium
+    assert (policy.action_space, policy.controller) == ("relative_target_pose", "lane_relative")
+    assert policy.interface is not None and policy.interface.lead
+    from smarts.env import DrivingParallelEnv
+    from train.ppo import training_spec
 
-    import smarts.env  # noqa: F401
-
-    env = gymnasium.make("smarts/Driving-v0", scenario="straight_2lane_cruise")
+    env = DrivingParallelEnv(training_spec("adaptive:a01_straight_free", "rtp", "lane_relative"),
+                             observation=policy.interface)  # fmt: skip
     obs, _ = env.reset(seed=0)
-    action = policy.act({k: v[None] for k, v in obs.items()})
-    assert action.shape == (1, 3) and env.action_space.contains(action[0].astype("float32"))
+    action = policy.act({k: v[None] for k, v in obs["agent_0"].items()})
+    assert action.shape == (1, 2) and env.action_space("agent_0").contains(action[0].astype("float32"))
 
 
 def test_resume_continues_from_the_checkpoint_step(tmp_path):
     out = tmp_path / "run"
     base = ["ppo", "--task", "platoon", "--frames-per-batch", "128", "--minibatch-size", "64", "--epochs", "1",
-            "--envs", "2", "--eval-episodes", "0", "--out-dir", str(out), "--quiet"]  # fmt: skip
+            "--envs", "2", "--scenarios", "adaptive:a01_straight_free", "--eval-episodes", "0", "--out-dir", str(out),
+            "--quiet"]  # fmt: skip
     assert main([*base, "--total-steps", "128"]) == 0
     first = torch.load(out / "final.pt", weights_only=True)
     assert main([*base, "--total-steps", "256", "--resume", str(out / "final.pt")]) == 0
@@ -66,3 +69,40 @@ def test_resume_continues_from_the_checkpoint_step(tmp_path):
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"junk")
     assert main([*base, "--total-steps", "256", "--resume", str(bad)]) == 2
+
+
+@pytest.mark.parametrize(
+    "flags, what",
+    [
+        (["--controller", "direct"], "controller"),
+        (["--interface", "{lead: false}"], "observation interface"),
+        (["--hidden", "32,32"], "hidden layers"),
+    ],
+)
+def test_resume_refuses_a_checkpoint_of_another_setup_before_touching_the_run(tmp_path, capsys, flags, what):
+    first = tmp_path / "first"
+    base = ["ppo", "--task", "platoon", "--frames-per-batch", "64", "--minibatch-size", "64", "--epochs", "1",
+            "--envs", "1", "--total-steps", "64", "--eval-episodes", "0", "--quiet"]  # fmt: skip
+    assert main([*base, "--out-dir", str(first)]) == 0
+    second = tmp_path / "second"
+    args = [*base, "--total-steps", "128", "--out-dir", str(second), "--resume", str(first / "final.pt"), *flags]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert f"trained with {what}" in err and "final.pt" in err
+    assert not second.exists()  # refused before the run folder (or any env) was made
+
+
+def test_training_config_takes_every_suite_scenario_and_the_task_reward():
+    from train.config import load_config
+    from train.ppo import scenario_names
+
+    cfg = load_config("platoon")
+    names = scenario_names(cfg.scenarios)
+    assert len(names) == 11 and names[0] == "adaptive:a01_straight_free"
+    assert cfg.controller == "lane_relative" and cfg.observation_interface().lead
+    assert cfg.reward_weights().task == "platoon"
+    assert load_config("drive").reward_weights().task == "drive"
+    from train.config import ConfigError
+
+    with pytest.raises(ConfigError, match="reward: unknown reward terms"):
+        load_config("platoon", overrides={"reward": "{speed_bonus: 1}"})

@@ -18,6 +18,7 @@ CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs" / "train"
 TASKS = ("platoon", "drive")
 ACTION_SPACES = {"rtp": "relative_target_pose", "continuous": "continuous"}
 LIBS = ("torchrl", "sb3")
+CONTROLLERS = ("direct", "lane_relative")
 
 
 class ConfigError(ValueError):
@@ -28,8 +29,17 @@ class ConfigError(ValueError):
 class TrainConfig:
     task: str = "platoon"
     scenarios: list[str] = field(default_factory=list)
-    """``suite:scenario`` names (e.g. ``adaptive:a01_straight_free``) or library scenario names."""
+    """``suite:scenario`` names (e.g. ``adaptive:a01_straight_free``), ``suite:*`` for every
+    scenario of a suite, or library scenario names."""
     action_space: str = "rtp"
+    controller: str = "lane_relative"
+    """``lane_relative``: the policy outputs (acceleration, lane change) commands that the env turns
+    into the action space's actions (``smarts.dynamics.lane_relative``); ``direct``: raw actions."""
+    interface: dict = field(default_factory=dict)
+    """The observation interface (``smarts.sensors.interface`` fields, e.g. ``{lead: true}``)."""
+    reward: dict = field(default_factory=dict)
+    """Task reward weights (``smarts.env.task_rewards.RewardWeights`` fields); ``task`` defaults
+    to this config's task."""
     lib: str = "torchrl"
     total_steps: int = 60_000
     envs: int = 16
@@ -47,10 +57,21 @@ class TrainConfig:
     critic_coeff: float = 0.5
     max_grad_norm: float = 0.5
     hidden: list[int] = field(default_factory=lambda: [128, 128])
+    init_log_std: float = -0.5
+    """Initial log standard deviation of the Gaussian policy (per action component)."""
+    obs_clip: float = 5.0
+    obs_std_floor: float = 0.1
+    """Normalised inputs are clipped to +-obs_clip; no feature is divided by less than this."""
     eval_every: int = 0
-    """Env steps between benchmark evaluations (0: only at the end)."""
+    """Env steps between benchmark evaluations on held-out seeds (0: only at the end); best.pt is
+    the checkpoint with the highest S_bench among them."""
     eval_episodes: int = 1
-    """Episodes per scenario of the final benchmark evaluation (0: none)."""
+    """Episodes per scenario of each benchmark evaluation (0: none)."""
+    eval_seed: int = 3000
+    """First seed of the evaluations; training episodes use seeds from 100_000 up, and the suites'
+    own benchmark seeds (1000, 2000) are neither, so selection and the final score are held out."""
+    torch_threads: int = 1
+    """torch threads per process (one is fastest for these small networks on a loaded machine)."""
     out: str = "runs/train"
     ray_address: str | None = None
 
@@ -62,6 +83,16 @@ class TrainConfig:
             raise fail("task", f"expected one of {', '.join(TASKS)}, got {self.task!r}")
         if self.action_space not in ACTION_SPACES:
             raise fail("action_space", f"expected one of {', '.join(ACTION_SPACES)}, got {self.action_space!r}")
+        if self.controller not in CONTROLLERS:
+            raise fail("controller", f"expected one of {', '.join(CONTROLLERS)}, got {self.controller!r}")
+        try:
+            self.observation_interface()
+        except ValueError as err:
+            raise fail("interface", str(err)) from None
+        try:
+            self.reward_weights()
+        except (TypeError, ValueError) as err:
+            raise fail("reward", str(err)) from None
         if self.lib not in LIBS:
             raise fail("lib", f"expected one of {', '.join(LIBS)}, got {self.lib!r}")
         for name in ("total_steps", "envs", "workers", "frames_per_batch", "minibatch_size", "epochs"):
@@ -77,7 +108,10 @@ class TrainConfig:
         for name in ("gamma", "gae_lambda"):
             if not 0 < getattr(self, name) <= 1:
                 raise fail(name, f"expected a number in (0, 1], got {getattr(self, name)}")
-        for name in ("entropy_coeff", "critic_coeff", "eval_every", "eval_episodes", "seed"):
+        for name in ("obs_clip", "obs_std_floor", "torch_threads"):
+            if not getattr(self, name) > 0:
+                raise fail(name, f"expected a positive number, got {getattr(self, name)}")
+        for name in ("entropy_coeff", "critic_coeff", "eval_every", "eval_episodes", "seed", "eval_seed"):
             if getattr(self, name) < 0:
                 raise fail(name, f"expected a non-negative number, got {getattr(self, name)}")
         if not self.hidden or any(h < 1 for h in self.hidden):
@@ -86,11 +120,33 @@ class TrainConfig:
             raise fail("scenarios", "expected at least one training scenario")
         return self
 
+    def observation_interface(self):
+        """The ``AgentInterface`` of ``interface``."""
+        from smarts.sensors.interface import interface_from_dict
+
+        return interface_from_dict(self.interface)
+
+    def reward_weights(self):
+        """The ``RewardWeights`` of ``reward`` (the task's reward unless ``reward.task`` says)."""
+        from smarts.env.task_rewards import RewardWeights
+
+        known = {f.name for f in fields(RewardWeights)}
+        unknown = sorted(set(self.reward) - known)
+        if unknown:
+            raise ValueError(f"unknown reward terms {unknown}; known: {', '.join(sorted(known))}")
+        return RewardWeights(**{"task": self.task, **self.reward})
+
 
 def _coerce(name: str, value: Any, kind: Any, source: str) -> Any:
     origin = getattr(kind, "__origin__", None)
     text = str(kind)
     try:
+        if text == "dict":
+            if isinstance(value, str):  # from the command line: a YAML/JSON mapping
+                value = yaml.safe_load(value) or {}
+            if not isinstance(value, dict):
+                raise ConfigError(f"{source}: {name}: expected a mapping, got {value!r}")
+            return value
         if isinstance(value, str) and ("int" in text and "list" not in text):
             return int(value)
         if isinstance(value, str) and text == "float":
@@ -100,7 +156,7 @@ def _coerce(name: str, value: Any, kind: Any, source: str) -> Any:
             return [int(v) for v in items] if "int" in text else items
         if text == "float" and isinstance(value, int) and not isinstance(value, bool):
             return float(value)
-    except ValueError:
+    except (ValueError, yaml.YAMLError):
         raise ConfigError(f"{source}: {name}: expected {text}, got {value!r}") from None
     expected = {"int": int, "float": float, "str": str}.get(text)
     if expected is not None and (not isinstance(value, expected) or isinstance(value, bool)):

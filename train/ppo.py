@@ -2,17 +2,20 @@
 
 The whole algorithm in one readable loop:
 
-1. ``envs`` copies of the task's training scenarios run as one batched env (in ``workers``
-   processes when > 1); a ``Collector`` gathers ``frames_per_batch`` steps with the current
-   stochastic policy. With ``ray_address``, each of the ``workers`` batches is stepped by its own
-   collector running as a Ray actor instead.
-2. GAE computes advantages and value targets.
+1. ``envs`` copies of the task's training scenarios (every learning agent of every copy is one
+   slot, all driven by one shared policy) run as one batched env, in ``workers`` processes when
+   > 1; a ``Collector`` gathers ``frames_per_batch`` steps with the current stochastic policy.
+   With ``ray_address``, each of the ``workers`` batches is stepped by its own collector running
+   as a Ray actor instead.
+2. GAE computes advantages and value targets per slot trajectory; steps of slots that were
+   waiting for their scenario copy to restart (``valid`` false) are then dropped.
 3. ``epochs`` passes of minibatch updates of torchrl's ``ClipPPOLoss`` (clipped objective + value
    loss + entropy bonus, normalised advantages), Adam, gradient clipping; then the observation
    normaliser takes the batch's statistics for the next collection.
 4. TensorBoard: episode return/length, losses, entropy, KL, learning rate, env steps/s; a checkpoint
-   after every batch (``last.pt``) and on Ctrl-C; at the end, the benchmark suite of the task is
-   run on the final checkpoint and its PR/RC/Humanness/MTE|SFD/S_bench logged.
+   after every batch (``last.pt``) and on Ctrl-C. Every ``eval_every`` steps the task's benchmark
+   suite runs on the checkpoint with held-out seeds; ``best.pt`` is the one with the highest
+   S_bench. At the end ``final.pt`` is evaluated the same way.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from torch import nn
 from torchrl.collectors import Collector
 from torchrl.data import LazyTensorStorage, ReplayBuffer
 from torchrl.data.replay_buffers import SamplerWithoutReplacement
-from torchrl.envs import Compose, ParallelEnv, RewardSum, StepCounter, TransformedEnv
+from torchrl.envs import ParallelEnv, RewardSum, TransformedEnv
 from torchrl.modules import IndependentNormal, ProbabilisticActor, ValueOperator
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
@@ -46,14 +49,32 @@ from agents.ppo import (
     save_checkpoint,
     scale_action,
 )
+from smarts.env.task_rewards import reward_factory
 from smarts.env.torchrl_env import SmartsBatchedEnv
 from train.config import ACTION_SPACES, TrainConfig
 
 TASK_SUITE = {"platoon": "adaptive", "drive": "collaborative"}
+TRAIN_SEED_BASE = 100_000
+"""Training episodes use seeds from here up (``seed * 1_000_003`` further on); evaluation uses
+``eval_seed`` and the benchmark suites their own seeds, so neither is seen in training."""
 
 
-def training_spec(name: str, action_space: str):
-    """A scenario spec from ``suite:scenario`` or a library name, every agent on ``action_space``."""
+def scenario_names(names: list[str]) -> list[str]:
+    """``suite:*`` expanded to every scenario of that suite, in suite order."""
+    from smarts.benchmark.suites import load_suite
+
+    out = []
+    for name in names:
+        if name.endswith(":*"):
+            out += [f"{name[:-2]}:{s.name}" for s in load_suite(name[:-2]).scenarios]
+        else:
+            out.append(name)
+    return out
+
+
+def training_spec(name: str, action_space: str, controller: str = "direct"):
+    """A scenario spec from ``suite:scenario`` or a library name, every learning agent on
+    ``action_space`` driven through ``controller`` (social agents keep their own)."""
     from smarts.benchmark.suites import load_suite
     from smarts.scenario import load_scenario
 
@@ -66,31 +87,46 @@ def training_spec(name: str, action_space: str):
         spec = matches[0]
     else:
         spec = load_scenario(name)
-    agents = [dataclasses.replace(a, action_space=ACTION_SPACES[action_space]) for a in spec.agents]
+    agents = [
+        a if a.is_social else dataclasses.replace(a, action_space=ACTION_SPACES[action_space], controller=controller)
+        for a in spec.agents
+    ]
     return dataclasses.replace(spec, agents=agents)
+
+
+def training_specs(cfg: TrainConfig) -> list:
+    names = scenario_names(cfg.scenarios)
+    return [training_spec(names[i % len(names)], cfg.action_space, cfg.controller) for i in range(cfg.envs)]
+
+
+def env_options(cfg: TrainConfig) -> dict:
+    """What every training env copy gets besides its scenario: observation and task reward."""
+    return {"observation": cfg.observation_interface(), "reward_factory": reward_factory(cfg.reward_weights())}
 
 
 def make_env(cfg: TrainConfig) -> TransformedEnv:
     """``envs`` scenario copies (cycling through the task's scenarios) stepped as one batched env in
     this process, or, with ``workers`` > 1, that many such batches in worker processes (needed for
     SUMO traffic: one SUMO per process)."""
-    specs = [training_spec(cfg.scenarios[i % len(cfg.scenarios)], cfg.action_space) for i in range(cfg.envs)]
+    specs = training_specs(cfg)
     if any(s.traffic is not None and s.traffic.engine == "sumo" for s in specs) and cfg.workers < cfg.envs:
         raise ValueError("SUMO scenarios run one per process: set workers equal to envs")
+    options = env_options(cfg)
     if cfg.workers > 1:
         per = [specs[w :: cfg.workers] for w in range(cfg.workers)]
-        base = ParallelEnv(cfg.workers, [functools.partial(SmartsBatchedEnv, p) for p in per], mp_start_method="spawn")
+        base = ParallelEnv(cfg.workers, [functools.partial(SmartsBatchedEnv, p, **options) for p in per],
+                           mp_start_method="spawn")  # fmt: skip
     else:
-        base = SmartsBatchedEnv(specs)
-    env = TransformedEnv(base, Compose(RewardSum(), StepCounter()))
-    env.set_seed(cfg.seed)
+        base = SmartsBatchedEnv(specs, **options)
+    env = TransformedEnv(base, RewardSum())
+    env.set_seed(TRAIN_SEED_BASE + cfg.seed * 1_000_003)
     return env
 
 
-def transformed_batched_env(specs: list, seed: int) -> TransformedEnv:
+def transformed_batched_env(specs: list, seed: int, options: dict) -> TransformedEnv:
     """One batch of scenario copies with the episode statistics training reads; module-level so
     that ``functools.partial`` of it pickles to Ray actors."""
-    env = TransformedEnv(SmartsBatchedEnv(specs), Compose(RewardSum(), StepCounter()))
+    env = TransformedEnv(SmartsBatchedEnv(specs, **options), RewardSum())
     env.set_seed(seed)
     return env
 
@@ -100,10 +136,43 @@ def ray_env_factories(cfg: TrainConfig) -> list:
     if cfg.envs % cfg.workers or cfg.frames_per_batch % cfg.workers:
         raise ValueError(f"with ray_address, envs ({cfg.envs}) and frames_per_batch ({cfg.frames_per_batch}) "
                          f"must be multiples of workers ({cfg.workers})")  # fmt: skip
-    specs = [training_spec(cfg.scenarios[i % len(cfg.scenarios)], cfg.action_space) for i in range(cfg.envs)]
+    specs = training_specs(cfg)
     per = [specs[w :: cfg.workers] for w in range(cfg.workers)]
-    # Seeds spaced by the batch size, as the in-process batch seeds its copies seed, seed + 1, ...
-    return [functools.partial(transformed_batched_env, p, cfg.seed + w * len(p)) for w, p in enumerate(per)]
+    base = TRAIN_SEED_BASE + cfg.seed * 1_000_003
+    # Seeds spaced apart per collector so their copies never share an episode seed.
+    return [functools.partial(transformed_batched_env, p, base + w * 10_000_019, env_options(cfg))
+            for w, p in enumerate(per)]  # fmt: skip
+
+
+class RewardScaler:
+    """Divides rewards by a running standard deviation of the discounted return (per slot), so the
+    critic regresses targets of order one whatever the reward's scale (the usual PPO reward
+    normalisation; the logged episode returns stay in the reward's own units)."""
+
+    def __init__(self, gamma: float):
+        self.gamma = gamma
+        self.returns: torch.Tensor | None = None
+        self.mean, self.var, self.count = 0.0, 1.0, 1e-4
+
+    def __call__(self, data) -> None:
+        reward = data["next", "reward"]  # [slots, time, 1]
+        done = data["next", "done"].float()
+        valid = data["valid"].float()
+        if self.returns is None:
+            self.returns = torch.zeros(reward.shape[0], 1)
+        seen = []
+        for t in range(reward.shape[1]):
+            self.returns = self.returns * self.gamma * valid[:, t] + reward[:, t] * valid[:, t]
+            seen.append(self.returns[valid[:, t] > 0])
+            self.returns = self.returns * (1.0 - done[:, t])
+        batch = torch.cat(seen) if seen else torch.zeros(0)
+        if batch.numel() > 1:
+            b_mean, b_var, n = float(batch.mean()), float(batch.var(unbiased=False)), batch.numel()
+            delta, total = b_mean - self.mean, self.count + n
+            self.mean += delta * n / total
+            self.var = (self.var * self.count + b_var * n + delta**2 * self.count * n / total) / total
+            self.count = total
+        data["next", "reward"] = reward / max(self.var**0.5, 1e-4)
 
 
 class _FlatNormalised(nn.Module):
@@ -135,16 +204,38 @@ class _GaussianInActionUnits(nn.Module):
         return scale_action(pre, self.low, self.high), std * 0.5 * (self.high - self.low)
 
 
+def raw_features(layout: ObservationLayout, obs_spec) -> torch.Tensor:
+    """1 for the flat inputs the normaliser must pass unchanged: masks and 0/1 flags (entries
+    bounded to [0, 1], and the flag columns of ``lead`` and ``signal``)."""
+    from smarts.sensors.observation import LEAD_FEATURE_NAMES
+
+    flags = {"lead": ("present", "visible", "in_lane"), "signal": (0, 1, 2)}
+    parts = []
+    for key, shape in zip(layout.keys, layout.shapes):
+        size = int(np.prod(shape))
+        spec = obs_spec[key]
+        low, high = getattr(spec.space, "low", None), getattr(spec.space, "high", None)
+        bounded01 = low is not None and bool((low == 0).all()) and bool((high == 1).all())
+        mark = torch.full((size,), 1.0 if bounded01 else 0.0)
+        if key == "lead":
+            mark[[LEAD_FEATURE_NAMES.index(n) for n in flags["lead"]]] = 1.0
+        elif key == "signal":
+            mark[list(flags["signal"])] = 1.0
+        parts.append(mark)
+    return torch.cat(parts)
+
+
 def build_modules(env, cfg: TrainConfig):
     obs_spec = env.observation_spec["observation"]
     keys = tuple(sorted(obs_spec.keys()))
-    batch_dims = len(env.batch_size)  # [envs] in front when the env is batched
+    batch_dims = len(env.batch_size)  # [slots] in front when the env is batched
     layout = ObservationLayout(keys, tuple(tuple(obs_spec[k].shape[batch_dims:]) for k in keys))
     action_spec = env.action_spec
     low = action_spec.space.low.reshape(-1, action_spec.shape[-1])[0]
     high = action_spec.space.high.reshape(-1, action_spec.shape[-1])[0]
-    normalizer = ObsNormalizer(layout.size)
-    actor_net = Actor(layout.size, action_spec.shape[-1], tuple(cfg.hidden))
+    normalizer = ObsNormalizer(layout.size, clip=cfg.obs_clip, std_floor=cfg.obs_std_floor,
+                               raw=raw_features(layout, obs_spec))  # fmt: skip
+    actor_net = Actor(layout.size, action_spec.shape[-1], tuple(cfg.hidden), init_log_std=cfg.init_log_std)
     critic_net = Critic(layout.size, tuple(cfg.hidden))
     in_keys = [("observation", k) for k in layout.keys]
     head = _GaussianInActionUnits(actor_net, low, high)
@@ -160,6 +251,34 @@ def build_modules(env, cfg: TrainConfig):
     return layout, normalizer, actor_net, critic_net, actor, critic, low.numpy(), high.numpy()
 
 
+def check_resume(resume: Path, cfg: TrainConfig) -> dict:
+    """The checkpoint to resume from, refused (before any env is built or file written) when it
+    was trained for another action space, controller, observation or network."""
+    blob = load_checkpoint(resume)
+    mine = {
+        "action space": ACTION_SPACES[cfg.action_space],
+        "controller": cfg.controller,
+        "observation interface": _interface_dict(cfg),
+        "hidden layers": list(cfg.hidden),
+    }
+    theirs = {
+        "action space": blob["action"]["space"],
+        "controller": blob["action"].get("controller", "direct"),
+        "observation interface": blob.get("interface"),
+        "hidden layers": list(blob["hidden"]),
+    }
+    for what, value in mine.items():
+        if theirs[what] != value:
+            raise CheckpointError(f"{resume}: trained with {what} {theirs[what]!r}; this run uses {value!r}")
+    return blob
+
+
+def _interface_dict(cfg: TrainConfig) -> dict:
+    from smarts.sensors.interface import interface_to_dict
+
+    return interface_to_dict(cfg.observation_interface())
+
+
 def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | None = None) -> Path:
     """Train, log and checkpoint under ``out``; returns the final checkpoint path. ``resume``
     continues from a checkpoint (networks, observation statistics, optimiser, step count) up to
@@ -167,6 +286,8 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
     from rich.progress import Progress
     from torch.utils.tensorboard import SummaryWriter
 
+    torch.set_num_threads(cfg.torch_threads)
+    blob = check_resume(resume, cfg) if resume is not None else None
     torch.manual_seed(cfg.seed)
     np.random.seed(cfg.seed)
     out.mkdir(parents=True, exist_ok=True)
@@ -181,14 +302,14 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
     else:
         env = make_env(cfg)
     layout, normalizer, actor_net, critic_net, actor, critic, low, high = build_modules(env, cfg)
-    advantage = GAE(gamma=cfg.gamma, lmbda=cfg.gae_lambda, value_network=critic, average_gae=True)
+    advantage = GAE(gamma=cfg.gamma, lmbda=cfg.gae_lambda, value_network=critic, average_gae=False)
     loss_module = ClipPPOLoss(actor, critic, clip_epsilon=cfg.clip_epsilon, entropy_coeff=cfg.entropy_coeff,
-                              critic_coeff=cfg.critic_coeff, loss_critic_type="smooth_l1",
+                              critic_coeff=cfg.critic_coeff, loss_critic_type="l2",
                               normalize_advantage=True)  # fmt: skip
+    scale_rewards = RewardScaler(cfg.gamma)
     optimizer = torch.optim.Adam(loss_module.parameters(), lr=cfg.lr)
     step = 0
-    if resume is not None:
-        blob = load_checkpoint(resume)
+    if blob is not None:
         try:
             actor_net.load_state_dict(blob["actor"])
             critic_net.load_state_dict(blob["critic"])
@@ -200,7 +321,9 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
         step = int(blob["step"])
         if step >= cfg.total_steps:
             raise ValueError(f"{resume}: already at {step} steps; raise --total-steps to continue")
-    frames = cfg.frames_per_batch
+    # A whole number of steps of every slot per batch (torchrl rounds up to it anyway).
+    slots = int(np.prod(env.batch_size)) if not cfg.ray_address else 1
+    frames = -(-cfg.frames_per_batch // slots) * slots
     if cfg.ray_address:
         env.close()
         collector = Collector(factories, actor, backend="ray", num_collectors=cfg.workers, sync=True,
@@ -210,15 +333,17 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
     else:
         collector = Collector(env, actor, frames_per_batch=frames, total_frames=cfg.total_steps - step,
                               auto_register_policy_transforms=False)
-    buffer = ReplayBuffer(storage=LazyTensorStorage(frames), sampler=SamplerWithoutReplacement(),
+    buffer = ReplayBuffer(storage=LazyTensorStorage(frames, ndim=1), sampler=SamplerWithoutReplacement(),
                           batch_size=cfg.minibatch_size)  # fmt: skip
     writer = SummaryWriter(log_dir=str(out / "tensorboard"))
-    metrics, start, best_return, first_step = {}, time.perf_counter(), -np.inf, step
+    metrics, start, first_step = {}, time.perf_counter(), step
+    best_score = -np.inf
     checkpoint = out / "last.pt"
 
     def save(path: Path) -> Path:
         return save_checkpoint(path, actor=actor_net, critic=critic_net, normalizer=normalizer, layout=layout,
                                low=low, high=high, action_space=ACTION_SPACES[cfg.action_space],
+                               controller=cfg.controller, interface=_interface_dict(cfg),
                                config=dataclasses.asdict(cfg), step=step, metrics=metrics,
                                optimizer_state=optimizer.state_dict())  # fmt: skip
 
@@ -227,12 +352,19 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
             task = bar.add_task(f"PPO {cfg.task}", total=cfg.total_steps)
             for data in collector:
                 collect_time = time.perf_counter()
-                # GAE runs on [envs, time] so advantages stop at each env's trajectory end;
-                # the minibatches then mix all envs' steps.
+                flat = data.reshape(-1)
+                ended = flat["next", "done"].reshape(-1) & flat["valid"].reshape(-1)
+                returns = flat["next", "episode_reward"].reshape(-1)[ended]  # in the reward's units
+                lengths = flat["next", "agent_steps"].reshape(-1)[ended]
+                scale_rewards(data)
+                # GAE runs on [slots, time] so advantages stop at each trajectory's end; steps of
+                # waiting slots are then dropped and the minibatches mix the real steps.
                 for _ in range(cfg.epochs):
                     with torch.no_grad():
                         advantage(data)
-                    buffer.extend(data.reshape(-1))
+                    flat = data.reshape(-1)
+                    buffer.empty()
+                    buffer.extend(flat[flat["valid"].reshape(-1)])
                     for batch in buffer:
                         losses = loss_module(batch)
                         total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
@@ -242,13 +374,13 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                         optimizer.step()
                 # Refresh the observation statistics only now: during the update the policy must see
                 # its inputs exactly as it did when it acted, or PPO's probability ratios are off.
-                data = data.reshape(-1)
-                normalizer.update(layout.flatten({k: data["observation", k] for k in layout.keys}))
+                flat = data.reshape(-1)
+                real = flat[flat["valid"].reshape(-1)]
+                inputs = layout.flatten({k: real["observation", k] for k in layout.keys})
+                clipped = normalizer.clipped_fraction(inputs)
+                normalizer.update(inputs)
                 collector.update_policy_weights_()
                 step += data.numel()
-                done = data["next", "done"].reshape(-1)
-                returns = data["next", "episode_reward"].reshape(-1)[done]
-                lengths = data["next", "step_count"].reshape(-1)[done].float()
                 losses = losses.detach()
                 metrics = {
                     "loss/objective": float(losses["loss_objective"]),
@@ -256,22 +388,26 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                     "loss/entropy": float(losses["loss_entropy"]),
                     "policy/entropy": float(losses.get("entropy", torch.tensor(float("nan")))),
                     "policy/kl_approx": float(losses.get("kl_approx", torch.tensor(float("nan")))),
+                    "policy/action_std": float(actor_net.log_std.detach().clamp(-3.0, 0.5).exp().mean()),
+                    "obs/clipped_fraction": clipped,
                     "train/lr": optimizer.param_groups[0]["lr"],
+                    "train/valid_fraction": float(real.numel() / max(flat.numel(), 1)),
                     "perf/env_steps_per_s": (step - first_step) / (time.perf_counter() - start),
                     "perf/update_s": time.perf_counter() - collect_time,
                 }
                 if len(returns):
                     metrics["episode/return"] = float(returns.mean())
-                    metrics["episode/length"] = float(lengths.mean())
+                    metrics["episode/length"] = float(lengths.float().mean())
                 for name, value in metrics.items():
                     if np.isfinite(value):
                         writer.add_scalar(name, value, step)
                 save(checkpoint)
-                if metrics.get("episode/return", -np.inf) > best_return:  # by training return
-                    best_return = metrics["episode/return"]
-                    save(out / "best.pt")
                 if cfg.eval_every and cfg.eval_episodes and step // cfg.eval_every > (step - data.numel()) // cfg.eval_every:
-                    evaluate_into(checkpoint, cfg, out / f"eval_{step}", writer, step)
+                    scores = evaluate_into(checkpoint, cfg, out / "evals" / f"step_{step}", writer, step)
+                    if scores.get("S_bench", -np.inf) > best_score:  # selection on held-out seeds
+                        best_score = scores["S_bench"]
+                        save(out / "best.pt")
+                        writer.add_scalar("eval/best_S_bench", best_score, step)
                 bar.update(task, completed=min(step, cfg.total_steps),
                            description=f"PPO {cfg.task} return {metrics.get('episode/return', float('nan')):.1f}")  # fmt: skip
     except KeyboardInterrupt:
@@ -285,15 +421,19 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
         scale_out.close()
     final = save(out / "final.pt")
     if cfg.eval_episodes > 0:
-        metrics.update({f"eval/{k}": v for k, v in evaluate_into(final, cfg, out / "eval", writer, step).items()})
+        scores = evaluate_into(final, cfg, out / "eval", writer, step)
+        metrics.update({f"eval/{k}": v for k, v in scores.items()})
+        if scores.get("S_bench", -np.inf) > best_score:
+            best_score = scores["S_bench"]
+            save(out / "best.pt")
     writer.close()
     print(json.dumps({"steps": step, "wall_s": round(time.perf_counter() - start, 1), **metrics}, indent=2))
     return final
 
 
 def evaluate_into(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int) -> dict:
-    """Run the task's benchmark suite on ``checkpoint`` (report under ``out``) and log its metrics
-    and a few evaluation trajectory figures to TensorBoard."""
+    """Run the task's benchmark suite on ``checkpoint`` with the held-out ``eval_seed`` (report
+    under ``out``) and log its metrics and a few evaluation trajectory figures to TensorBoard."""
     from PIL import Image
 
     from smarts.benchmark.report import write_report
@@ -304,14 +444,15 @@ def evaluate_into(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: i
     frozen = out / "policy.pt"  # the runner reads the file later: keep this step's weights
     out.mkdir(parents=True, exist_ok=True)
     frozen.write_bytes(Path(checkpoint).read_bytes())
-    jobs = plan_jobs([str(frozen)], suite, cfg.eval_episodes, out)
+    jobs = plan_jobs([str(frozen)], suite, cfg.eval_episodes, out, seed=cfg.eval_seed)
     results = run_jobs(jobs, workers=2, progress=False)
     write_report(out, suite, [str(frozen)], results)
     scores = json.loads((out / "results.json").read_text())["agents"][str(frozen)]["scores"]
     overall = scores["overall"] if scores else {}
     for name, value in overall.items():
-        writer.add_scalar(f"eval/{name}", value, step)
+        if isinstance(value, (int, float)):
+            writer.add_scalar(f"eval/{name}", value, step)
     for figure in sorted((out / "plots").glob("trajectories_*.png"))[:3]:
         image = np.asarray(Image.open(figure).convert("RGB"))
         writer.add_image(f"eval_trajectories/{figure.stem[len('trajectories_'):]}", image, step, dataformats="HWC")
-    return overall
+    return {k: v for k, v in overall.items() if isinstance(v, (int, float))}

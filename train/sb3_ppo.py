@@ -22,19 +22,26 @@ SB3_FORMAT = "smarts-sb3-ppo-v1"
 
 
 def make_vec_env(cfg: TrainConfig):
+    import functools
+
     from smarts.env import DrivingParallelEnv
     from smarts.env.sb3_vec_env import SmartsVecEnv
-    from train.ppo import training_spec
+    from smarts.env.task_rewards import TaskReward
+    from train.ppo import TRAIN_SEED_BASE, training_specs
 
-    specs = [training_spec(cfg.scenarios[i % len(cfg.scenarios)], cfg.action_space) for i in range(cfg.envs)]
-    specs = [dataclasses.replace(s, agents=s.agents[:1]) for s in specs]  # one learner per copy
-    return SmartsVecEnv([lambda spec=spec: DrivingParallelEnv(spec) for spec in specs], seed=cfg.seed,
-                        normalize_actions=True, processes=cfg.workers > 1)  # fmt: skip
+    interface, weights = cfg.observation_interface(), cfg.reward_weights()
+    factories = [
+        functools.partial(DrivingParallelEnv, spec, observation=interface, reward=TaskReward(weights))
+        for spec in training_specs(cfg)
+    ]  # every learning agent of every copy is one slot
+    return SmartsVecEnv(factories, seed=TRAIN_SEED_BASE + cfg.seed * 1_000_003, normalize_actions=True,
+                        processes=cfg.workers > 1)  # fmt: skip
 
 
 def train_sb3(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
     from stable_baselines3 import PPO
 
+    torch.set_num_threads(cfg.torch_threads)
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.json").write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
     vec = make_vec_env(cfg)
@@ -87,8 +94,10 @@ def save_sb3(path: Path, model, vec, cfg: TrainConfig) -> Path:
         "format": SB3_FORMAT,
         "policy": model.policy.state_dict(),
         "observation": {k: list(s.shape) for k, s in spaces.items()},
+        "interface": _interface_dict(cfg),
         "action": {
             "space": ACTION_SPACES[cfg.action_space],
+            "controller": cfg.controller,
             "low": vec._agent_action_space.low.tolist(),
             "high": vec._agent_action_space.high.tolist(),
         },
@@ -100,6 +109,12 @@ def save_sb3(path: Path, model, vec, cfg: TrainConfig) -> Path:
     torch.save(blob, tmp)
     tmp.replace(path)
     return path
+
+
+def _interface_dict(cfg: TrainConfig) -> dict:
+    from smarts.sensors.interface import interface_to_dict
+
+    return interface_to_dict(cfg.observation_interface())
 
 
 class SB3Policy:
@@ -115,6 +130,12 @@ class SB3Policy:
         self.low = np.asarray(blob["action"]["low"], dtype=np.float32)
         self.high = np.asarray(blob["action"]["high"], dtype=np.float32)
         self.action_space = blob["action"]["space"]
+        self.controller = blob["action"].get("controller", "direct")
+        self.interface = None
+        if blob.get("interface") is not None:
+            from smarts.sensors.interface import interface_from_dict
+
+            self.interface = interface_from_dict(blob["interface"])
         act_space = gym.spaces.Box(-1.0, 1.0, self.low.shape, np.float32)
         self.policy = MultiInputActorCriticPolicy(obs_space, act_space, lambda _: 0.0, net_arch=blob["net_arch"])
         self.policy.load_state_dict(blob["policy"])

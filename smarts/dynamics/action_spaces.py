@@ -35,6 +35,11 @@ ACTION_COMPONENTS: dict[ActionSpaceType, tuple[str, ...]] = {
 }
 
 
+CONTROLLERS = ("direct", "lane_relative")
+"""How an agent's actions reach its action space (see ``smarts.dynamics.lane_relative``)."""
+LANE_RELATIVE_COMPONENTS = ("accel", "lane_change")
+
+
 class ActionError(ValueError):
     """An action that cannot be applied; ``agent_ids`` lists the agents whose actions are bad, so a
     caller can drop those agents without touching the others."""
@@ -82,8 +87,24 @@ def action_space(
     )
 
 
+def agent_action_space(
+    kind: ActionSpaceType | str, controller: str, limits: ReachLimits, dt: float
+) -> gymnasium.spaces.Box:
+    """The box an agent acts in: its action space's own, or the lane-relative command box
+    ``[-1, 1]^2`` (accel, lane_change) when its controller is ``lane_relative``."""
+    box = action_space(kind, limits, dt)
+    if controller == "direct":
+        return box
+    if controller != "lane_relative":
+        raise ValueError(f"unknown controller {controller!r}; expected one of {', '.join(CONTROLLERS)}")
+    return gymnasium.spaces.Box(low=-1.0, high=1.0, shape=(2,), dtype=np.float32)
+
+
 def check_actions(
-    kind: ActionSpaceType | str, actions: np.ndarray, agent_ids: Sequence[str]
+    kind: ActionSpaceType | str,
+    actions: np.ndarray,
+    agent_ids: Sequence[str],
+    controller: str = "direct",
 ) -> np.ndarray:
     """Check an ``[n_agents, k]`` action array and return it as float64.
 
@@ -91,12 +112,16 @@ def check_actions(
     Finite values outside the box pass: the controllers limit them.
     """
     kind = _as_kind(kind)
-    components = ACTION_COMPONENTS[kind]
+    components = ACTION_COMPONENTS[kind] if controller == "direct" else LANE_RELATIVE_COMPONENTS
+    if controller != "direct":
+        kind_label = f"{kind.value} ({controller})"
+    else:
+        kind_label = kind.value
     try:
         arr = np.asarray(actions, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise ActionError(
-            f"{kind.value} actions for agents {list(agent_ids)} are not numbers ({exc}); "
+            f"{kind_label} actions for agents {list(agent_ids)} are not numbers ({exc}); "
             f"expected a float array of shape ({len(agent_ids)}, {len(components)})",
             agent_ids,
         ) from None
@@ -104,12 +129,12 @@ def check_actions(
     if arr.shape != expected:
         if arr.ndim == 2 and arr.shape[0] == len(agent_ids):
             raise ActionError(
-                f"{', '.join(agent_ids)}: {kind.value} action has {arr.shape[1]} components; "
+                f"{', '.join(agent_ids)}: {kind_label} action has {arr.shape[1]} components; "
                 f"expected {len(components)} ({', '.join(components)})",
                 agent_ids,
             )
         raise ActionError(
-            f"{kind.value} actions have shape {arr.shape}; expected {expected}: one row of "
+            f"{kind_label} actions have shape {arr.shape}; expected {expected}: one row of "
             f"({', '.join(components)}) per agent {list(agent_ids)}",
             agent_ids,
         )
@@ -118,7 +143,7 @@ def check_actions(
         return arr
     bad_rows, bad_cols = np.nonzero(~finite)
     problems = [
-        f"{agent_ids[r]}: {kind.value} action component {components[c]} is {arr[r, c]}"
+        f"{agent_ids[r]}: {kind_label} action component {components[c]} is {arr[r, c]}"
         for r, c in zip(bad_rows.tolist(), bad_cols.tolist())
     ]
     bad_agents = list(dict.fromkeys(agent_ids[r] for r in bad_rows.tolist()))

@@ -13,9 +13,17 @@ import numpy as np
 from smarts.core.provider import ProviderBase
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import Role, VehicleType
-from smarts.dynamics.action_spaces import ActionError, ActionSpaceType, check_actions, lane_command
+from smarts.dynamics.action_spaces import (
+    ACTION_COMPONENTS,
+    LANE_RELATIVE_COMPONENTS,
+    ActionError,
+    ActionSpaceType,
+    check_actions,
+    lane_command,
+)
 from smarts.dynamics.bicycle import wheelbase_for_length
 from smarts.dynamics.lane_control import lane_control_step
+from smarts.dynamics.lane_relative import LaneRelativeController, LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
 from smarts.dynamics.pose_control import apply_relative_pose, apply_target_pose
 
@@ -36,12 +44,19 @@ class AgentVehicle:
     mass: float
     role: Role = Role.AGENT  # SOCIAL_AGENT for agents driven by a zoo policy
     take_over: str | None = None  # id of a traffic vehicle this agent takes over at reset
+    controller: str = "direct"  # or "lane_relative": commands turned into this space's actions
 
 
 class AgentProvider(ProviderBase):
     name = "agents"
 
-    def __init__(self, vehicles: list[AgentVehicle], limits: ReachLimits, dt: float):
+    def __init__(
+        self,
+        vehicles: list[AgentVehicle],
+        limits: ReachLimits,
+        dt: float,
+        lane_relative: LaneRelativeParams | None = None,
+    ):
         self.vehicles = vehicles
         self.limits = limits
         self.dt = dt
@@ -50,6 +65,13 @@ class AgentProvider(ProviderBase):
             members = [i for i, v in enumerate(vehicles) if v.action_space is kind]
             if members:
                 self.groups[kind] = np.array(members, dtype=np.int64)
+        for v in vehicles:
+            if v.controller == "lane_relative" and v.action_space is ActionSpaceType.LANE:
+                raise ValueError(f"{v.agent_id}: the lane_relative controller cannot drive the lane action space")
+        self.commanded = np.array([v.controller == "lane_relative" for v in vehicles], dtype=bool)
+        self.lane_relative = (
+            LaneRelativeController(len(vehicles), lane_relative) if self.commanded.any() else None
+        )
         self.world = None  # a pybullet PhysicsWorld, created only when an agent drives Continuous
         self.handles = np.full(len(vehicles), -1, dtype=np.int64)
         self.lane_offset = np.zeros(len(vehicles), dtype=np.int64)  # lane agents: 0 route, +1 left, -1 right
@@ -67,6 +89,8 @@ class AgentProvider(ProviderBase):
                 self.world.reset()
         self.handles[:] = -1
         self.lane_offset[:] = 0
+        if self.lane_relative is not None:
+            self.lane_relative.reset(sim)
         for i, (vehicle, mission) in enumerate(zip(self.vehicles, sim.missions)):
             if vehicle.take_over is not None:
                 continue  # taken from traffic in start(), once traffic has created it
@@ -138,37 +162,63 @@ class AgentProvider(ProviderBase):
 
     # ------------------------------------------------------------------ step
     def step(self, sim: Simulation, dt: float) -> None:
+        # Every action is checked before anything moves: a bad one leaves all vehicles as they were.
+        plans = []
         for kind, members in self.groups.items():
             members = members[sim.agent_active[members]]
             if members.size == 0:
                 continue
-            ids = [sim.agent_ids[i] for i in members]
-            actions = self._gather(kind, sim.actions, ids)
+            commanded = self.commanded[members]
+            parts = []
+            for mask, controller in ((~commanded, "direct"), (commanded, "lane_relative")):
+                ids = [sim.agent_ids[i] for i in members[mask]]
+                parts.append(self._gather(kind, sim.actions, ids, controller) if ids else None)
+            plans.append((kind, members, commanded, *parts))
+        for kind, members, commanded, direct, commands in plans:
             rows = sim.agent_row[members]
-            if kind is ActionSpaceType.RELATIVE_TARGET_POSE:
-                apply_relative_pose(sim.table, rows, actions, dt, self.limits)
-            elif kind is ActionSpaceType.TARGET_POSE:
-                apply_target_pose(sim.table, rows, actions, dt, self.limits)
-            elif kind is ActionSpaceType.CONTINUOUS:
-                from smarts.dynamics.pybullet_chassis import apply_continuous
+            actions = np.empty((len(members), len(ACTION_COMPONENTS[kind])))
+            if direct is not None:
+                actions[~commanded] = direct
+            if commands is not None:  # lane-relative commands -> this space's own actions
+                actions[commanded] = self._from_commands(
+                    kind, sim, members[commanded], rows[commanded], commands, dt
+                )
+            self._drive(kind, sim, members, rows, actions, dt)
 
-                apply_continuous(self.world, sim.table, rows, self.handles[members], actions, dt)
-            else:
-                self._lane_step(sim, members, rows, actions, dt)
+    def _from_commands(self, kind, sim, members, rows, commands, dt) -> np.ndarray:
+        ctl = self.lane_relative
+        if kind is ActionSpaceType.RELATIVE_TARGET_POSE:
+            return ctl.relative_pose_actions(sim, members, rows, commands, dt)
+        if kind is ActionSpaceType.TARGET_POSE:
+            return ctl.target_pose_actions(sim, members, rows, commands, dt)
+        return ctl.continuous_actions(sim, members, rows, commands, dt, self.world, self.handles[members])
+
+    def _drive(self, kind, sim, members, rows, actions, dt) -> None:
+        if kind is ActionSpaceType.RELATIVE_TARGET_POSE:
+            apply_relative_pose(sim.table, rows, actions, dt, self.limits)
+        elif kind is ActionSpaceType.TARGET_POSE:
+            apply_target_pose(sim.table, rows, actions, dt, self.limits)
+        elif kind is ActionSpaceType.CONTINUOUS:
+            from smarts.dynamics.pybullet_chassis import apply_continuous
+
+            apply_continuous(self.world, sim.table, rows, self.handles[members], actions, dt)
+        else:
+            self._lane_step(sim, members, rows, actions, dt)
 
     @staticmethod
-    def _gather(kind: ActionSpaceType, actions: dict, ids: list[str]) -> np.ndarray:
+    def _gather(kind: ActionSpaceType, actions: dict, ids: list[str], controller: str = "direct") -> np.ndarray:
         """One float64 array of the group's actions; malformed ones raise ``ActionError`` by agent."""
+        width = len(ACTION_COMPONENTS[kind]) if controller == "direct" else len(LANE_RELATIVE_COMPONENTS)
         try:
             arr = np.array([actions[a] for a in ids], dtype=np.float64)
         except (KeyError, TypeError, ValueError):
             arr = None
-        if arr is None or arr.ndim != 2 or not np.isfinite(arr).all():
+        if arr is None or arr.ndim != 2 or arr.shape[1] != width or not np.isfinite(arr).all():
             for a in ids:  # find the culprit(s) to name them
                 if a not in actions:
                     raise ActionError(f"{a}: no action given this step", [a])
-                check_actions(kind, np.atleast_1d(np.asarray(actions[a], dtype=object))[None], [a])
-            check_actions(kind, arr, ids)
+                check_actions(kind, np.atleast_1d(np.asarray(actions[a], dtype=object))[None], [a], controller)
+            check_actions(kind, arr, ids, controller)
         return arr
 
     def _lane_step(self, sim: Simulation, members, rows, actions, dt) -> None:

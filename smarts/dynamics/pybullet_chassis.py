@@ -134,6 +134,7 @@ class PhysicsWorld:
         self._half_track = np.zeros(16)
         self._box_above_base = np.zeros(16)
         self._rolling_torque = np.zeros(16)  # per wheel, N m
+        self._mass = np.zeros(16)  # whole car, kg
         self._handles: set[int] = set()
 
     def step(self) -> None:
@@ -268,17 +269,17 @@ class PhysicsWorld:
                     body, link, 0.0, targetVelocity=speed / WHEEL_RADIUS, physicsClientId=cid
                 )
         rolling = 0.25 * self.rolling_resistance * mass * _GRAVITY * WHEEL_RADIUS
-        self._store_geometry(body, wheelbase, half_track, box_above_base, rolling)
+        self._store_geometry(body, wheelbase, half_track, box_above_base, rolling, mass)
         # Coasting with centred steering until the first controls arrive.
         self.apply_controls([body], [0.0], [0.0], [0.0])
         return body
 
     def _store_geometry(
-        self, body: int, wheelbase: float, half_track: float, above: float, rolling: float
+        self, body: int, wheelbase: float, half_track: float, above: float, rolling: float, mass: float
     ) -> None:
         if body >= len(self._wheelbase):
             size = max(2 * len(self._wheelbase), body + 1)
-            for name in ("_wheelbase", "_half_track", "_box_above_base", "_rolling_torque"):
+            for name in ("_wheelbase", "_half_track", "_box_above_base", "_rolling_torque", "_mass"):
                 grown = np.zeros(size)
                 old = getattr(self, name)
                 grown[: len(old)] = old
@@ -287,7 +288,16 @@ class PhysicsWorld:
         self._half_track[body] = half_track
         self._box_above_base[body] = above
         self._rolling_torque[body] = rolling
+        self._mass[body] = mass
         self._handles.add(body)
+
+    def wheelbase(self, handles: Sequence[int] | np.ndarray) -> np.ndarray:
+        """Axle distance of the cars, m."""
+        return self._wheelbase[np.asarray(handles, dtype=np.int64)]
+
+    def vehicle_mass(self, handles: Sequence[int] | np.ndarray) -> np.ndarray:
+        """Whole-car mass of the cars, kg."""
+        return self._mass[np.asarray(handles, dtype=np.int64)]
 
     def remove_vehicle(self, handle: int) -> None:
         if handle not in self._handles:

@@ -16,6 +16,7 @@ from smarts.core.simulation import EventConfig, Simulation
 from smarts.core.vehicle_table import Role, VehicleType
 from smarts.dynamics.action_spaces import ActionSpaceType
 from smarts.dynamics.agent_provider import AgentProvider, AgentVehicle
+from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
 from smarts.maps import RoadMap, load_map
 from smarts.scenario import ScenarioError, ScenarioSpec, load_scenario
@@ -34,7 +35,10 @@ def scenario_map(spec: ScenarioSpec) -> RoadMap:
 
 
 def build_simulation(
-    spec: ScenarioSpec, limits: ReachLimits | None = None, road_map: RoadMap | None = None
+    spec: ScenarioSpec,
+    limits: ReachLimits | None = None,
+    road_map: RoadMap | None = None,
+    lane_relative: LaneRelativeParams | None = None,
 ) -> Simulation:
     road_map = road_map or scenario_map(spec)
     limits = limits or ReachLimits()
@@ -58,6 +62,7 @@ def build_simulation(
                 mass=dims.mass,
                 role=Role.SOCIAL_AGENT if agent.is_social else Role.AGENT,
                 take_over=agent.mission.start.take_over,
+                controller=agent.controller,
             )
         )
     terminate = np.zeros(NUM_EVENTS, dtype=bool)
@@ -69,7 +74,7 @@ def build_simulation(
         not_moving_distance=spec.events.not_moving_distance,
     )
     signals = SignalState(road_map) if road_map.tls_ids else None
-    providers = [AgentProvider(vehicles, limits, spec.step_length)]
+    providers = [AgentProvider(vehicles, limits, spec.step_length, lane_relative)]
     providers += traffic_providers(spec, road_map, signals)
     sim = Simulation(
         road_map,

@@ -20,10 +20,11 @@ import numpy as np
 from pettingzoo import ParallelEnv
 
 from smarts.core.events import EVENT_NAMES, Event
-from smarts.dynamics.action_spaces import ActionError, action_space
+from smarts.dynamics.action_spaces import ActionError, agent_action_space
+from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
 from smarts.env.assembly import as_spec, build_simulation
-from smarts.env.reward import default_rewards
+from smarts.env.reward import RewardFunction, default_rewards
 from smarts.env.social import SocialAgents
 from smarts.env.v2v import V2VLink
 from smarts.scenario import ScenarioSpec
@@ -48,16 +49,21 @@ class DrivingParallelEnv(ParallelEnv):
         limits: ReachLimits | None = None,
         render_mode: str | None = None,
         render_view: str = "map",
+        lane_relative: LaneRelativeParams | None = None,
+        reward: RewardFunction | None = None,
     ):
         """``observation`` overrides the scenario's agent interfaces: one interface (or the basic
         ``ObservationConfig``) for every agent, or a mapping from agent id to one. ``render_view``
         is ``map`` (the whole map), ``ego`` (centred on the first live agent) or ``ego:<agent
-        id>``."""
+        id>``. ``lane_relative`` sets how lane-relative commands drive (agents with
+        ``controller: lane_relative``); ``reward`` replaces the scenario's default reward with a
+        task reward (``smarts.env.task_rewards``)."""
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.scenario = as_spec(scenario)
         self.limits = limits or ReachLimits()
-        self.sim = build_simulation(self.scenario, self.limits)
+        self.sim = build_simulation(self.scenario, self.limits, lane_relative=lane_relative)
+        self.reward_fn = reward
         self.sensors = ObservationSuite(self._interfaces(observation))
         self.builder = self.sensors.builders[0]  # the only one when all agents share an interface
         self.render_mode = render_mode
@@ -68,7 +74,10 @@ class DrivingParallelEnv(ParallelEnv):
         if not self.possible_agents:
             raise ValueError(f"{self.scenario.source}: every agent has a policy; at least one must learn")
         self.agents: list[str] = []
-        driving = [action_space(a.action_space, self.limits, self.scenario.step_length) for a in self.scenario.agents]
+        driving = [
+            agent_action_space(a.action_space, a.controller, self.limits, self.scenario.step_length)
+            for a in self.scenario.agents
+        ]
         self.comms: V2VLink | None = None
         self._comms_spaces: dict[int, gym.spaces.Dict] = {}
         if self.scenario.comms is not None:
@@ -169,7 +178,10 @@ class DrivingParallelEnv(ParallelEnv):
             agents = agents[~self.social.is_social[agents]]
         ids = [sim.agent_ids[i] for i in agents]
         obs = self._split(batches)
-        reward = default_rewards(sim, agents, self.scenario.reward)
+        if self.reward_fn is None:
+            reward = default_rewards(sim, agents, self.scenario.reward)
+        else:
+            reward = self.reward_fn(sim, agents)
         events = sim.agent_events[agents]
         done = sim.agent_done[agents]
         # Truncated: only the step limit ended the episode; terminated: a terminal event did.

@@ -4,8 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from typing import Callable
+
 from smarts.core.events import Event
 from smarts.core.simulation import Simulation
+
+RewardFunction = Callable[[Simulation, np.ndarray], np.ndarray]
+"""``reward(sim, agents) -> float64[n]``: this step's reward of each agent index in ``agents``,
+called after the step (events and route progress are up to date)."""
 
 
 def default_rewards(sim: Simulation, agents: np.ndarray, weights) -> np.ndarray:

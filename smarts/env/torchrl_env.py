@@ -344,85 +344,159 @@ def make_serial_env(
 
 
 class SmartsBatchedEnv(EnvBase):
-    """K single-agent envs stepped in this process as one TorchRL env of batch size [K].
+    """Every learning agent of K scenario copies as one slot of a TorchRL env of batch size [slots].
 
-    For collection throughput: one TensorDict per step for all K envs (instead of one per env and
-    a process hop each), observations stacked with one copy per key. Each sub-env may run a
-    different scenario (same observation/action spaces); a sub-env whose episode ended is reset
-    when TorchRL asks for it (``_reset`` mask), the others carry on. Built-in traffic only (libsumo
-    allows one SUMO per process: SUMO scenarios need ``make_parallel_env``).
+    For collection throughput and parameter sharing: one TensorDict per step for all slots, the
+    observations stacked with one copy per key. Each copy may run a different scenario with any
+    number of learning agents (same observation/action spaces); every agent of every copy is a
+    slot, driven by the one shared policy.
+
+    Agents of a copy finish at different times: a slot whose agent has finished *waits* (its
+    observation is zeros, its actions are ignored, its reward is 0) until every agent of its copy
+    has finished; the copy is then reset at once and all its slots go on from the new episode. The
+    ``valid`` entry (bool [1]) says whether a slot's observation is real, i.e. whether the step
+    taken from it is a real transition: training drops the others. ``agent_steps`` counts the
+    steps of the slot's current episode (the episode length when ``done``).
+
+    Seeding: ``set_seed(s)`` makes copy ``i`` start at seed ``s + i * 100_003`` and count up by one
+    per episode, so the same seed gives the same rollout. Built-in traffic only (libsumo allows one
+    SUMO per process: SUMO scenarios need ``make_parallel_env`` or one copy per worker process).
+    ``reward_factory`` builds one reward function per copy (``smarts.env.task_rewards``);
+    ``env_kwargs`` go to every ``DrivingParallelEnv``.
     """
 
-    def __init__(self, scenarios: list[ScenarioSource], *, device: torch.device | str = "cpu", **env_kwargs: Any):
+    def __init__(
+        self,
+        scenarios: list[ScenarioSource],
+        *,
+        reward_factory: Callable[[], Any] | None = None,
+        device: torch.device | str = "cpu",
+        **env_kwargs: Any,
+    ):
         if not scenarios:
             raise ValueError("SmartsBatchedEnv needs at least one scenario")
-        self.envs = [SmartsTorchRLEnv(s, single_agent=True, device=device, **env_kwargs) for s in scenarios]
-        k = len(self.envs)
+        self.envs = [
+            DrivingParallelEnv(
+                as_spec(s) if not isinstance(s, DrivingParallelEnv) else s.scenario,
+                reward=reward_factory() if reward_factory is not None else None,
+                **env_kwargs,
+            )
+            for s in scenarios
+        ]
+        self.slots: list[tuple[int, str]] = [(i, a) for i, env in enumerate(self.envs) for a in env.possible_agents]
+        k = len(self.slots)
         super().__init__(device=device, batch_size=torch.Size([k]))
-        first = self.envs[0]
-        for env in self.envs[1:]:
-            if _layout(env._obs_space) != _layout(first._obs_space):
+        first_env, first_agent = self.envs[0], self.envs[0].possible_agents[0]
+        obs_space = first_env.observation_space(first_agent)
+        act_space = first_env.action_space(first_agent)
+        for i, agent in self.slots:
+            env = self.envs[i]
+            if _layout(env.observation_space(agent)) != _layout(obs_space) or env.action_space(agent) != act_space:
                 raise ValueError(
-                    f"{env.env.scenario.source}: observation space differs from {first.env.scenario.source}; "
-                    "batched scenarios must share one"
+                    f"{env.scenario.source}: {agent}'s observation or action space differs from "
+                    f"{first_env.scenario.source}'s {first_agent}; batched scenarios must share one"
                 )
-        self.observation_spec = first.observation_spec.expand(k)
-        self.action_spec = first.action_spec.expand(k, *first.action_spec.shape)
-        self.reward_spec = first.reward_spec.expand(k, *first.reward_spec.shape)
-        self.full_done_spec = first.full_done_spec.expand(k)
-        self._keys = first._obs_keys
-        self._agent = [e.possible_agents[0] for e in self.envs]
-        self._last_obs: list[dict[str, np.ndarray]] = [e._zero_obs for e in self.envs]
-        self._next_seed: int | None = None
+        self._keys = list(obs_space.spaces)
+        obs = Composite({key: space_to_spec(sp, (k,), device) for key, sp in obs_space.spaces.items()}, shape=(k,), device=device)
+        self.observation_spec = Composite(
+            observation=obs,
+            valid=Categorical(2, shape=(k, 1), dtype=torch.bool, device=device),
+            agent_steps=Unbounded(shape=(k, 1), dtype=torch.float32, device=device),
+            shape=(k,),
+            device=device,
+        )
+        self.action_spec = space_to_spec(act_space, (k,), device)
+        self.reward_spec = Unbounded(shape=(k, 1), dtype=torch.float32, device=device)
+        self.full_done_spec = Composite(_done_specs((k, 1), device), shape=(k,), device=device)
+        self._slot_of = {(i, a): j for j, (i, a) in enumerate(self.slots)}
+        self._zero = {key: np.zeros(sp.shape, dtype=sp.dtype) for key, sp in obs_space.spaces.items()}
+        self._obs = {key: np.zeros((k, *sp.shape), dtype=sp.dtype) for key, sp in obs_space.spaces.items()}
+        self._live = np.zeros(k, dtype=bool)
+        self._steps = np.zeros(k, dtype=np.float32)
+        self._stash: dict[int, dict[str, np.ndarray]] = {}  # first observations awaiting a reset
+        self._next_seed: list[int | None] = [None] * len(self.envs)
 
     def _set_seed(self, seed: int | None) -> None:
-        self._next_seed = None if seed is None else int(seed)
+        if seed is not None and int(seed) < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {seed}")
+        self._next_seed = [None if seed is None else int(seed) + i * 100_003 for i in range(len(self.envs))]
 
-    def _seed_for(self, i: int) -> int | None:
-        if self._next_seed is None:
-            return None
-        seed = self._next_seed + i * 100_003  # distinct streams per sub-env
-        return seed
+    def _reset_copy(self, e: int) -> dict[int, dict[str, np.ndarray]]:
+        """Reset copy ``e``; returns the first observation of each of its slots."""
+        seed = self._next_seed[e]
+        if seed is not None:
+            self._next_seed[e] = seed + 1
+        obs, _ = self.envs[e].reset(seed=seed)
+        return {self._slot_of[(e, agent)]: {key: np.array(v) for key, v in o.items()} for agent, o in obs.items()}
+
+    def _start(self, j: int, first: Mapping[str, np.ndarray] | None) -> None:
+        """Slot ``j`` begins an episode from ``first`` (None: it waits, with zeros)."""
+        for key in self._keys:
+            self._obs[key][j] = first[key] if first is not None else self._zero[key]
+        self._live[j] = first is not None
+        self._steps[j] = 0.0
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         mask = None
         if tensordict is not None and "_reset" in tensordict.keys():
             mask = tensordict.get("_reset").reshape(-1).cpu().numpy()
-        for i, env in enumerate(self.envs):
-            if mask is None or mask[i]:
-                seed = self._seed_for(i)
-                obs, _ = env.env.reset(seed=seed)
-                if self._next_seed is not None:
-                    self._next_seed += 1
-                self._last_obs[i] = {k: v.copy() for k, v in obs[self._agent[i]].items()}
-        k = len(self.envs)
-        out = {"observation": self._stack(), **_flags(np.zeros((k, 1), bool), np.zeros((k, 1), bool), np.zeros((k, 1), bool))}
+        if mask is None:
+            self._stash.clear()
+            for e in range(len(self.envs)):
+                for j, first in self._reset_copy(e).items():
+                    self._start(j, first)
+        else:
+            for j in np.flatnonzero(mask).tolist():
+                if j not in self._stash and not self.envs[self.slots[j][0]].agents:
+                    self._stash.update(self._reset_copy(self.slots[j][0]))  # (normally done by _step)
+                self._start(j, self._stash.pop(j, None))
+        k = len(self.slots)
+        out = {**self._observation(), **_flags(np.zeros((k, 1), bool), np.zeros((k, 1), bool), np.zeros((k, 1), bool))}
         return TensorDict(out, batch_size=self.batch_size, device=self.device)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         actions = tensordict.get("action").detach().cpu().numpy()
-        k = len(self.envs)
+        k = len(self.slots)
         reward = np.zeros((k, 1), dtype=np.float32)
         term = np.zeros((k, 1), dtype=bool)
         trunc = np.zeros((k, 1), dtype=bool)
-        for i, env in enumerate(self.envs):
-            agent = self._agent[i]
-            pz = env.env
-            if not pz.agents:  # finished, waiting for its reset
+        for e, env in enumerate(self.envs):
+            if not env.agents:
                 continue
-            obs, rewards, terms, truncs, _ = pz.step({agent: actions[i]})
-            reward[i, 0] = rewards.get(agent, 0.0)
-            term[i, 0] = terms.get(agent, False)
-            trunc[i, 0] = truncs.get(agent, False) or (not pz.agents and not term[i, 0])
-            if agent in obs:
-                self._last_obs[i] = {key: v.copy() for key, v in obs[agent].items()}
-        out = {"observation": self._stack(), "reward": torch.from_numpy(reward), **_flags(term | trunc, term, trunc)}
+            acting = {agent: actions[self._slot_of[(e, agent)]] for agent in env.agents}
+            obs, rewards, terms, truncs, _ = env.step(acting)
+            for agent in acting:
+                j = self._slot_of[(e, agent)]
+                reward[j, 0] = rewards.get(agent, 0.0)
+                self._steps[j] += 1.0
+                o = obs.get(agent)
+                for key in self._keys:
+                    self._obs[key][j] = o[key] if o is not None else self._zero[key]
+                if agent not in env.agents:  # finished; torchrl will reset its slot
+                    term[j, 0] = bool(terms.get(agent, False))
+                    trunc[j, 0] = not term[j, 0]
+                    self._live[j] = False
+            if not env.agents:
+                # The copy is over: restart it now. Slots that ended this step take their first
+                # observation at torchrl's reset; slots already waiting take it at once (the
+                # step that brings it is not a real transition of theirs: it is marked invalid).
+                ended = set(np.flatnonzero((term | trunc)[:, 0]).tolist())
+                for j, first in self._reset_copy(e).items():
+                    if j in ended:
+                        self._stash[j] = first
+                    else:
+                        self._start(j, first)
+        out = {**self._observation(), "reward": torch.from_numpy(reward), **_flags(term | trunc, term, trunc)}
         return TensorDict(out, batch_size=self.batch_size, device=self.device)
 
-    def _stack(self) -> dict[str, torch.Tensor]:
-        return {key: torch.from_numpy(np.array([o[key] for o in self._last_obs])) for key in self._keys}
+    def _observation(self) -> dict[str, Any]:
+        return {
+            "observation": {key: torch.from_numpy(self._obs[key].copy()) for key in self._keys},
+            "valid": torch.from_numpy(self._live[:, None].copy()),
+            "agent_steps": torch.from_numpy(self._steps[:, None].copy()),
+        }
 
     def close(self, *, raise_if_closed: bool = True) -> None:
         for env in self.envs:
-            env.env.close()
+            env.close()
         super().close(raise_if_closed=raise_if_closed)

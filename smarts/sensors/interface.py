@@ -153,9 +153,13 @@ class AgentInterface:
     lidar: LidarInterface | None = None
     signals: bool = True
     """The next traffic signal on the route (``signal``)."""
+    lead: bool = False
+    """The vehicle the agent follows (``mission.follow``) as its own block (``lead``): relative
+    position, heading and velocity, speed, acceleration, gap along the lane, visible, in my lane."""
 
     def __post_init__(self) -> None:
         _flag("interface.signals", self.signals)
+        _flag("interface.lead", self.lead)
 
     @property
     def needs_shadows(self) -> bool:
@@ -173,7 +177,7 @@ _PARTS: dict[str, type] = {
     "lidar": LidarInterface,
 }
 _OPTIONAL_PARTS = ("rasters", "lidar")
-_FLAGS = ("signals",)
+_FLAGS = ("signals", "lead")
 
 
 def interface_from_dict(data: Any, path: str = "interface") -> AgentInterface:

@@ -27,6 +27,12 @@ Per agent, with the default interface:
   green (one of them 1, all 0 when there is none ahead) and the route distance to its stop line (m,
   0 when none).
 - ``events`` float32[8]: the events of ``smarts.core.events.Event`` this step, 0/1.
+- ``lead`` float32[12] (``lead: true``): the vehicle the agent follows (``mission.follow``), as
+  ``smarts.core.following`` sees it: present, visible (within 50 m), in my lane (lane continuity),
+  dx, dy (m, ego frame), cos and sin of the relative heading, relative velocity vx, vy (m/s, ego
+  frame), lead speed (m/s), lead acceleration (m/s^2), bumper-to-bumper gap (m, along the lane
+  when in lane, else along the ego's heading). Everything after the flags is 0 when the lead is
+  not visible. ``LEAD_FEATURE_NAMES`` names the columns.
 Optional sensors add keys: ``rasters`` and ``rgb`` (``smarts.sensors.rasters``), ``lidar`` and
 ``lidar_hit`` (``smarts.sensors.lidar``).
 """
@@ -41,6 +47,7 @@ import numba
 import numpy as np
 
 from smarts.core.events import NUM_EVENTS
+from smarts.core.following import lead_state
 from smarts.core.geometry import wrap_scalar
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import COLUMN, Role, VehicleType
@@ -66,6 +73,10 @@ NEIGHBOUR_FEATURE_NAMES = ("dx", "dy", "cos_heading", "sin_heading", "vx", "vy",
 EXTENDED_NEIGHBOUR_FEATURE_NAMES = (
     "speed", "accel", "yaw_rate", "lane_index", "same_road",
     *(f"type_{t.name.lower()}" for t in VehicleType),
+)  # fmt: skip
+LEAD_FEATURE_NAMES = (
+    "present", "visible", "in_lane", "dx", "dy", "cos_heading", "sin_heading", "vx", "vy", "speed",
+    "accel", "gap",
 )  # fmt: skip
 _VIS_OFF, _VIS_HIDE, _VIS_FLAG = 0, 1, 2
 
@@ -175,6 +186,8 @@ class ObservationBuilder:
         if self.interface.signals:
             spaces["signal"] = box((SIGNAL_FEATURES,))
         spaces["events"] = box((NUM_EVENTS,), 0.0, 1.0)
+        if self.interface.lead:
+            spaces["lead"] = box((len(LEAD_FEATURE_NAMES),))
         if self.rasters is not None:
             spaces.update(self.rasters.spaces())
         if self.lidar is not None:
@@ -214,6 +227,8 @@ class ObservationBuilder:
         )
         if not interface.signals:
             del obs["signal"]
+        if interface.lead:
+            obs["lead"] = lead_features(sim, agents)
         if self.rasters is not None:
             obs.update(self.rasters.observe(sim, agents, rows, shadows))
         if self.lidar is not None:
@@ -234,6 +249,18 @@ class ObservationBuilder:
             )
             self._lane_info_map = rm
         return self._lane_info_cache
+
+
+def lead_features(sim: Simulation, agents: np.ndarray) -> np.ndarray:
+    """float32[n, 12] ``lead`` block of ``agents`` (see the module docstring)."""
+    st = lead_state(sim, agents)
+    cols = [
+        st.present, st.visible, st.in_lane, st.dx, st.dy, np.cos(st.rel_heading), np.sin(st.rel_heading),
+        st.rel_vx, st.rel_vy, st.lead_speed, st.lead_accel, np.nan_to_num(st.gap, nan=0.0),
+    ]  # fmt: skip
+    out = np.stack(cols, axis=1).astype(np.float32)
+    out[~st.visible, 3:] = 0.0
+    return out
 
 
 @numba.njit(cache=True, nogil=True)

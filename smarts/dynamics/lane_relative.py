@@ -1,0 +1,371 @@
+"""Lane-relative commands for learning: (acceleration, lane change) turned into real actions.
+
+Why: a policy that outputs raw (dx, dy, dheading) or (throttle, brake, steering) must first learn
+to stay on the road, and its zero action (what an untrained Gaussian policy outputs) asks to stop
+or to coast. Here the zero command is a sane one: keep the current speed in the current lane.
+The command is then turned into the agent's own action space (RelativeTargetPose, TargetPose or
+Continuous), so the vehicle obeys exactly the limits and physics of that space and a benchmark
+run in that space stays honest. Nothing here decides *what* to do (no car following, no gap
+keeping): the policy chooses every acceleration and every lane change.
+
+Command (float ``[n, 2]``, each component in [-1, 1]; values outside are clipped):
+
+- ``accel``: the longitudinal acceleration asked for, as a fraction of ``max_accel`` (> 0) or of
+  ``max_decel`` (< 0). It is reached at most at ``max_jerk`` (m/s^3), so the ride is smooth.
+- ``lane_change``: above ``+threshold`` change one lane to the left, below ``-threshold`` one to the
+  right, otherwise keep the lane. A change runs to its end (``lane_change_time`` seconds along a
+  smooth lateral profile) before another one starts. Where the road has no lane on the asked side,
+  the request is kept as the branch to take at the next fork or junction (the continuation next
+  to the left or right of the default one) until the vehicle has passed that fork.
+
+Which lane is followed: the vehicle's current lane (or, during a change, its neighbour), continued
+through successor lanes; at a fork the default continuation is the one on the agent's own route,
+else the straightest, and a remembered branch request takes its neighbour to the left or right. The vehicle steers by pure
+pursuit to the point ``max(speed * lookahead_time, min_lookahead)`` metres ahead on that lane,
+shifted sideways by what remains of the lane-change profile.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numba
+import numpy as np
+
+from smarts.core.geometry import wrap_scalar
+from smarts.core.vehicle_table import COLUMN
+
+COMMAND_COMPONENTS = ("accel", "lane_change")
+U_TURN = 2.6
+"""rad: continuations turning more than this are U-turns, taken only when the route says so."""
+
+
+@dataclass(frozen=True)
+class LaneRelativeParams:
+    """How commands become motion (documented because policies learn against them)."""
+
+    max_accel: float = 3.0
+    """m/s^2 asked for by accel = +1."""
+    max_decel: float = 6.0
+    """m/s^2 of braking asked for by accel = -1."""
+    max_jerk: float = 2.0
+    """m/s^3: how fast the acceleration may change from one step to the next."""
+    lane_change_time: float = 5.0
+    """s: duration of the lateral profile of one lane change."""
+    lookahead_time: float = 1.0
+    """s of travel to the pure-pursuit point."""
+    min_lookahead: float = 4.0
+    """m: the pure-pursuit point is never closer than this."""
+    threshold: float = 0.5
+    """|lane_change| above this asks for a change (or a branch)."""
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ValueError(f"LaneRelativeParams.{f.name}: expected a finite number, got {value!r}")
+            if value <= 0 or (f.name == "threshold" and value >= 1):
+                raise ValueError(f"LaneRelativeParams.{f.name}: expected a number in (0, {'1' if f.name == 'threshold' else 'inf'}), got {value!r}")
+
+
+class LaneRelativeController:
+    """Per-agent lane-change state and the command -> target conversion for one simulation.
+
+    Agent-indexed state (``n_agents`` entries) survives between steps and is cleared by ``reset``.
+    """
+
+    def __init__(self, n_agents: int, params: LaneRelativeParams | None = None):
+        self.params = params or LaneRelativeParams()
+        self.n = n_agents
+        self.track = np.full(n_agents, -1, dtype=np.int64)  # the lane being followed
+        self.pending = np.zeros(n_agents, dtype=np.int64)  # -1 right, +1 left, 0 none
+        self.profile_start = np.zeros(n_agents)  # lateral offset to the target lane when it began
+        self.profile_age = np.full(n_agents, np.inf)  # s since the profile began
+        self.branch = np.zeros(n_agents, dtype=np.int64)  # remembered fork choice
+        self._route_road: np.ndarray | None = None
+
+    def reset(self, sim) -> None:
+        self.track[:] = -1
+        self.pending[:] = 0
+        self.profile_start[:] = 0.0
+        self.profile_age[:] = np.inf
+        self.branch[:] = 0
+        self._route_road = np.ascontiguousarray(sim.mission_arrays.on_route_road)
+
+    def targets(self, sim, members: np.ndarray, rows: np.ndarray, commands: np.ndarray, dt: float):
+        """Advance the state of agents ``members`` (rows ``rows``) by one step of ``commands``.
+
+        Returns ``(accel, curvature, target_x, target_y)``: the jerk-limited acceleration (m/s^2),
+        the pure-pursuit path curvature (1/m) and the pursued point (world frame) per member.
+        """
+        if self._route_road is None:
+            self.reset(sim)
+        p = self.params
+        cmd = np.clip(np.asarray(commands, dtype=np.float64), -1.0, 1.0)
+        n = len(members)
+        accel = np.empty(n)
+        curvature = np.empty(n)
+        target = np.empty((n, 2))
+        rm = sim.road_map
+        _targets_kernel(
+            sim.table.data, sim.table.lane, np.asarray(members, np.int64), np.asarray(rows, np.int64), cmd, dt,
+            p.max_accel, p.max_decel, p.max_jerk, p.lane_change_time, p.lookahead_time, p.min_lookahead,
+            p.threshold, rm.lane_left, rm.lane_right, rm.lane_width, rm.lane_length, rm.lane_road,
+            rm.lane_internal, rm.succ_offsets, rm.succ, rm.lanepoint_offsets, rm.lanepoints, rm.lanepoint_s,
+            rm.lanepoint_heading, self._route_road, self.track, self.pending, self.profile_start,
+            self.profile_age, self.branch, accel, curvature, target,
+        )  # fmt: skip
+        return accel, curvature, target[:, 0], target[:, 1]
+
+    # ------------------------------------------------------------------ conversions
+    def relative_pose_actions(self, sim, members, rows, commands, dt: float) -> np.ndarray:
+        """RelativeTargetPose actions ``[n, 3]``: an arc of the pursued curvature at the new speed.
+
+        The pose limiter of RelativeTargetPose still applies afterwards (speed, yaw rate, curvature).
+        """
+        accel, kappa, _, _ = self.targets(sim, members, rows, commands, dt)
+        speed = np.maximum(sim.table.speed[rows], 0.0)
+        new_speed = np.maximum(speed + accel * dt, 0.0)
+        d = new_speed * dt
+        dh = kappa * d
+        return np.stack([d * np.cos(0.5 * dh), d * np.sin(0.5 * dh), dh], axis=1)
+
+    def target_pose_actions(self, sim, members, rows, commands, dt: float) -> np.ndarray:
+        """TargetPose actions ``[n, 3]``: the relative pose expressed in the world frame."""
+        rel = self.relative_pose_actions(sim, members, rows, commands, dt)
+        t = sim.table
+        h = t.heading[rows]
+        c, s = np.cos(h), np.sin(h)
+        x = t.x[rows] + c * rel[:, 0] - s * rel[:, 1]
+        y = t.y[rows] + s * rel[:, 0] + c * rel[:, 1]
+        heading = np.arctan2(np.sin(h + rel[:, 2]), np.cos(h + rel[:, 2]))
+        return np.stack([x, y, heading], axis=1)
+
+    def continuous_actions(self, sim, members, rows, commands, dt: float, world, handles) -> np.ndarray:
+        """Continuous actions ``[n, 3]`` (throttle, brake, steering) for pybullet cars.
+
+        Throttle and brake come from the car's torque model (the force that gives the asked
+        acceleration, plus rolling resistance) and steering from the pursued curvature through the
+        car's wheelbase; the physics decides what actually happens.
+        """
+        accel, kappa, _, _ = self.targets(sim, members, rows, commands, dt)
+        handles = np.asarray(handles, dtype=np.int64)
+        mass = world.vehicle_mass(handles)
+        from smarts.dynamics.pybullet_chassis import WHEEL_RADIUS
+
+        rolling = world.rolling_resistance * 9.81
+        drive = np.clip(mass * (accel + rolling) * WHEEL_RADIUS / world.max_drive_torque, 0.0, 1.0)
+        brake = np.clip(mass * np.maximum(-accel - rolling, 0.0) * WHEEL_RADIUS / world.max_brake_torque, 0.0, 1.0)
+        drive = np.where(accel + rolling > 0.0, drive, 0.0)
+        wheelbase = world.wheelbase(handles)
+        steering = np.clip(np.arctan(kappa * wheelbase) / world.max_steer, -1.0, 1.0)
+        return np.stack([drive, brake, steering], axis=1)
+
+
+@numba.njit(cache=True, nogil=True)
+def _smooth(u):  # pragma: no cover - compiled
+    """Quintic smoothstep on [0, 1]: zero velocity and acceleration at both ends."""
+    if u <= 0.0:
+        return 0.0
+    if u >= 1.0:
+        return 1.0
+    return u * u * u * (10.0 - 15.0 * u + 6.0 * u * u)
+
+
+@numba.njit(cache=True, nogil=True)
+def _point_on_lane(offsets, points, point_s, heading, lane, s):  # pragma: no cover - compiled
+    a, b = offsets[lane], offsets[lane + 1]
+    if b - a == 1:
+        return points[a, 0], points[a, 1], heading[a]
+    lo, hi = a, b - 1
+    if s <= point_s[a]:
+        k = a
+    elif s >= point_s[b - 1]:
+        k = b - 2
+    else:
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if point_s[mid] <= s:
+                lo = mid
+            else:
+                hi = mid
+        k = lo
+    seg = max(point_s[k + 1] - point_s[k], 1e-9)
+    u = (s - point_s[k]) / seg
+    x = points[k, 0] + u * (points[k + 1, 0] - points[k, 0])
+    y = points[k, 1] + u * (points[k + 1, 1] - points[k, 1])
+    return x, y, heading[k] if u < 0.5 else heading[k + 1]
+
+
+@numba.njit(cache=True, nogil=True)
+def _turn_of(offsets, heading, lane, nxt, succ_offsets, succ, internal):  # pragma: no cover - compiled
+    """Heading change from the end of ``lane`` through the junction that ``nxt`` enters (rad, +
+    left): junction lanes with a single successor are followed to the lane leaving the junction."""
+    end = heading[offsets[lane + 1] - 1]
+    cur = nxt
+    guard = 0
+    while internal[cur] and succ_offsets[cur + 1] - succ_offsets[cur] == 1 and guard < 8:
+        following = succ[succ_offsets[cur]]
+        if not internal[following]:
+            break
+        cur = following
+        guard += 1
+    if internal[cur] and succ_offsets[cur + 1] - succ_offsets[cur] == 1:  # the lane leaving the junction
+        return wrap_scalar(heading[offsets[succ[succ_offsets[cur]]]] - end)
+    return wrap_scalar(heading[offsets[cur + 1] - 1] - end)
+
+
+@numba.njit(cache=True, nogil=True)
+def _next_lane(lane, branch, agent, succ_offsets, succ, lane_road, internal, route_road, lp_offsets, lp_heading):  # pragma: no cover
+    """The successor to follow at the end of ``lane``: the default one (on the agent's route, else
+    the straightest), or with a branch request the next one to its left (+1) or right (-1)."""
+    a, b = succ_offsets[lane], succ_offsets[lane + 1]
+    if b == a:
+        return -1
+    if b - a == 1:
+        return succ[a]
+    default, default_key = succ[a], np.inf
+    for k in range(a, b):
+        nxt = succ[k]
+        turn = _turn_of(lp_offsets, lp_heading, lane, nxt, succ_offsets, succ, internal)
+        key = abs(turn) + (0.0 if route_road[agent, lane_road[nxt]] else 100.0)
+        if key < default_key:
+            default, default_key = nxt, key
+    if branch == 0:
+        return default
+    base = _turn_of(lp_offsets, lp_heading, lane, default, succ_offsets, succ, internal)
+    best, best_gap = default, np.inf
+    for k in range(a, b):
+        nxt = succ[k]
+        turn = _turn_of(lp_offsets, lp_heading, lane, nxt, succ_offsets, succ, internal)
+        gap = (turn - base) * branch
+        if abs(turn) < U_TURN and 1e-3 < gap < best_gap:  # a U-turn is never a branch request
+            best, best_gap = nxt, gap
+    return best
+
+
+@numba.njit(cache=True, nogil=True)
+def _project_on_lane(offsets, points, point_s, lane, x, y):  # pragma: no cover - compiled
+    """(s, t) of a point on one lane's centre line (t + left); s runs on past both ends."""
+    a, b = offsets[lane], offsets[lane + 1]
+    if b - a < 2:
+        return 0.0, 0.0
+    best_d2, best_s, best_t = np.inf, 0.0, 0.0
+    for k in range(a, b - 1):
+        vx, vy = points[k + 1, 0] - points[k, 0], points[k + 1, 1] - points[k, 1]
+        rx, ry = x - points[k, 0], y - points[k, 1]
+        len2 = vx * vx + vy * vy
+        if len2 <= 0.0:
+            continue
+        raw = (rx * vx + ry * vy) / len2
+        u = min(max(raw, 0.0), 1.0)
+        if (k == a and raw < 0.0) or (k == b - 2 and raw > 1.0):
+            u = raw  # extend the end segments so s keeps growing past the lane's ends
+        dx, dy = rx - u * vx, ry - u * vy
+        d2 = dx * dx + dy * dy
+        if d2 < best_d2:
+            best_d2 = d2
+            best_s = point_s[k] + u * math.sqrt(len2)
+            best_t = math.sqrt(d2) if vx * ry - vy * rx >= 0.0 else -math.sqrt(d2)
+    return best_s, best_t
+
+
+@numba.njit(cache=True, nogil=True)
+def _targets_kernel(
+    data, lane_col, members, rows, cmd, dt, max_accel, max_decel, max_jerk, lc_time, look_time,
+    min_look, threshold, lane_left, lane_right, lane_width, lane_length, lane_road, internal,
+    succ_offsets, succ, lp_offsets, lp_points, lp_s, lp_heading, route_road, track, pending, profile_start,
+    profile_age, branch, accel_out, kappa_out, target_out,
+):  # pragma: no cover - compiled
+    for i in range(members.shape[0]):
+        a, r = members[i], rows[i]
+        x, y, h, v = data[_X, r], data[_Y, r], data[_H, r], max(data[_SPEED, r], 0.0)
+        # Longitudinal: the asked acceleration, reached at most at max_jerk.
+        want = cmd[i, 0] * (max_accel if cmd[i, 0] >= 0.0 else max_decel)
+        prev = data[_ACCEL, r]
+        accel_out[i] = min(max(want, prev - max_jerk * dt), prev + max_jerk * dt)
+        profile_age[a] += dt
+
+        # The lane being followed: kept by this controller (where junction lanes overlap, the map
+        # projection alone cannot tell which branch the car is taking), moved on to the chosen
+        # successor at its end, re-taken from the projection if the car has strayed from it.
+        lane = track[a]
+        if lane >= 0:
+            s, t = _project_on_lane(lp_offsets, lp_points, lp_s, lane, x, y)
+            guard = 0
+            while s > lane_length[lane] and guard < 16:
+                nxt = _next_lane(lane, branch[a], a, succ_offsets, succ, lane_road, internal, route_road, lp_offsets, lp_heading)
+                if nxt < 0:
+                    break
+                if succ_offsets[lane + 1] - succ_offsets[lane] > 1:
+                    branch[a] = 0  # the fork is behind us
+                lane = nxt
+                s, t = _project_on_lane(lp_offsets, lp_points, lp_s, lane, x, y)
+                guard += 1
+            if abs(t) > 0.5 * lane_width[lane] + 2.0:
+                lane = -1
+        if lane < 0:
+            lane = lane_col[r]
+            pending[a] = 0
+            if lane < 0:  # off every lane: hold the wheel straight
+                track[a] = -1
+                kappa_out[i] = 0.0
+                target_out[i, 0], target_out[i, 1] = x + math.cos(h), y + math.sin(h)
+                continue
+            s, t = _project_on_lane(lp_offsets, lp_points, lp_s, lane, x, y)
+            if abs(t) > 0.1:  # settle onto this lane's centre smoothly
+                profile_start[a] = t
+                profile_age[a] = 0.0
+        if pending[a] != 0:
+            neighbour = lane_left[lane] if pending[a] > 0 else lane_right[lane]
+            if neighbour < 0:  # the neighbour ended: settle back into this lane from where we are
+                pending[a] = 0
+                profile_start[a] = t
+                profile_age[a] = 0.0
+            else:
+                sn, tn = _project_on_lane(lp_offsets, lp_points, lp_s, neighbour, x, y)
+                if abs(tn) < abs(t):  # over the lane line: the change has arrived
+                    lane, s, t = neighbour, sn, tn
+                    pending[a] = 0
+        track[a] = lane
+
+        # A new lane-change request, once the last change is over.
+        side = 1 if cmd[i, 1] > threshold else (-1 if cmd[i, 1] < -threshold else 0)
+        if side != 0 and pending[a] == 0 and profile_age[a] >= lc_time:
+            neighbour = lane_left[lane] if side > 0 else lane_right[lane]
+            if neighbour >= 0:
+                pending[a] = side
+                profile_start[a] = _project_on_lane(lp_offsets, lp_points, lp_s, neighbour, x, y)[1]
+                profile_age[a] = 0.0
+            else:
+                branch[a] = side
+        ref, s_ref = lane, s
+        if pending[a] != 0:
+            ref = lane_left[lane] if pending[a] > 0 else lane_right[lane]
+            s_ref = _project_on_lane(lp_offsets, lp_points, lp_s, ref, x, y)[0]
+        offset = profile_start[a] * (1.0 - _smooth(profile_age[a] / lc_time))
+
+        # The pursued point: lookahead metres along ref and its continuation, shifted by offset.
+        pos = s_ref + max(v * look_time, min_look)
+        cur = ref
+        guard = 0
+        while pos > lane_length[cur] and guard < 64:
+            nxt = _next_lane(cur, branch[a], a, succ_offsets, succ, lane_road, internal, route_road, lp_offsets, lp_heading)
+            if nxt < 0:
+                break
+            pos -= lane_length[cur]
+            cur = nxt
+            guard += 1
+        px, py, ph = _point_on_lane(lp_offsets, lp_points, lp_s, lp_heading, cur, pos)
+        px -= math.sin(ph) * offset
+        py += math.cos(ph) * offset
+        target_out[i, 0], target_out[i, 1] = px, py
+        c, sn = math.cos(h), math.sin(h)
+        tx, ty = c * (px - x) + sn * (py - y), c * (py - y) - sn * (px - x)
+        d2 = tx * tx + ty * ty
+        kappa_out[i] = 2.0 * ty / d2 if d2 > 1e-6 else 0.0
+
+
+_X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
+_SPEED, _ACCEL, _S, _T = COLUMN["speed"], COLUMN["accel"], COLUMN["s"], COLUMN["t"]

@@ -1,0 +1,160 @@
+"""Task rewards for training: terms shaped like the benchmark metrics a task is scored with.
+
+The scenario's default reward (metres of route progress, crash penalties, a goal bonus) makes
+standing still a strong local optimum: the benchmark's safety-heavy S_bench gives a parked car about
+0.6. These rewards pay for what the metrics pay for, step by step, so the optimum is to drive well:
+
+Platoon (follow a lead vehicle; scored by PR, RC, Humanness and SFD), per step::
+
+    follow * (1 - tg / max_time_gap)          lead in my lane and visible, outside the follow margin
+                                              FM = standstill + headway * v, tg = (gap - FM) / v,
+                                              0 beyond max_time_gap (the SFD step, as a reward)
+    - too_close * (FM - gap) / FM             lead in lane, inside the margin (SFD scores it as lost)
+    + travel * v * dt                         metres driven (keeps a follower who lost the lead moving)
+
+Drive (reach the exit of a junction; scored by PR, RC, Humanness and MTE), per step::
+
+    progress * (metres of route progress) - time   (MTE pays for arriving early)
+    + goal on the step the goal is reached
+
+Both add the shared terms (the Humanness and RC ingredients, and the events)::
+
+    - comfort * [any of |jerk|, |lateral jerk|, |accel|, |lateral accel| over its comfort limit]
+    - lane_centre * min(|lane offset| / (0.5 * lane width), 1)
+    - speeding * min(max(v - limit, 0) / (0.5 * limit), 1)
+    - wrong_way * [wrong way] - partial_off_road * [a wheel off the road]
+    - collision * [collision] - off_road * [off road]
+
+Every weight lives in ``configs/train/<task>.yaml`` (``reward:``); the limits default to the
+benchmark's (``configs/benchmark/metrics.yaml``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from smarts.core.events import Event
+from smarts.core.following import lead_state
+from smarts.core.simulation import Simulation
+
+TASK_REWARDS = ("platoon", "drive")
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """Weights of the task reward terms (see the module docstring) and the limits they use."""
+
+    task: str = "platoon"
+    # platoon
+    follow: float = 1.0
+    too_close: float = 0.5
+    travel: float = 0.02
+    # drive
+    progress: float = 0.1
+    goal: float = 10.0
+    time: float = 0.02
+    # shared
+    comfort: float = 0.1
+    lane_centre: float = 0.1
+    speeding: float = 1.0
+    wrong_way: float = 0.5
+    partial_off_road: float = 0.5
+    collision: float = 20.0
+    off_road: float = 20.0
+    # limits (the benchmark's defaults)
+    standstill_distance: float = 2.5
+    headway: float = 1.0
+    max_time_gap: float = 3.0
+    jerk_long_max: float = 0.9
+    jerk_lat_max: float = 0.9
+    accel_long_max: float = 2.0
+    accel_lat_max: float = 1.47
+
+    def __post_init__(self) -> None:
+        if self.task not in TASK_REWARDS:
+            raise ValueError(f"reward.task: expected one of {', '.join(TASK_REWARDS)}, got {self.task!r}")
+        for f in fields(self):
+            if f.name == "task":
+                continue
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
+                raise ValueError(f"reward.{f.name}: expected a finite number >= 0, got {value!r}")
+        for name in ("headway", "max_time_gap", "jerk_long_max", "jerk_lat_max", "accel_long_max", "accel_lat_max"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"reward.{name}: expected a positive number, got {getattr(self, name)!r}")
+
+
+class TaskReward:
+    """``reward(sim, agents)`` for one simulation (it keeps the lateral acceleration of the last
+    step to difference it into lateral jerk; build one per env)."""
+
+    def __init__(self, weights: RewardWeights):
+        self.w = weights
+        self._lat = np.zeros(0)
+        self._step = np.zeros(0, dtype=np.int64)
+
+    def __call__(self, sim: Simulation, agents: np.ndarray) -> np.ndarray:
+        w = self.w
+        t = sim.table
+        rows = sim.agent_row[agents]
+        ev = sim.agent_events[agents]
+        speed = np.maximum(t.speed[rows], 0.0)
+        rm = sim.road_map
+        lane = t.lane[rows]
+        on_lane = lane >= 0
+        lane_c = np.maximum(lane, 0)
+
+        # Humanness and RC ingredients.
+        if self._lat.shape[0] != len(sim.agent_ids):
+            self._lat = np.zeros(len(sim.agent_ids))
+            self._step = np.full(len(sim.agent_ids), -10, dtype=np.int64)
+        lat = t.lat_accel[rows]
+        previous = np.where(self._step[agents] == sim.step_count - 1, self._lat[agents], lat)
+        lat_jerk = (lat - previous) / sim.dt
+        self._lat[agents], self._step[agents] = lat, sim.step_count
+        uncomfortable = (
+            (np.abs(t.jerk[rows]) > w.jerk_long_max)
+            | (np.abs(lat_jerk) > w.jerk_lat_max)
+            | (np.abs(t.accel[rows]) > w.accel_long_max)
+            | (np.abs(lat) > w.accel_lat_max)
+        )
+        centre = np.where(on_lane, np.minimum(np.abs(t.t[rows]) / (0.5 * rm.lane_width[lane_c]), 1.0), 1.0)
+        limit = rm.lane_speed_limit[lane_c]
+        overspeed = np.where(on_lane, np.minimum(np.maximum(speed - limit, 0.0) / (0.5 * limit), 1.0), 0.0)
+        reward = (
+            -w.comfort * uncomfortable
+            - w.lane_centre * centre
+            - w.speeding * overspeed
+            - w.wrong_way * ev[:, Event.WRONG_WAY]
+            - w.partial_off_road * ev[:, Event.PARTIAL_OFF_ROAD]
+            - w.collision * ev[:, Event.COLLISION]
+            - w.off_road * ev[:, Event.OFF_ROAD]
+        )
+        if w.task == "platoon":
+            reward += self._platoon(sim, agents, speed)
+        else:
+            reward += w.progress * sim.route_progress_delta[agents] - w.time
+            reward += w.goal * ev[:, Event.REACHED_GOAL]
+        return reward
+
+    def _platoon(self, sim: Simulation, agents: np.ndarray, speed: np.ndarray) -> np.ndarray:
+        w = self.w
+        lead = lead_state(sim, agents)
+        gap = np.nan_to_num(lead.gap, nan=0.0)
+        margin = w.standstill_distance + w.headway * speed
+        inside = lead.in_lane & (gap <= margin)
+        outside = lead.in_lane & ~inside
+        with np.errstate(divide="ignore", invalid="ignore"):
+            time_gap = np.where(outside, (gap - margin) / np.maximum(speed, 1e-6), np.inf)
+        follow = np.where(outside, np.clip(1.0 - time_gap / w.max_time_gap, 0.0, 1.0), 0.0)
+        close = np.where(inside, np.clip((margin - gap) / margin, 0.0, 1.0), 0.0)
+        return w.follow * follow - w.too_close * close + w.travel * speed * sim.dt
+
+
+def reward_factory(weights: RewardWeights):
+    """A no-argument constructor of one ``TaskReward`` per env (picklable for worker processes)."""
+    import functools
+
+    return functools.partial(TaskReward, weights)
