@@ -63,11 +63,16 @@ class Actor(nn.Module):
     """Flat observation -> (pre-squash mean, relative spread) of the policy's Gaussian."""
 
     def __init__(
-        self, obs_size: int, action_size: int, hidden: tuple[int, ...] = (128, 128), init_log_std: float = -0.5
+        self,
+        obs_size: int,
+        action_size: int,
+        hidden: tuple[int, ...] = (128, 128),
+        init_log_std: float | list[float] = -0.5,
     ):
         super().__init__()
         self.net = mlp([obs_size, *hidden], action_size, final_gain=0.01)
-        self.log_std = nn.Parameter(torch.full((action_size,), float(init_log_std)))
+        start = torch.as_tensor(init_log_std, dtype=torch.float32).expand(action_size).clone()
+        self.log_std = nn.Parameter(start)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         loc = self.net(x)
@@ -156,7 +161,7 @@ def save_checkpoint(path: Path, *, actor: Actor, critic: Critic, normalizer: Obs
                     layout: ObservationLayout, low: np.ndarray, high: np.ndarray,
                     action_space: str, config: dict, step: int, metrics: dict,
                     optimizer_state: dict | None = None, controller: str = "direct",
-                    interface: dict | None = None) -> Path:  # fmt: skip
+                    interface: dict | None = None, lane_relative: dict | None = None) -> Path:  # fmt: skip
     """Write tensors + JSON-able metadata atomically (``weights_only`` loadable).
 
     ``action_space`` and ``controller`` say how the actions drive a vehicle and ``interface`` (the
@@ -173,6 +178,7 @@ def save_checkpoint(path: Path, *, actor: Actor, critic: Critic, normalizer: Obs
         "action": {"space": action_space, "controller": controller, "mean": "linear",
                    "low": [float(v) for v in low], "high": [float(v) for v in high]},
         "interface": interface,
+        "lane_relative": lane_relative,
         "hidden": list(config.get("hidden", (128, 128))),
         "config": config,
         "step": int(step),
@@ -233,6 +239,14 @@ class PPOPolicy:
         self.action_space = blob["action"]["space"]
         self.controller = blob["action"].get("controller", "direct")
         self.mean_map = blob["action"].get("mean", "tanh")
+        self.lane_relative = None
+        if blob.get("lane_relative") is not None:
+            from smarts.dynamics.lane_relative import LaneRelativeParams
+
+            try:
+                self.lane_relative = LaneRelativeParams(**blob["lane_relative"])
+            except (TypeError, ValueError) as err:
+                raise CheckpointError(f"{source}: recorded lane-relative settings are invalid ({err})") from None
         self.interface = None
         if blob.get("interface") is not None:
             from smarts.sensors.interface import InterfaceError, interface_from_dict

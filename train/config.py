@@ -35,6 +35,9 @@ class TrainConfig:
     controller: str = "lane_relative"
     """``lane_relative``: the policy outputs (acceleration, lane change) commands that the env turns
     into the action space's actions (``smarts.dynamics.lane_relative``); ``direct``: raw actions."""
+    lane_relative: dict = field(default_factory=dict)
+    """How lane-relative commands drive (``smarts.dynamics.lane_relative.LaneRelativeParams``
+    fields, e.g. ``{max_jerk: 2.0}``); recorded in checkpoints so evaluation drives the same."""
     interface: dict = field(default_factory=dict)
     """The observation interface (``smarts.sensors.interface`` fields, e.g. ``{lead: true}``)."""
     reward: dict = field(default_factory=dict)
@@ -56,9 +59,15 @@ class TrainConfig:
     entropy_coeff: float = 0.001
     critic_coeff: float = 0.5
     max_grad_norm: float = 0.5
+    target_kl: float = 0.05
+    """Stop a batch's remaining epochs once the approximate KL to the collecting policy exceeds
+    this (0: never)."""
+    action_bound_coeff: float = 1.0
+    """Weight of the loss on the Gaussian's mean outside the action box (``train.ppo.action_bound_loss``)."""
     hidden: list[int] = field(default_factory=lambda: [128, 128])
-    init_log_std: float = -0.5
-    """Initial log standard deviation of the Gaussian policy (per action component)."""
+    init_log_std: list[float] = field(default_factory=lambda: [-0.5])
+    """Initial log standard deviation of the Gaussian policy: one value for every action
+    component, or one per component (for lane-relative commands: speed, lane change)."""
     obs_clip: float = 5.0
     obs_std_floor: float = 0.1
     """Normalised inputs are clipped to +-obs_clip; no feature is divided by less than this."""
@@ -90,6 +99,10 @@ class TrainConfig:
         except ValueError as err:
             raise fail("interface", str(err)) from None
         try:
+            self.lane_relative_params()
+        except (TypeError, ValueError) as err:
+            raise fail("lane_relative", str(err)) from None
+        try:
             self.reward_weights()
         except (TypeError, ValueError) as err:
             raise fail("reward", str(err)) from None
@@ -111,9 +124,11 @@ class TrainConfig:
         for name in ("obs_clip", "obs_std_floor", "torch_threads"):
             if not getattr(self, name) > 0:
                 raise fail(name, f"expected a positive number, got {getattr(self, name)}")
-        for name in ("entropy_coeff", "critic_coeff", "eval_every", "eval_episodes", "seed", "eval_seed"):
+        for name in ("entropy_coeff", "critic_coeff", "action_bound_coeff", "target_kl", "eval_every", "eval_episodes", "seed", "eval_seed"):
             if getattr(self, name) < 0:
                 raise fail(name, f"expected a non-negative number, got {getattr(self, name)}")
+        if not self.init_log_std or not all(-5.0 <= v <= 1.0 for v in self.init_log_std):
+            raise fail("init_log_std", f"expected one or more numbers in [-5, 1], got {self.init_log_std}")
         if not self.hidden or any(h < 1 for h in self.hidden):
             raise fail("hidden", f"expected a list of positive layer sizes, got {self.hidden}")
         if not self.scenarios:
@@ -125,6 +140,16 @@ class TrainConfig:
         from smarts.sensors.interface import interface_from_dict
 
         return interface_from_dict(self.interface)
+
+    def lane_relative_params(self):
+        """The ``LaneRelativeParams`` of ``lane_relative``."""
+        from smarts.dynamics.lane_relative import LaneRelativeParams
+
+        known = {f.name for f in fields(LaneRelativeParams)}
+        unknown = sorted(set(self.lane_relative) - known)
+        if unknown:
+            raise ValueError(f"unknown settings {unknown}; known: {', '.join(sorted(known))}")
+        return LaneRelativeParams(**self.lane_relative)
 
     def reward_weights(self):
         """The ``RewardWeights`` of ``reward`` (the task's reward unless ``reward.task`` says)."""
@@ -153,7 +178,9 @@ def _coerce(name: str, value: Any, kind: Any, source: str) -> Any:
             return float(value)
         if isinstance(value, str) and "list" in text:
             items = [v for v in value.replace(",", " ").split() if v]
-            return [int(v) for v in items] if "int" in text else items
+            if "int" in text:
+                return [int(v) for v in items]
+            return [float(v) for v in items] if "float" in text else items
         if text == "float" and isinstance(value, int) and not isinstance(value, bool):
             return float(value)
     except (ValueError, yaml.YAMLError):

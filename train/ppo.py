@@ -72,13 +72,15 @@ def scenario_names(names: list[str]) -> list[str]:
     return out
 
 
-def training_spec(name: str, action_space: str, controller: str = "direct"):
-    """A scenario spec from ``suite:scenario`` or a library name, every learning agent on
+def training_spec(name, action_space: str, controller: str = "direct"):
+    """A scenario spec from ``suite:scenario``, a library name or a spec, every learning agent on
     ``action_space`` driven through ``controller`` (social agents keep their own)."""
     from smarts.benchmark.suites import load_suite
     from smarts.scenario import load_scenario
 
-    if ":" in name:
+    if not isinstance(name, str):
+        spec = name
+    elif ":" in name:
         suite_name, scenario = name.split(":", 1)
         suite = load_suite(suite_name)
         matches = [s.spec for s in suite.scenarios if s.name == scenario]
@@ -101,7 +103,11 @@ def training_specs(cfg: TrainConfig) -> list:
 
 def env_options(cfg: TrainConfig) -> dict:
     """What every training env copy gets besides its scenario: observation and task reward."""
-    return {"observation": cfg.observation_interface(), "reward_factory": reward_factory(cfg.reward_weights())}
+    return {
+        "observation": cfg.observation_interface(),
+        "reward_factory": reward_factory(cfg.reward_weights()),
+        "lane_relative": cfg.lane_relative_params(),
+    }
 
 
 def make_env(cfg: TrainConfig) -> TransformedEnv:
@@ -209,7 +215,7 @@ def raw_features(layout: ObservationLayout, obs_spec) -> torch.Tensor:
     bounded to [0, 1], and the flag columns of ``lead`` and ``signal``)."""
     from smarts.sensors.observation import LEAD_FEATURE_NAMES
 
-    flags = {"lead": ("present", "visible", "in_lane"), "signal": (0, 1, 2)}
+    flags = {"lead": ("present", "visible", "in_lane"), "signal": (0, 1, 2), "ahead": (0,)}
     parts = []
     for key, shape in zip(layout.keys, layout.shapes):
         size = int(np.prod(shape))
@@ -219,8 +225,8 @@ def raw_features(layout: ObservationLayout, obs_spec) -> torch.Tensor:
         mark = torch.full((size,), 1.0 if bounded01 else 0.0)
         if key == "lead":
             mark[[LEAD_FEATURE_NAMES.index(n) for n in flags["lead"]]] = 1.0
-        elif key == "signal":
-            mark[list(flags["signal"])] = 1.0
+        elif key in ("signal", "ahead"):
+            mark[list(flags[key])] = 1.0
         parts.append(mark)
     return torch.cat(parts)
 
@@ -235,7 +241,11 @@ def build_modules(env, cfg: TrainConfig):
     high = action_spec.space.high.reshape(-1, action_spec.shape[-1])[0]
     normalizer = ObsNormalizer(layout.size, clip=cfg.obs_clip, std_floor=cfg.obs_std_floor,
                                raw=raw_features(layout, obs_spec))  # fmt: skip
-    actor_net = Actor(layout.size, action_spec.shape[-1], tuple(cfg.hidden), init_log_std=cfg.init_log_std)
+    size = action_spec.shape[-1]
+    log_std = cfg.init_log_std if len(cfg.init_log_std) == size else cfg.init_log_std[:1] * size
+    if len(cfg.init_log_std) not in (1, size):
+        raise ValueError(f"init_log_std: expected 1 or {size} values (one per action component), got {cfg.init_log_std}")
+    actor_net = Actor(layout.size, size, tuple(cfg.hidden), init_log_std=log_std)
     critic_net = Critic(layout.size, tuple(cfg.hidden))
     in_keys = [("observation", k) for k in layout.keys]
     head = _GaussianInActionUnits(actor_net, low, high)
@@ -251,6 +261,16 @@ def build_modules(env, cfg: TrainConfig):
     return layout, normalizer, actor_net, critic_net, actor, critic, low.numpy(), high.numpy()
 
 
+def action_bound_loss(actor_net: Actor, normalizer: ObsNormalizer, layout: ObservationLayout, batch, low, high):
+    """Squared distance of the Gaussian's mean outside the action box. Beyond the box the simulator
+    clips every sample to the same action, so PPO's gradient there is noise and the mean drifts
+    away (and a lane change requested at +3 means the same as at +0.6); this keeps it in reach."""
+    x = normalizer(layout.flatten({k: batch["observation", k] for k in layout.keys}))
+    pre, _ = actor_net(x)
+    mean = scale_action(pre, low, high)
+    return ((mean - high).clamp(min=0.0) ** 2 + (low - mean).clamp(min=0.0) ** 2).sum(-1).mean()
+
+
 def check_resume(resume: Path, cfg: TrainConfig) -> dict:
     """The checkpoint to resume from, refused (before any env is built or file written) when it
     was trained for another action space, controller, observation or network."""
@@ -260,17 +280,25 @@ def check_resume(resume: Path, cfg: TrainConfig) -> dict:
         "controller": cfg.controller,
         "observation interface": _interface_dict(cfg),
         "hidden layers": list(cfg.hidden),
+        "lane-relative settings": _lane_relative_dict(cfg),
     }
     theirs = {
         "action space": blob["action"]["space"],
         "controller": blob["action"].get("controller", "direct"),
         "observation interface": blob.get("interface"),
         "hidden layers": list(blob["hidden"]),
+        "lane-relative settings": blob.get("lane_relative"),
     }
     for what, value in mine.items():
         if theirs[what] != value:
             raise CheckpointError(f"{resume}: trained with {what} {theirs[what]!r}; this run uses {value!r}")
     return blob
+
+
+def _lane_relative_dict(cfg: TrainConfig) -> dict | None:
+    if cfg.controller != "lane_relative":
+        return None
+    return dataclasses.asdict(cfg.lane_relative_params())
 
 
 def _interface_dict(cfg: TrainConfig) -> dict:
@@ -307,6 +335,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                               critic_coeff=cfg.critic_coeff, loss_critic_type="l2",
                               normalize_advantage=True)  # fmt: skip
     scale_rewards = RewardScaler(cfg.gamma)
+    bound_low, bound_high = torch.as_tensor(low), torch.as_tensor(high)
     optimizer = torch.optim.Adam(loss_module.parameters(), lr=cfg.lr)
     step = 0
     if blob is not None:
@@ -344,6 +373,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
         return save_checkpoint(path, actor=actor_net, critic=critic_net, normalizer=normalizer, layout=layout,
                                low=low, high=high, action_space=ACTION_SPACES[cfg.action_space],
                                controller=cfg.controller, interface=_interface_dict(cfg),
+                               lane_relative=_lane_relative_dict(cfg),
                                config=dataclasses.asdict(cfg), step=step, metrics=metrics,
                                optimizer_state=optimizer.state_dict())  # fmt: skip
 
@@ -359,6 +389,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                 scale_rewards(data)
                 # GAE runs on [slots, time] so advantages stop at each trajectory's end; steps of
                 # waiting slots are then dropped and the minibatches mix the real steps.
+                stop = False
                 for _ in range(cfg.epochs):
                     with torch.no_grad():
                         advantage(data)
@@ -367,11 +398,20 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                     buffer.extend(flat[flat["valid"].reshape(-1)])
                     for batch in buffer:
                         losses = loss_module(batch)
+                        if cfg.target_kl and float(losses.get("kl_approx", torch.tensor(0.0))) > cfg.target_kl:
+                            stop = True  # the policy has moved far enough on this batch (as SB3 does)
+                            break
                         total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+                        if cfg.action_bound_coeff > 0:
+                            total = total + cfg.action_bound_coeff * action_bound_loss(
+                                actor_net, normalizer, layout, batch, bound_low, bound_high
+                            )
                         optimizer.zero_grad()
                         total.backward()
                         nn.utils.clip_grad_norm_(loss_module.parameters(), cfg.max_grad_norm)
                         optimizer.step()
+                    if stop:
+                        break
                 # Refresh the observation statistics only now: during the update the policy must see
                 # its inputs exactly as it did when it acted, or PPO's probability ratios are off.
                 flat = data.reshape(-1)
@@ -444,7 +484,9 @@ def evaluate_into(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: i
     frozen = out / "policy.pt"  # the runner reads the file later: keep this step's weights
     out.mkdir(parents=True, exist_ok=True)
     frozen.write_bytes(Path(checkpoint).read_bytes())
-    jobs = plan_jobs([str(frozen)], suite, cfg.eval_episodes, out, seed=cfg.eval_seed)
+    # The reference agents' episodes (same seeds every time) are run once per training run and reused.
+    cache = out.parent / "reference_cache" if out.parent.name == "evals" else out.parent / "evals" / "reference_cache"
+    jobs = plan_jobs([str(frozen)], suite, cfg.eval_episodes, out, seed=cfg.eval_seed, reference_cache=cache)
     results = run_jobs(jobs, workers=2, progress=False)
     write_report(out, suite, [str(frozen)], results)
     scores = json.loads((out / "results.json").read_text())["agents"][str(frozen)]["scores"]

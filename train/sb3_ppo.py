@@ -29,9 +29,9 @@ def make_vec_env(cfg: TrainConfig):
     from smarts.env.task_rewards import TaskReward
     from train.ppo import TRAIN_SEED_BASE, training_specs
 
-    interface, weights = cfg.observation_interface(), cfg.reward_weights()
+    interface, weights, lane = cfg.observation_interface(), cfg.reward_weights(), cfg.lane_relative_params()
     factories = [
-        functools.partial(DrivingParallelEnv, spec, observation=interface, reward=TaskReward(weights))
+        functools.partial(DrivingParallelEnv, spec, observation=interface, reward=TaskReward(weights), lane_relative=lane)
         for spec in training_specs(cfg)
     ]  # every learning agent of every copy is one slot
     return SmartsVecEnv(factories, seed=TRAIN_SEED_BASE + cfg.seed * 1_000_003, normalize_actions=True,
@@ -95,6 +95,7 @@ def save_sb3(path: Path, model, vec, cfg: TrainConfig) -> Path:
         "policy": model.policy.state_dict(),
         "observation": {k: list(s.shape) for k, s in spaces.items()},
         "interface": _interface_dict(cfg),
+        "lane_relative": dataclasses.asdict(cfg.lane_relative_params()) if cfg.controller == "lane_relative" else None,
         "action": {
             "space": ACTION_SPACES[cfg.action_space],
             "controller": cfg.controller,
@@ -136,6 +137,11 @@ class SB3Policy:
             from smarts.sensors.interface import interface_from_dict
 
             self.interface = interface_from_dict(blob["interface"])
+        self.lane_relative = None
+        if blob.get("lane_relative") is not None:
+            from smarts.dynamics.lane_relative import LaneRelativeParams
+
+            self.lane_relative = LaneRelativeParams(**blob["lane_relative"])
         act_space = gym.spaces.Box(-1.0, 1.0, self.low.shape, np.float32)
         self.policy = MultiInputActorCriticPolicy(obs_space, act_space, lambda _: 0.0, net_arch=blob["net_arch"])
         self.policy.load_state_dict(blob["policy"])

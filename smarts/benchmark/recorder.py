@@ -86,6 +86,7 @@ class EpisodeRecorder:
         self.lead_final: dict[str, tuple[float, float]] = {}
         self.failure: str | None = None
         self.start_time = float(sim.time)
+        self.end_time: float | None = None
         self._goal_s = self._goal_along_route()
         # The reset state: kept, never written as a row.
         t = sim.table
@@ -140,8 +141,10 @@ class EpisodeRecorder:
             return  # the reset state is not a row
         if sim.time - self.start_time > self.meta["time_limit"] + TIME_LIMIT_TOLERANCE:
             return  # past the time limit: the episode is over for the metrics
+        self.end_time = float(sim.time - self.start_time)
         live = sim.agent_active[self.agents]
         if not live.any():
+            self._note_leads()  # the scenario goes on: where the lead gets to is the followers' goal
             return
         agents = self.agents[live]
         rows = sim.agent_row[agents]
@@ -215,6 +218,7 @@ class EpisodeRecorder:
             initial_route_distance=initial,
             agents=traces,
             failure=self.failure,
+            end_time=self.end_time,
             info=self.info,
         )
 

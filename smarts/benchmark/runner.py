@@ -52,12 +52,15 @@ class PolicySetup:
     action_space: str
     controller: str = "direct"
     interface: AgentInterface | None = None
+    lane_relative: Any = None
+    """``LaneRelativeParams`` the policy was trained with (lane-relative controller); None: defaults."""
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "action_space": self.action_space,
             "controller": self.controller,
             "interface": None if self.interface is None else interface_to_dict(self.interface),
+            "lane_relative": None if self.lane_relative is None else dataclasses.asdict(self.lane_relative),
         }
 
 
@@ -113,7 +116,7 @@ def policy_setup(policy, locator: str) -> PolicySetup:
         raise AgentSetupError(
             f"agent {locator!r}: interface must be a smarts.sensors.interface.AgentInterface or None, got {type(interface).__name__}"
         )
-    return PolicySetup(space, controller, interface)
+    return PolicySetup(space, controller, interface, getattr(policy, "lane_relative", None))
 
 
 def check_hosted(locator: str, setup: PolicySetup, suite: Suite) -> None:
@@ -150,9 +153,7 @@ def build_env(entry: SuiteScenario, setup: PolicySetup):
     from smarts.env import DrivingParallelEnv
 
     spec = scenario_for(entry.spec, setup)
-    if setup.interface is not None:
-        return DrivingParallelEnv(spec, observation=setup.interface)
-    return DrivingParallelEnv(spec)
+    return DrivingParallelEnv(spec, observation=setup.interface, lane_relative=setup.lane_relative)
 
 
 def _summary(job: Job, scenario: str, failure: str | None, info: dict) -> dict:
@@ -214,6 +215,13 @@ def run_episode(job: Job) -> dict:
                 break
             if leads and not all(lead in env.sim.table.row_of for lead in leads):
                 break  # the lead left the map: the following task is over
+        # Followers that crashed or left the road did not complete the scenario: it runs on to its
+        # end (the time limit or the lead leaving the map), so their goal is where the lead gets
+        # to and SFD counts the steps they missed.
+        while (running and recorder.failure is None and leads and not env.agents
+               and env.sim.time < entry.time_limit - 1e-9
+               and all(lead in env.sim.table.row_of for lead in leads)):  # fmt: skip
+            env.step({})
         log = recorder.finish()
     finally:
         env.close()

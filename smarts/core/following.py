@@ -151,3 +151,60 @@ def _lead_kernel(
             gap[i] = along - half_lengths
         elif (lane_internal[lf] or lane_internal[lj]) and fx > 0.0 and abs(fy) < 0.5 * lane_width[lf]:
             in_lane[i] = True
+
+
+@dataclass
+class AheadState:
+    """Per agent: the nearest road user ahead on the agent's lane (lane continuity, any vehicle)."""
+
+    present: np.ndarray  # bool[n] one is within ``sight`` metres of lane ahead
+    gap: np.ndarray  # float64[n] bumper-to-bumper metres along the lanes (sight when none)
+    rel_speed: np.ndarray  # float64[n] its speed along its heading minus the agent's (m/s; 0 when none)
+    speed: np.ndarray  # float64[n] m/s
+    accel: np.ndarray  # float64[n] m/s^2
+
+
+def ahead_state(sim, agents: np.ndarray, sight: float = LEAD_SIGHT) -> AheadState:
+    """The nearest road user ahead of each agent on its lane or a lane it leads to, within ``sight``
+    metres along the lanes (the vehicle a driver keeps a gap to, whoever it is)."""
+    agents = np.asarray(agents, dtype=np.int64)
+    n = len(agents)
+    out = AheadState(np.zeros(n, bool), np.full(n, float(sight)), np.zeros(n), np.zeros(n), np.zeros(n))
+    if n == 0:
+        return out
+    rm = sim.road_map
+    _ahead_kernel(
+        sim.table.data, sim.table.lane, sim.agent_row[agents], sim.alive, rm.succ_offsets, rm.succ,
+        rm.lane_length, float(sight), out.present, out.gap, out.rel_speed, out.speed, out.accel,
+    )  # fmt: skip
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _ahead_kernel(
+    data, lane, rows, alive, succ_offsets, succ, lane_length, sight, present, gap, rel_speed, speed, accel
+):  # pragma: no cover - compiled
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        if r < 0 or lane[r] < 0:
+            continue
+        x, y, h, v = data[_X, r], data[_Y, r], data[_H, r], data[_SPEED, r]
+        best = sight
+        for j in alive:
+            if j == r or lane[j] < 0:
+                continue
+            dx, dy = data[_X, j] - x, data[_Y, j] - y
+            if dx * dx + dy * dy > (sight + 15.0) ** 2:
+                continue
+            along = lane_distance_ahead(succ_offsets, succ, lane_length, lane[r], data[_S, r], lane[j], data[_S, j], sight)
+            if along <= 0.0 or along > sight:
+                continue
+            g = along - 0.5 * (data[_LENGTH, r] + data[_LENGTH, j])
+            if g < best:
+                best = g
+                present[i] = True
+                gap[i] = g
+                rel = data[_H, j] - h
+                speed[i] = data[_SPEED, j]
+                rel_speed[i] = data[_SPEED, j] * math.cos(rel) - v
+                accel[i] = data[_ACCEL, j]

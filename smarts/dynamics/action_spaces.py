@@ -37,7 +37,7 @@ ACTION_COMPONENTS: dict[ActionSpaceType, tuple[str, ...]] = {
 
 CONTROLLERS = ("direct", "lane_relative")
 """How an agent's actions reach its action space (see ``smarts.dynamics.lane_relative``)."""
-LANE_RELATIVE_COMPONENTS = ("accel", "lane_change")
+LANE_RELATIVE_COMPONENTS = ("speed", "lane_change")
 
 
 class ActionError(ValueError):
@@ -91,7 +91,7 @@ def agent_action_space(
     kind: ActionSpaceType | str, controller: str, limits: ReachLimits, dt: float
 ) -> gymnasium.spaces.Box:
     """The box an agent acts in: its action space's own, or the lane-relative command box
-    ``[-1, 1]^2`` (accel, lane_change) when its controller is ``lane_relative``."""
+    ``[-1, 1]^2`` (speed, lane_change) when its controller is ``lane_relative``."""
     box = action_space(kind, limits, dt)
     if controller == "direct":
         return box

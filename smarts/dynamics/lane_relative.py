@@ -1,4 +1,4 @@
-"""Lane-relative commands for learning: (acceleration, lane change) turned into real actions.
+"""Lane-relative commands for learning: (speed, lane change) turned into real actions.
 
 Why: a policy that outputs raw (dx, dy, dheading) or (throttle, brake, steering) must first learn
 to stay on the road, and its zero action (what an untrained Gaussian policy outputs) asks to stop
@@ -6,12 +6,17 @@ or to coast. Here the zero command is a sane one: keep the current speed in the 
 The command is then turned into the agent's own action space (RelativeTargetPose, TargetPose or
 Continuous), so the vehicle obeys exactly the limits and physics of that space and a benchmark
 run in that space stays honest. Nothing here decides *what* to do (no car following, no gap
-keeping): the policy chooses every acceleration and every lane change.
+keeping): the policy chooses every target speed and every lane change; this module only tracks
+them, like a driver's feet and hands follow the driver's decisions.
 
 Command (float ``[n, 2]``, each component in [-1, 1]; values outside are clipped):
 
-- ``accel``: the longitudinal acceleration asked for, as a fraction of ``max_accel`` (> 0) or of
-  ``max_decel`` (< 0). It is reached at most at ``max_jerk`` (m/s^3), so the ride is smooth.
+- ``speed``: the target speed, relative to the speed limit of the lane followed:
+  ``limit * (1 + speed)``, so 0 cruises at the limit, -1 stops and +1 asks for twice the limit.
+  The acceleration towards it is ``(target - v) / speed_time_constant``, at most ``max_accel``
+  and ``max_decel``, and changes at most at ``max_jerk`` (m/s^3), so the ride is smooth. (A
+  target rather than an acceleration: the mean command sets where the speed settles, which a
+  policy learns far faster than the integral of noisy accelerations.)
 - ``lane_change``: above ``+threshold`` change one lane to the left, below ``-threshold`` one to the
   right, otherwise keep the lane. A change runs to its end (``lane_change_time`` seconds along a
   smooth lateral profile) before another one starts. Where the road has no lane on the asked side,
@@ -36,7 +41,9 @@ import numpy as np
 from smarts.core.geometry import wrap_scalar
 from smarts.core.vehicle_table import COLUMN
 
-COMMAND_COMPONENTS = ("accel", "lane_change")
+COMMAND_COMPONENTS = ("speed", "lane_change")
+DEFAULT_SPEED_LIMIT = 13.89
+"""m/s used off the map, where no lane gives a limit."""
 U_TURN = 2.6
 """rad: continuations turning more than this are U-turns, taken only when the route says so."""
 
@@ -45,17 +52,19 @@ U_TURN = 2.6
 class LaneRelativeParams:
     """How commands become motion (documented because policies learn against them)."""
 
-    max_accel: float = 3.0
-    """m/s^2 asked for by accel = +1."""
+    speed_time_constant: float = 2.0
+    """s: the acceleration is the speed error divided by this."""
+    max_accel: float = 4.0
+    """m/s^2: the largest acceleration."""
     max_decel: float = 6.0
-    """m/s^2 of braking asked for by accel = -1."""
+    """m/s^2: the hardest braking."""
     max_jerk: float = 2.0
     """m/s^3: how fast the acceleration may change from one step to the next."""
     lane_change_time: float = 5.0
     """s: duration of the lateral profile of one lane change."""
-    lookahead_time: float = 1.0
+    lookahead_time: float = 0.6
     """s of travel to the pure-pursuit point."""
-    min_lookahead: float = 4.0
+    min_lookahead: float = 2.5
     """m: the pure-pursuit point is never closer than this."""
     threshold: float = 0.5
     """|lane_change| above this asks for a change (or a branch)."""
@@ -96,7 +105,8 @@ class LaneRelativeController:
     def targets(self, sim, members: np.ndarray, rows: np.ndarray, commands: np.ndarray, dt: float):
         """Advance the state of agents ``members`` (rows ``rows``) by one step of ``commands``.
 
-        Returns ``(accel, curvature, target_x, target_y)``: the jerk-limited acceleration (m/s^2),
+        Returns ``(accel, curvature, target_x, target_y)``: the acceleration (m/s^2) towards the
+        target speed,
         the pure-pursuit path curvature (1/m) and the pursued point (world frame) per member.
         """
         if self._route_road is None:
@@ -110,8 +120,8 @@ class LaneRelativeController:
         rm = sim.road_map
         _targets_kernel(
             sim.table.data, sim.table.lane, np.asarray(members, np.int64), np.asarray(rows, np.int64), cmd, dt,
-            p.max_accel, p.max_decel, p.max_jerk, p.lane_change_time, p.lookahead_time, p.min_lookahead,
-            p.threshold, rm.lane_left, rm.lane_right, rm.lane_width, rm.lane_length, rm.lane_road,
+            p.speed_time_constant, p.max_accel, p.max_decel, p.max_jerk, p.lane_change_time, p.lookahead_time, p.min_lookahead,
+            p.threshold, rm.lane_left, rm.lane_right, rm.lane_width, rm.lane_length, rm.lane_speed_limit, rm.lane_road,
             rm.lane_internal, rm.succ_offsets, rm.succ, rm.lanepoint_offsets, rm.lanepoints, rm.lanepoint_s,
             rm.lanepoint_heading, self._route_road, self.track, self.pending, self.profile_start,
             self.profile_age, self.branch, accel, curvature, target,
@@ -246,6 +256,20 @@ def _next_lane(lane, branch, agent, succ_offsets, succ, lane_road, internal, rou
 
 
 @numba.njit(cache=True, nogil=True)
+def _accel(command, limit, v, previous, dt, tau, max_accel, max_decel, max_jerk):  # pragma: no cover - compiled
+    """Towards the target speed ``limit * (1 + command)``, within the acceleration and jerk limits."""
+    target = max(limit, 0.1) * (1.0 + command)
+    want = min(max((target - v) / tau, -max_decel), max_accel)
+    # Ease off the brake while stopping, so the car halts without a jolt: once releasing the brake
+    # at max_jerk takes all the speed that is left, release it.
+    if previous < 0.0 and v + previous * dt <= previous * previous / (2.0 * max_jerk) + 1e-9:
+        want = max(want, min(previous + max_jerk * dt, 0.0))
+    if target < 0.05 and v < 0.01:  # the last centimetre per second: come to rest
+        want = -v / dt
+    return min(max(want, previous - max_jerk * dt), previous + max_jerk * dt)
+
+
+@numba.njit(cache=True, nogil=True)
 def _project_on_lane(offsets, points, point_s, lane, x, y):  # pragma: no cover - compiled
     """(s, t) of a point on one lane's centre line (t + left); s runs on past both ends."""
     a, b = offsets[lane], offsets[lane + 1]
@@ -273,18 +297,14 @@ def _project_on_lane(offsets, points, point_s, lane, x, y):  # pragma: no cover 
 
 @numba.njit(cache=True, nogil=True)
 def _targets_kernel(
-    data, lane_col, members, rows, cmd, dt, max_accel, max_decel, max_jerk, lc_time, look_time,
-    min_look, threshold, lane_left, lane_right, lane_width, lane_length, lane_road, internal,
+    data, lane_col, members, rows, cmd, dt, tau, max_accel, max_decel, max_jerk, lc_time, look_time,
+    min_look, threshold, lane_left, lane_right, lane_width, lane_length, speed_limit, lane_road, internal,
     succ_offsets, succ, lp_offsets, lp_points, lp_s, lp_heading, route_road, track, pending, profile_start,
     profile_age, branch, accel_out, kappa_out, target_out,
 ):  # pragma: no cover - compiled
     for i in range(members.shape[0]):
         a, r = members[i], rows[i]
         x, y, h, v = data[_X, r], data[_Y, r], data[_H, r], max(data[_SPEED, r], 0.0)
-        # Longitudinal: the asked acceleration, reached at most at max_jerk.
-        want = cmd[i, 0] * (max_accel if cmd[i, 0] >= 0.0 else max_decel)
-        prev = data[_ACCEL, r]
-        accel_out[i] = min(max(want, prev - max_jerk * dt), prev + max_jerk * dt)
         profile_age[a] += dt
 
         # The lane being followed: kept by this controller (where junction lanes overlap, the map
@@ -312,6 +332,7 @@ def _targets_kernel(
                 track[a] = -1
                 kappa_out[i] = 0.0
                 target_out[i, 0], target_out[i, 1] = x + math.cos(h), y + math.sin(h)
+                accel_out[i] = _accel(cmd[i, 0], DEFAULT_SPEED_LIMIT, v, data[_ACCEL, r], dt, tau, max_accel, max_decel, max_jerk)
                 continue
             s, t = _project_on_lane(lp_offsets, lp_points, lp_s, lane, x, y)
             if abs(t) > 0.1:  # settle onto this lane's centre smoothly
@@ -329,6 +350,7 @@ def _targets_kernel(
                     lane, s, t = neighbour, sn, tn
                     pending[a] = 0
         track[a] = lane
+        accel_out[i] = _accel(cmd[i, 0], speed_limit[lane], v, data[_ACCEL, r], dt, tau, max_accel, max_decel, max_jerk)
 
         # A new lane-change request, once the last change is over.
         side = 1 if cmd[i, 1] > threshold else (-1 if cmd[i, 1] < -threshold else 0)

@@ -2,14 +2,16 @@
 
 The scenario's default reward (metres of route progress, crash penalties, a goal bonus) makes
 standing still a strong local optimum: the benchmark's safety-heavy S_bench gives a parked car about
-0.6. These rewards pay for what the metrics pay for, step by step, so the optimum is to drive well:
+0.6. These rewards pay for what the metrics pay for, step by step, so the optimum is to drive well.
+Two rules keep their incentives straight: a step that goes on driving never earns less than
+ending the episode by a crash, and (for drive) standing still costs a little every step.
 
 Platoon (follow a lead vehicle; scored by PR, RC, Humanness and SFD), per step::
 
-    follow * (1 - tg / max_time_gap)          lead in my lane and visible, outside the follow margin
-                                              FM = standstill + headway * v, tg = (gap - FM) / v,
-                                              0 beyond max_time_gap (the SFD step, as a reward)
-    - too_close * (FM - gap) / FM             lead in lane, inside the margin (SFD scores it as lost)
+    follow * max(0, 1 - |tg - target_gap| / max_time_gap)   lead in my lane and visible, outside
+                                              the follow margin FM = standstill + headway * v,
+                                              tg = (gap - FM) / v; 0 inside FM or without the lead
+                                              (SFD scores both as lost)
     + travel * v * dt                         metres driven (keeps a follower who lost the lead moving)
 
 Drive (reach the exit of a junction; scored by PR, RC, Humanness and MTE), per step::
@@ -19,8 +21,8 @@ Drive (reach the exit of a junction; scored by PR, RC, Humanness and MTE), per s
 
 Both add the shared terms (the Humanness and RC ingredients, and the events)::
 
-    - comfort * [any of |jerk|, |lateral jerk|, |accel|, |lateral accel| over its comfort limit]
-    - lane_centre * min(|lane offset| / (0.5 * lane width), 1)
+    + comfort * [no jerk, lateral jerk, acceleration or lateral acceleration over its comfort limit]
+    + lane_centre * (1 - min(|lane offset| / (0.5 * lane width), 1))
     - speeding * min(max(v - limit, 0) / (0.5 * limit), 1)
     - wrong_way * [wrong way] - partial_off_road * [a wheel off the road]
     - collision * [collision] - off_road * [off road]
@@ -49,16 +51,18 @@ class RewardWeights:
     task: str = "platoon"
     # platoon
     follow: float = 1.0
-    too_close: float = 0.5
+    target_gap: float = 0.5
+    """s beyond the follow margin where the follow term peaks (just outside the margin, which SFD
+    scores best, with room to spare: inside it SFD counts the lead as lost)."""
     travel: float = 0.02
     # drive
     progress: float = 0.1
     goal: float = 10.0
-    time: float = 0.02
+    time: float = 0.05
     # shared
     comfort: float = 0.1
     lane_centre: float = 0.1
-    speeding: float = 1.0
+    speeding: float = 0.5
     wrong_way: float = 0.5
     partial_off_road: float = 0.5
     collision: float = 20.0
@@ -124,8 +128,8 @@ class TaskReward:
         limit = rm.lane_speed_limit[lane_c]
         overspeed = np.where(on_lane, np.minimum(np.maximum(speed - limit, 0.0) / (0.5 * limit), 1.0), 0.0)
         reward = (
-            -w.comfort * uncomfortable
-            - w.lane_centre * centre
+            w.comfort * ~uncomfortable
+            + w.lane_centre * (1.0 - centre)
             - w.speeding * overspeed
             - w.wrong_way * ev[:, Event.WRONG_WAY]
             - w.partial_off_road * ev[:, Event.PARTIAL_OFF_ROAD]
@@ -144,13 +148,11 @@ class TaskReward:
         lead = lead_state(sim, agents)
         gap = np.nan_to_num(lead.gap, nan=0.0)
         margin = w.standstill_distance + w.headway * speed
-        inside = lead.in_lane & (gap <= margin)
-        outside = lead.in_lane & ~inside
+        outside = lead.in_lane & (gap > margin)
         with np.errstate(divide="ignore", invalid="ignore"):
             time_gap = np.where(outside, (gap - margin) / np.maximum(speed, 1e-6), np.inf)
-        follow = np.where(outside, np.clip(1.0 - time_gap / w.max_time_gap, 0.0, 1.0), 0.0)
-        close = np.where(inside, np.clip((margin - gap) / margin, 0.0, 1.0), 0.0)
-        return w.follow * follow - w.too_close * close + w.travel * speed * sim.dt
+        follow = np.where(outside, np.clip(1.0 - np.abs(time_gap - w.target_gap) / w.max_time_gap, 0.0, 1.0), 0.0)
+        return w.follow * follow + w.travel * speed * sim.dt
 
 
 def reward_factory(weights: RewardWeights):

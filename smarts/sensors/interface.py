@@ -156,10 +156,14 @@ class AgentInterface:
     lead: bool = False
     """The vehicle the agent follows (``mission.follow``) as its own block (``lead``): relative
     position, heading and velocity, speed, acceleration, gap along the lane, visible, in my lane."""
+    ahead: bool = False
+    """The nearest road user ahead on the agent's lane, whoever it is (``ahead``): present, gap
+    along the lane, relative speed, speed, acceleration."""
 
     def __post_init__(self) -> None:
         _flag("interface.signals", self.signals)
         _flag("interface.lead", self.lead)
+        _flag("interface.ahead", self.ahead)
 
     @property
     def needs_shadows(self) -> bool:
@@ -177,7 +181,7 @@ _PARTS: dict[str, type] = {
     "lidar": LidarInterface,
 }
 _OPTIONAL_PARTS = ("rasters", "lidar")
-_FLAGS = ("signals", "lead")
+_FLAGS = ("signals", "lead", "ahead")
 
 
 def interface_from_dict(data: Any, path: str = "interface") -> AgentInterface:

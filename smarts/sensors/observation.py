@@ -33,6 +33,9 @@ Per agent, with the default interface:
   frame), lead speed (m/s), lead acceleration (m/s^2), bumper-to-bumper gap (m, along the lane
   when in lane, else along the ego's heading). Everything after the flags is 0 when the lead is
   not visible. ``LEAD_FEATURE_NAMES`` names the columns.
+- ``ahead`` float32[5] (``ahead: true``): the nearest road user ahead on the agent's lane or a lane
+  it leads to (lane continuity, within 50 m of lane): present, bumper-to-bumper gap along the lanes
+  (m; 50 when none), its speed minus the agent's (m/s), its speed (m/s) and acceleration (m/s^2).
 Optional sensors add keys: ``rasters`` and ``rgb`` (``smarts.sensors.rasters``), ``lidar`` and
 ``lidar_hit`` (``smarts.sensors.lidar``).
 """
@@ -47,7 +50,7 @@ import numba
 import numpy as np
 
 from smarts.core.events import NUM_EVENTS
-from smarts.core.following import lead_state
+from smarts.core.following import ahead_state, lead_state
 from smarts.core.geometry import wrap_scalar
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import COLUMN, Role, VehicleType
@@ -74,6 +77,7 @@ EXTENDED_NEIGHBOUR_FEATURE_NAMES = (
     "speed", "accel", "yaw_rate", "lane_index", "same_road",
     *(f"type_{t.name.lower()}" for t in VehicleType),
 )  # fmt: skip
+AHEAD_FEATURE_NAMES = ("present", "gap", "rel_speed", "speed", "accel")
 LEAD_FEATURE_NAMES = (
     "present", "visible", "in_lane", "dx", "dy", "cos_heading", "sin_heading", "vx", "vy", "speed",
     "accel", "gap",
@@ -188,6 +192,8 @@ class ObservationBuilder:
         spaces["events"] = box((NUM_EVENTS,), 0.0, 1.0)
         if self.interface.lead:
             spaces["lead"] = box((len(LEAD_FEATURE_NAMES),))
+        if self.interface.ahead:
+            spaces["ahead"] = box((len(AHEAD_FEATURE_NAMES),))
         if self.rasters is not None:
             spaces.update(self.rasters.spaces())
         if self.lidar is not None:
@@ -229,6 +235,9 @@ class ObservationBuilder:
             del obs["signal"]
         if interface.lead:
             obs["lead"] = lead_features(sim, agents)
+        if interface.ahead:
+            st = ahead_state(sim, agents)
+            obs["ahead"] = np.stack([st.present, st.gap, st.rel_speed, st.speed, st.accel], axis=1).astype(np.float32)
         if self.rasters is not None:
             obs.update(self.rasters.observe(sim, agents, rows, shadows))
         if self.lidar is not None:

@@ -235,6 +235,33 @@ def test_sfd_hand_computed():
     assert "MTE" not in s
 
 
+def test_sfd_counts_the_steps_a_crashed_follower_missed_as_lost():
+    # 5 steps at the best gap (cost 0 each), then the follower's rows stop (it rammed its lead)
+    # while the scenario ran on to 2.0 s: the 15 missing steps count as lost contact (cost 1).
+    n = 5
+    trace = make_trace(
+        n,
+        with_following=True,
+        follow_time_gap=np.zeros(n),
+        in_follow_margin=np.zeros(n, bool),
+        lead_in_lane_and_visible=np.ones(n, bool),
+    )
+    assert score_episode(one(trace, task="adaptive"), P)["SFD"] == 1.0  # no end time: as logged
+    crashed = one(trace, task="adaptive", end_time=2.0)
+    assert agent_costs(crashed, P)["a"].follow_gap == pytest.approx(15 / 20)
+    assert score_episode(crashed, P)["SFD"] == pytest.approx(0.25)
+    # A follower that lasted to the end misses nothing.
+    assert score_episode(one(trace, task="adaptive", end_time=0.5), P)["SFD"] == 1.0
+
+
+def test_end_time_is_validated():
+    trace = make_trace(5)
+    with pytest.raises(LogError, match=r"metadata\.end_time.*after the time limit"):
+        one(trace, end_time=11.0).validate()
+    with pytest.raises(LogError, match=r"metadata\.end_time.*before the last logged row"):
+        one(trace, end_time=0.2).validate()
+
+
 def test_sfd_lead_out_of_sight_throughout():
     n = 5
     trace = make_trace(

@@ -121,7 +121,8 @@ def test_rows_start_after_the_first_step_and_end_at_the_time_limit(tmp_path):
     driven = trace.x - 10.0
     np.testing.assert_allclose(trace.route_distance_to_goal, 140.0 - driven, atol=0.01)
     assert log.info == {"agent": "zoo:keep-lane", "action_space": "relative_target_pose",
-                        "controller": "direct", "interface": None}  # fmt: skip
+                        "controller": "direct", "interface": None, "lane_relative": None}  # fmt: skip
+    assert log.end_time == pytest.approx(2.0)
 
 
 def test_recording_before_any_step_writes_nothing(tmp_path):
@@ -140,3 +141,48 @@ def test_recording_before_any_step_writes_nothing(tmp_path):
                             time_limit=1.0, follow={"agent_0": "lead"})  # fmt: skip
     finally:
         env.close()
+
+
+RAM = """
+name: ram
+task: adaptive
+episodes: 1
+seed: 0
+scenarios:
+  - name: ram
+    difficulty: easy
+    time_limit: 12
+    follow: {agent_0: lead}
+    scenario:
+      map: builtin:straight_2lane
+      agents:
+        - mission: {start: {road: main, lane: 0, offset: 10, speed: 12}, goal: {endless: true}}
+      traffic:
+        engine: builtin
+        vehicle_types:
+          lead: {base: passenger, max_speed: 6, accel: 1.5, decel: 3.0, tau: 1.2}
+        trips:
+          - {id: lead, route: [main], depart_lane: 0, depart_pos: 40, depart_speed: 6, vehicle_type: lead}
+"""
+
+
+def test_a_follower_that_rams_its_lead_has_not_completed_the_scenario(tmp_path, monkeypatch):
+    import zoo.registry
+
+    monkeypatch.setitem(zoo.registry.ZOO, "ram", ("tests.benchmark.broken_agent", "RammingPolicy", ""))
+    path = tmp_path / "ram.yaml"
+    path.write_text(RAM)
+    suite = load_suite(path)
+    result = run_episode(Job("zoo:ram", suite.source, 0, 0, 0, str(tmp_path / "ram.npz")))
+    assert result["failure"] is None
+    log = read_episode(tmp_path / "ram.npz")
+    trace = log.agents["agent_0"]
+    crash = float(trace.time[-1])
+    assert crash < 4.0  # 30 m closed at 6 to 10 m/s more than the lead
+    # The scenario ran on to its time limit: the lead's position then is the follower's goal...
+    assert log.end_time == pytest.approx(12.0)
+    assert trace.route_distance_to_goal[-1] > 6.0 * (12.0 - crash) - 5.0
+    scores = score_episode(log)
+    assert scores["PR"] < 0.5
+    # ... and SFD counts every step it missed as lost contact.
+    assert scores["SFD"] <= crash / 12.0 + 1e-9

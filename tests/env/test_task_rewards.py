@@ -8,7 +8,7 @@ from smarts.env import DrivingParallelEnv
 from smarts.env.task_rewards import RewardWeights, TaskReward
 from tests.builders import agent, make_spec
 
-ONLY = dict(follow=0.0, too_close=0.0, travel=0.0, progress=0.0, goal=0.0, time=0.0, comfort=0.0, lane_centre=0.0,
+ONLY = dict(follow=0.0, travel=0.0, progress=0.0, goal=0.0, time=0.0, comfort=0.0, lane_centre=0.0,
             speeding=0.0, wrong_way=0.0, partial_off_road=0.0, collision=0.0, off_road=0.0)  # fmt: skip
 
 
@@ -33,24 +33,21 @@ def _step(env, follower=(1.0, 0.0, 0.0), lead=(1.0, 0.0, 0.0)):
     return env.step({a: actions[a] for a in env.agents})[1]
 
 
-def test_follow_term_is_the_sfd_step_as_a_reward():
-    env = _platoon_env(follow=1.0)
+def test_follow_term_peaks_just_beyond_the_follow_margin():
+    env = _platoon_env(follow=1.0, target_gap=0.5)
     rewards = _step(env)  # both drive 1 m: the gap stays 20 m bumper to bumper minus lengths
     sim = env.sim
     gap = 20.0 - sim.table.length[sim.agent_row[0]]
     speed = sim.table.speed[sim.agent_row[0]]
     margin = 2.5 + 1.0 * speed
-    assert rewards["follower"] == pytest.approx(1.0 - (gap - margin) / speed / 3.0, abs=1e-6)
+    time_gap = (gap - margin) / speed
+    assert rewards["follower"] == pytest.approx(1.0 - abs(time_gap - 0.5) / 3.0, abs=1e-6)
     assert rewards["lead"] == 0.0  # the lead follows nobody
 
 
-def test_inside_the_margin_the_follow_term_turns_into_a_too_close_penalty():
-    env = _platoon_env(lead_offset=15.0, follow=1.0, too_close=1.0)
-    rewards = _step(env)
-    sim = env.sim
-    gap = 5.0 - sim.table.length[sim.agent_row[0]]
-    margin = 2.5 + sim.table.speed[sim.agent_row[0]]
-    assert rewards["follower"] == pytest.approx(-(margin - gap) / margin, abs=1e-6)
+def test_inside_the_margin_following_pays_nothing():
+    env = _platoon_env(lead_offset=15.0, follow=1.0)
+    assert _step(env)["follower"] == 0.0  # 5 m centre to centre: inside 2.5 m + 1 s * 10 m/s
 
 
 def test_a_lost_lead_pays_nothing_but_travel_still_pays():
@@ -74,12 +71,12 @@ def _single(action_space="relative_target_pose", **kw):
     return spec
 
 
-def test_comfort_term_counts_steps_over_a_comfort_limit():
+def test_comfort_term_pays_steps_within_every_comfort_limit():
     env = DrivingParallelEnv(_single(), reward=TaskReward(_weights(comfort=2.0)))
     env.reset(seed=0)
-    assert env.step({"agent_0": np.array([1.0, 0.0, 0.0])})[1]["agent_0"] == 0.0  # steady 10 m/s
+    assert env.step({"agent_0": np.array([1.0, 0.0, 0.0])})[1]["agent_0"] == 2.0  # steady 10 m/s
     # +1.5 m/s in one step: 15 m/s^2 acceleration (the limiter allows 4) -> uncomfortable.
-    assert env.step({"agent_0": np.array([1.15, 0.0, 0.0])})[1]["agent_0"] == pytest.approx(-2.0)
+    assert env.step({"agent_0": np.array([1.15, 0.0, 0.0])})[1]["agent_0"] == 0.0
 
 
 def test_lane_centre_and_speeding_terms():
@@ -87,12 +84,12 @@ def test_lane_centre_and_speeding_terms():
     env.reset(seed=0)
     env.step({"agent_0": np.array([1.0, 0.0, 0.0])})
     r = env.step({"agent_0": np.array([1.0, 0.0, 0.0])})[1]["agent_0"]
-    assert r == 0.0
+    assert r == 1.0  # on the lane centre
     row = env.sim.agent_row[0]
     env.sim.table.y[row] += 0.8  # 0.8 m left of the lane centre
     r = env.step({"agent_0": np.array([1.0, 0.0, 0.0])})[1]["agent_0"]
     width = env.sim.road_map.lane_width[env.sim.table.lane[row]]
-    assert r == pytest.approx(-0.8 / (0.5 * width), abs=1e-3)
+    assert r == pytest.approx(1.0 - 0.8 / (0.5 * width), abs=1e-3)
 
     env = DrivingParallelEnv(_single(), reward=TaskReward(_weights(speeding=1.0)))
     env.reset(seed=0)

@@ -55,8 +55,10 @@ Any further 1-D per-step arrays may ride along in ``AgentTrace.extra`` (checked 
 
 Episode metadata: scenario name, task (``collaborative`` | ``adaptive``), episode index, seed,
 dt (s), time limit (s), goal radius (m), agent ids, initial route distance per agent (m), an
-optional failure reason (the episode did not finish normally, e.g. the agent raised) and a
-free-form JSON ``info`` mapping.
+optional failure reason (the episode did not finish normally, e.g. the agent raised), an
+optional ``end_time`` (when the scenario ended: the time limit, or earlier when a following
+task's lead left the map; a vehicle whose rows stop before it did not complete the scenario) and
+a free-form JSON ``info`` mapping.
 
 On disk: one ``.npz`` per episode (:func:`write_episode` / :func:`read_episode`), never pickled.
 The metadata is a JSON string stored as the ``metadata`` array; agent ``i`` (in ``agent_ids``
@@ -223,6 +225,11 @@ class EpisodeLog:
     initial_route_distance: dict[str, float]
     failure: str | None = None
     """Why the episode did not finish normally (e.g. the agent raised); None when it did."""
+    end_time: float | None = None
+    """Seconds since the start when the scenario ended: its time limit, or earlier when a
+    following task's lead left the map. A mission vehicle whose rows stop before it (a crash, off
+    the road) did not complete the scenario; SFD counts its missing steps as lost contact. None:
+    the last logged row of the episode."""
     info: dict[str, Any] = field(default_factory=dict)
     """Free-form JSON-serialisable extras (agent locator, action space, ...)."""
     source: str | None = None
@@ -253,6 +260,7 @@ class EpisodeLog:
                 a: float(d) for a, d in self.initial_route_distance.items()
             },
             "failure": self.failure,
+            "end_time": None if self.end_time is None else float(self.end_time),
             "info": self.info,
         }
 
@@ -350,6 +358,19 @@ def _validate_metadata(log: EpisodeLog) -> None:
                 agent=agent_id,
                 column="metadata.initial_route_distance",
             )
+    end = log.end_time
+    if end is not None:
+        if not _is_number(end) or not math.isfinite(end) or end <= 0:
+            raise bad("end_time", f"expected a finite number of seconds > 0 or null, got {end!r}")
+        if end > log.time_limit + TIME_LIMIT_TOLERANCE:
+            raise bad("end_time", f"{end!r} is after the time limit {log.time_limit!r}")
+        last = max((float(t.time[-1]) for t in log.agents.values() if _is_trace_with_rows(t)), default=0.0)
+        if end < last - TIME_LIMIT_TOLERANCE:
+            raise bad("end_time", f"{end!r} is before the last logged row at {last!r}")
+
+
+def _is_trace_with_rows(trace: Any) -> bool:
+    return isinstance(trace, AgentTrace) and np.ndim(trace.time) == 1 and trace.num_steps > 0
 
 
 TIME_LIMIT_TOLERANCE = 1e-6
@@ -630,6 +651,7 @@ def read_episode(path: str | os.PathLike) -> EpisodeLog:
         agents=agents,
         initial_route_distance=meta["initial_route_distance"],
         failure=meta.get("failure"),
+        end_time=meta.get("end_time"),
         info=meta.get("info") or {},
         source=src,
     )

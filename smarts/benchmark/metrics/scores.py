@@ -30,7 +30,9 @@ Per-vehicle costs (``p`` = :class:`MetricParams`):
   ego's lane or out of sight, when the ego is inside the follow margin, or when the time gap to
   the margin exceeds ``max_time_gap_s``; else ``time_gap / max_time_gap_s``. "In the ego's lane"
   is lane continuity (the lead ahead on the ego's lane or on a successor lane reached from it,
-  across segment boundaries; see ``smarts.benchmark.metrics.log``), not equal lane ids.
+  across segment boundaries; see ``smarts.benchmark.metrics.log``), not equal lane ids. A vehicle
+  whose rows stop before the scenario's ``end_time`` (it crashed or left the road) keeps counting
+  ``gap = 1`` for every missing step: losing the lead by crashing into it is not good following.
 
 Rows never run past the time limit (the log validator rejects them), so PR and MTE agree on what
 arrived: an agent still driving at the limit has not arrived for either.
@@ -180,6 +182,14 @@ def time_cost(time: np.ndarray, goal_reached: np.ndarray, time_limit: float) -> 
     return min(max(float(time[hits[0]]), 0.0), time_limit) / time_limit
 
 
+def missing_steps(trace: AgentTrace, log: EpisodeLog) -> int:
+    """Steps between a vehicle's last row and the scenario's end (``log.end_time``): a vehicle
+    that crashed or left the road did not complete the scenario."""
+    if log.end_time is None or trace.num_steps == 0:
+        return 0
+    return max(int(round((float(log.end_time) - float(trace.time[-1])) / float(log.dt))), 0)
+
+
 def follow_gap_cost(
     follow_time_gap: np.ndarray,
     in_follow_margin: np.ndarray,
@@ -254,14 +264,14 @@ def agent_costs(
     for agent_id, tr in log.agents.items():
         follow = None
         if log.task == "adaptive":
-            follow = float(
-                follow_gap_cost(
-                    tr.follow_time_gap,
-                    tr.in_follow_margin,
-                    tr.lead_in_lane_and_visible,
-                    params.following.max_time_gap_s,
-                ).mean()
+            gaps = follow_gap_cost(
+                tr.follow_time_gap,
+                tr.in_follow_margin,
+                tr.lead_in_lane_and_visible,
+                params.following.max_time_gap_s,
             )
+            missed = missing_steps(tr, log)  # the vehicle left before the scenario ended
+            follow = float((gaps.sum() + missed) / (gaps.size + missed))
         out[agent_id] = AgentCosts(
             progress=progress_cost(
                 tr.route_distance_to_goal,

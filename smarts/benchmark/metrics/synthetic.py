@@ -79,6 +79,7 @@ def make_episode(
     initial_route_distance: dict[str, float] | float = 100.0,
     failure: str | None = None,
     info: dict[str, Any] | None = None,
+    end_time: float | None = None,
 ) -> EpisodeLog:
     """Wrap traces in an :class:`EpisodeLog`; a single float sets every agent's initial distance."""
     if not isinstance(initial_route_distance, dict):
@@ -92,6 +93,7 @@ def make_episode(
         time_limit=time_limit,
         goal_radius=goal_radius,
         agents=dict(traces),
+        end_time=end_time,
         initial_route_distance=initial_route_distance,
         failure=failure,
         info=dict(info or {}),
