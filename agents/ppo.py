@@ -111,13 +111,15 @@ class ObsNormalizer(nn.Module):
 
     @torch.no_grad()
     def update(self, x: torch.Tensor) -> None:
+        """Fold a batch into the running statistics, in place: torchrl's losses hold references to
+        these very buffers, so replacing them would leave the loss normalising with stale ones."""
         x = x.reshape(-1, x.shape[-1])
         batch_mean, batch_var, n = x.mean(0), x.var(0, unbiased=False), x.shape[0]
         delta = batch_mean - self.mean
         total = self.count + n
-        self.mean += delta * n / total
-        self.var = (self.var * self.count + batch_var * n + delta**2 * self.count * n / total) / total
-        self.count = total
+        self.var.copy_((self.var * self.count + batch_var * n + delta**2 * self.count * n / total) / total)
+        self.mean.add_(delta * n / total)
+        self.count.copy_(total)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         std = torch.sqrt(self.var + 1e-8).clamp(min=float(self.std_floor))

@@ -58,3 +58,33 @@ def test_corrupted_foreign_and_mismatched_files_are_clear_errors(tmp_path):
     space = gymnasium.spaces.Dict({k: v for k, v in env.observation_space.spaces.items() if k != "goal"})
     with pytest.raises(CheckpointError, match="observation 'goal'"):
         policy.check_space(space)
+
+
+def test_normaliser_passes_flags_raw_and_never_pins_a_feature_to_the_clip():
+    """Masks and flags stay 0/1; a feature that is nearly constant in the statistics (a mask that is
+    almost always 1, a lane width) is divided by at least the floor, so when it does change it
+    does not jump to the clip."""
+    from train.config import load_config
+    from train.ppo import build_modules, make_env
+
+    cfg = load_config("platoon", overrides={"envs": 4})
+    env = make_env(cfg)
+    try:
+        layout, normalizer, *_ = build_modules(env, cfg)
+        rollout = env.rollout(60, break_when_any_done=False)
+    finally:
+        env.close()
+    x = layout.flatten({k: rollout["observation", k].reshape(-1, *layout.shapes[i]) for i, k in enumerate(layout.keys)})
+    normalizer.update(x)
+    y = normalizer(x)
+    raw = normalizer.raw > 0
+    assert raw.sum() > 0 and torch.equal(y[:, raw], x[:, raw])  # flags untouched
+    at_clip = (y[:, ~raw].abs() >= float(normalizer.clip_value) - 1e-6).float().mean(0)
+    assert at_clip.max() < 0.05  # no input sits at the clip for more than a few samples
+    flag_keys = {"neighbour_mask", "waypoint_mask", "events"}
+    offset = 0
+    for key, shape in zip(layout.keys, layout.shapes):
+        size = int(np.prod(shape))
+        if key in flag_keys:
+            assert raw[offset : offset + size].all(), key
+        offset += size

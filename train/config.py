@@ -68,6 +68,10 @@ class TrainConfig:
     init_log_std: list[float] = field(default_factory=lambda: [-0.5])
     """Initial log standard deviation of the Gaussian policy: one value for every action
     component, or one per component (for lane-relative commands: speed, lane change)."""
+    obs_norm: bool = True
+    """Normalise observations by running statistics (kept in the checkpoint)."""
+    reward_scaling: bool = True
+    """Divide rewards by the running standard deviation of the discounted return."""
     obs_clip: float = 5.0
     obs_std_floor: float = 0.1
     """Normalised inputs are clipped to +-obs_clip; no feature is divided by less than this."""
@@ -166,6 +170,12 @@ def _coerce(name: str, value: Any, kind: Any, source: str) -> Any:
     origin = getattr(kind, "__origin__", None)
     text = str(kind)
     try:
+        if text == "bool":
+            if isinstance(value, str) and value.lower() in ("true", "false", "yes", "no", "1", "0"):
+                return value.lower() in ("true", "yes", "1")
+            if not isinstance(value, bool):
+                raise ConfigError(f"{source}: {name}: expected true or false, got {value!r}")
+            return value
         if text == "dict":
             if isinstance(value, str):  # from the command line: a YAML/JSON mapping
                 value = yaml.safe_load(value) or {}

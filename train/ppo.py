@@ -386,7 +386,8 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                 ended = flat["next", "done"].reshape(-1) & flat["valid"].reshape(-1)
                 returns = flat["next", "episode_reward"].reshape(-1)[ended]  # in the reward's units
                 lengths = flat["next", "agent_steps"].reshape(-1)[ended]
-                scale_rewards(data)
+                if cfg.reward_scaling:
+                    scale_rewards(data)
                 # GAE runs on [slots, time] so advantages stop at each trajectory's end; steps of
                 # waiting slots are then dropped and the minibatches mix the real steps.
                 stop = False
@@ -418,7 +419,8 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                 real = flat[flat["valid"].reshape(-1)]
                 inputs = layout.flatten({k: real["observation", k] for k in layout.keys})
                 clipped = normalizer.clipped_fraction(inputs)
-                normalizer.update(inputs)
+                if cfg.obs_norm:
+                    normalizer.update(inputs)
                 collector.update_policy_weights_()
                 step += data.numel()
                 losses = losses.detach()
