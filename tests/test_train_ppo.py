@@ -106,3 +106,25 @@ def test_training_config_takes_every_suite_scenario_and_the_task_reward():
 
     with pytest.raises(ConfigError, match="reward: unknown reward terms"):
         load_config("platoon", overrides={"reward": "{speed_bonus: 1}"})
+
+
+def test_the_ppo_loss_normalises_with_the_statistics_the_policy_acts_with():
+    """torchrl's losses keep references to the policy's buffers: the observation statistics must be
+    updated in place, or the loss scores actions under other inputs than they were taken with."""
+    from torchrl.objectives import ClipPPOLoss
+
+    from train.config import load_config
+    from train.ppo import build_modules, make_env
+
+    cfg = load_config("platoon", overrides={"envs": 1})
+    env = make_env(cfg)
+    try:
+        layout, normalizer, _, _, actor, critic, _, _ = build_modules(env, cfg)
+        loss = ClipPPOLoss(actor, critic)
+        normalizer.update(torch.randn(64, layout.size) * 3.0 + 1.0)
+        for name, buffer in loss.named_buffers():
+            if name.endswith(("normalizer.mean", "normalizer.var", "normalizer.count")):
+                own = getattr(normalizer, name.rsplit(".", 1)[1])
+                assert torch.equal(buffer, own), name
+    finally:
+        env.close()
