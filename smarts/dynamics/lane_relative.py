@@ -14,7 +14,8 @@ Command (float ``[n, 2]``, each component in [-1, 1]; values outside are clipped
 - ``speed``: the target speed, relative to the speed limit of the lane followed:
   ``limit * (1 + speed)``, so 0 cruises at the limit, -1 stops and +1 asks for twice the limit.
   The acceleration towards it is ``(target - v) / speed_time_constant``, at most ``max_accel``
-  and ``max_decel``, and changes at most at ``max_jerk`` (m/s^3), so the ride is smooth. (A
+  and ``max_decel``, and changes at most at ``max_jerk`` (m/s^3), so the ride is smooth; only a
+  demand to brake harder than ``comfort_decel`` may build up braking faster (``brake_jerk``). (A
   target rather than an acceleration: the mean command sets where the speed settles, which a
   policy learns far faster than the integral of noisy accelerations.)
 - ``lane_change``: above ``+threshold`` change one lane to the left, below ``-threshold`` one to the
@@ -54,12 +55,17 @@ class LaneRelativeParams:
 
     speed_time_constant: float = 2.0
     """s: the acceleration is the speed error divided by this."""
-    max_accel: float = 4.0
-    """m/s^2: the largest acceleration."""
+    max_accel: float = 2.0
+    """m/s^2: the largest acceleration (the Humanness comfort limit)."""
     max_decel: float = 6.0
     """m/s^2: the hardest braking."""
-    max_jerk: float = 2.0
-    """m/s^3: how fast the acceleration may change from one step to the next."""
+    max_jerk: float = 0.9
+    """m/s^3: how fast the acceleration may change from one step to the next (the Humanness
+    comfort limit)..."""
+    brake_jerk: float = 4.0
+    """m/s^3: ...except when braking harder than ``comfort_decel`` is asked for: an emergency."""
+    comfort_decel: float = 2.0
+    """m/s^2: braking beyond this is an emergency (``brake_jerk``)."""
     lane_change_time: float = 5.0
     """s: duration of the lateral profile of one lane change."""
     lookahead_time: float = 0.6
@@ -120,7 +126,7 @@ class LaneRelativeController:
         rm = sim.road_map
         _targets_kernel(
             sim.table.data, sim.table.lane, np.asarray(members, np.int64), np.asarray(rows, np.int64), cmd, dt,
-            p.speed_time_constant, p.max_accel, p.max_decel, p.max_jerk, p.lane_change_time, p.lookahead_time, p.min_lookahead,
+            p.speed_time_constant, p.max_accel, p.max_decel, p.max_jerk, p.brake_jerk, p.comfort_decel, p.lane_change_time, p.lookahead_time, p.min_lookahead,
             p.threshold, rm.lane_left, rm.lane_right, rm.lane_width, rm.lane_length, rm.lane_speed_limit, rm.lane_road,
             rm.lane_internal, rm.succ_offsets, rm.succ, rm.lanepoint_offsets, rm.lanepoints, rm.lanepoint_s,
             rm.lanepoint_heading, self._route_road, self.track, self.pending, self.profile_start,
@@ -256,17 +262,20 @@ def _next_lane(lane, branch, agent, succ_offsets, succ, lane_road, internal, rou
 
 
 @numba.njit(cache=True, nogil=True)
-def _accel(command, limit, v, previous, dt, tau, max_accel, max_decel, max_jerk):  # pragma: no cover - compiled
+def _accel(command, limit, v, previous, dt, tau, max_accel, max_decel, max_jerk, brake_jerk, comfort_decel):  # pragma: no cover - compiled
     """Towards the target speed ``limit * (1 + command)``, within the acceleration and jerk limits."""
     target = max(limit, 0.1) * (1.0 + command)
     want = min(max((target - v) / tau, -max_decel), max_accel)
-    # Ease off the brake while stopping, so the car halts without a jolt: once releasing the brake
-    # at max_jerk takes all the speed that is left, release it.
-    if previous < 0.0 and v + previous * dt <= previous * previous / (2.0 * max_jerk) + 1e-9:
-        want = max(want, min(previous + max_jerk * dt, 0.0))
     if target < 0.05 and v < 0.01:  # the last centimetre per second: come to rest
         want = -v / dt
-    return min(max(want, previous - max_jerk * dt), previous + max_jerk * dt)
+    down = brake_jerk if want < -comfort_decel else max_jerk
+    accel = min(max(want, previous - down * dt), previous + max_jerk * dt)
+    # Ease off the brake while stopping, so the car halts without a jolt: once releasing the brake
+    # at max_jerk would take all the speed that is left, release it.
+    deepest = min(accel, previous)
+    if deepest < 0.0 and v + deepest * dt <= deepest * deepest / (2.0 * max_jerk) + 1e-9:
+        accel = max(accel, min(previous + max_jerk * dt, 0.0))
+    return accel
 
 
 @numba.njit(cache=True, nogil=True)
@@ -297,7 +306,7 @@ def _project_on_lane(offsets, points, point_s, lane, x, y):  # pragma: no cover 
 
 @numba.njit(cache=True, nogil=True)
 def _targets_kernel(
-    data, lane_col, members, rows, cmd, dt, tau, max_accel, max_decel, max_jerk, lc_time, look_time,
+    data, lane_col, members, rows, cmd, dt, tau, max_accel, max_decel, max_jerk, brake_jerk, comfort_decel, lc_time, look_time,
     min_look, threshold, lane_left, lane_right, lane_width, lane_length, speed_limit, lane_road, internal,
     succ_offsets, succ, lp_offsets, lp_points, lp_s, lp_heading, route_road, track, pending, profile_start,
     profile_age, branch, accel_out, kappa_out, target_out,
@@ -332,7 +341,7 @@ def _targets_kernel(
                 track[a] = -1
                 kappa_out[i] = 0.0
                 target_out[i, 0], target_out[i, 1] = x + math.cos(h), y + math.sin(h)
-                accel_out[i] = _accel(cmd[i, 0], DEFAULT_SPEED_LIMIT, v, data[_ACCEL, r], dt, tau, max_accel, max_decel, max_jerk)
+                accel_out[i] = _accel(cmd[i, 0], DEFAULT_SPEED_LIMIT, v, data[_ACCEL, r], dt, tau, max_accel, max_decel, max_jerk, brake_jerk, comfort_decel)
                 continue
             s, t = _project_on_lane(lp_offsets, lp_points, lp_s, lane, x, y)
             if abs(t) > 0.1:  # settle onto this lane's centre smoothly
@@ -350,7 +359,7 @@ def _targets_kernel(
                     lane, s, t = neighbour, sn, tn
                     pending[a] = 0
         track[a] = lane
-        accel_out[i] = _accel(cmd[i, 0], speed_limit[lane], v, data[_ACCEL, r], dt, tau, max_accel, max_decel, max_jerk)
+        accel_out[i] = _accel(cmd[i, 0], speed_limit[lane], v, data[_ACCEL, r], dt, tau, max_accel, max_decel, max_jerk, brake_jerk, comfort_decel)
 
         # A new lane-change request, once the last change is over.
         side = 1 if cmd[i, 1] > threshold else (-1 if cmd[i, 1] < -threshold else 0)
