@@ -128,3 +128,32 @@ def test_the_ppo_loss_normalises_with_the_statistics_the_policy_acts_with():
                 assert torch.equal(buffer, own), name
     finally:
         env.close()
+
+
+def test_periodic_evaluation_selects_best_by_s_bench_and_logs_it(tmp_path):
+    from pathlib import Path
+
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    suite = Path(__file__).parent / "benchmark" / "tiny_suite.yaml"
+    out = tmp_path / "run"
+    args = ["ppo", "--task", "drive", "--scenarios", "collaborative:c01_4way_1lane_left_free", "--total-steps", "256",
+            "--frames-per-batch", "128", "--minibatch-size", "64", "--epochs", "1", "--envs", "1", "--eval-every", "128",
+            "--eval-episodes", "1", "--eval-suite", str(suite), "--out-dir", str(out), "--quiet"]  # fmt: skip
+    assert main(args) == 0
+    acc = EventAccumulator(str(out / "tensorboard"), size_guidance={"scalars": 0, "images": 0})
+    acc.Reload()
+    s_bench = {e.step: e.value for e in acc.Scalars("eval/S_bench")}
+    assert set(s_bench) == {128, 256}  # every eval_every steps; the one at the end is the final evaluation
+    assert all(0.0 <= v <= 1.0 for v in s_bench.values())
+    assert "eval/PR" in acc.Tags()["scalars"] and "eval/MTE" in acc.Tags()["scalars"]
+    assert any(t.startswith("eval_trajectories/") for t in acc.Tags()["images"])
+    best = torch.load(out / "best.pt", weights_only=True)
+    assert s_bench[best["step"]] == max(s_bench.values())
+    assert len(acc.Scalars("eval/S_bench")) == 2
+    report = (out / "evals" / "step_128" / "report.md").read_text()
+    assert "zoo:stand-still (reference)" in report and "seed 3000" in report
+    # The selected checkpoint goes through `train eval` like any agent.
+    assert main(["eval", "--agent", str(out / "best.pt"), "--suite", str(suite), "--episodes", "1",
+                 "--workers", "1", "--out", str(tmp_path / "eval"), "--quiet"]) == 0  # fmt: skip
+    assert (tmp_path / "eval" / "results.json").is_file()

@@ -80,6 +80,9 @@ class TrainConfig:
     the checkpoint with the highest S_bench among them."""
     eval_episodes: int = 1
     """Episodes per scenario of each benchmark evaluation (0: none)."""
+    eval_suite: str | None = None
+    """The benchmark suite of the evaluations (a name or a YAML path); None: the task's own
+    (``adaptive`` for platoon, ``collaborative`` for drive)."""
     eval_seed: int = 3000
     """First seed of the evaluations; training episodes use seeds from 100_000 up, and the suites'
     own benchmark seeds (1000, 2000) are neither, so selection and the final score are held out."""
@@ -223,7 +226,7 @@ def load_config(task: str | None = None, path: str | Path | None = None, overrid
     for name, value in {**data, **(overrides or {})}.items():
         if name not in kinds:
             raise ConfigError(f"{source}: {name}: unknown setting; known: {', '.join(kinds)}")
-        if value is None and name != "ray_address":
+        if value is None and name not in ("ray_address", "eval_suite"):
             continue
         origin = "command line" if overrides and name in overrides else source
         values[name] = _coerce(name, value, kinds[name], origin)

@@ -444,7 +444,8 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                     if np.isfinite(value):
                         writer.add_scalar(name, value, step)
                 save(checkpoint)
-                if cfg.eval_every and cfg.eval_episodes and step // cfg.eval_every > (step - data.numel()) // cfg.eval_every:
+                periodic = cfg.eval_every and step // cfg.eval_every > (step - data.numel()) // cfg.eval_every
+                if periodic and cfg.eval_episodes and step < cfg.total_steps:  # (the last one is the final)
                     scores = evaluate_into(checkpoint, cfg, out / "evals" / f"step_{step}", writer, step)
                     if scores.get("S_bench", -np.inf) > best_score:  # selection on held-out seeds
                         best_score = scores["S_bench"]
@@ -482,7 +483,7 @@ def evaluate_into(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: i
     from smarts.benchmark.runner import plan_jobs, run_jobs
     from smarts.benchmark.suites import load_suite
 
-    suite = load_suite(TASK_SUITE[cfg.task])
+    suite = load_suite(cfg.eval_suite or TASK_SUITE[cfg.task])
     frozen = out / "policy.pt"  # the runner reads the file later: keep this step's weights
     out.mkdir(parents=True, exist_ok=True)
     frozen.write_bytes(Path(checkpoint).read_bytes())
