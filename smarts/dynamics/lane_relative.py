@@ -59,9 +59,9 @@ class LaneRelativeParams:
     """m/s^2: the largest acceleration (the Humanness comfort limit)."""
     max_decel: float = 6.0
     """m/s^2: the hardest braking."""
-    max_jerk: float = 0.9
-    """m/s^3: how fast the acceleration may change from one step to the next (the Humanness
-    comfort limit)..."""
+    max_jerk: float = 0.8
+    """m/s^3: how fast the acceleration may change from one step to the next (within the
+    Humanness comfort limit of 0.9, with room for rounding)..."""
     brake_jerk: float = 4.0
     """m/s^3: ...except when braking harder than ``comfort_decel`` is asked for: an emergency."""
     comfort_decel: float = 2.0
