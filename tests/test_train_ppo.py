@@ -157,3 +157,21 @@ def test_periodic_evaluation_selects_best_by_s_bench_and_logs_it(tmp_path):
     assert main(["eval", "--agent", str(out / "best.pt"), "--suite", str(suite), "--episodes", "1",
                  "--workers", "1", "--out", str(tmp_path / "eval"), "--quiet"]) == 0  # fmt: skip
     assert (tmp_path / "eval" / "results.json").is_file()
+
+
+def test_init_from_starts_a_new_run_from_trained_networks_in_another_action_space(tmp_path, capsys):
+    base = ["ppo", "--task", "platoon", "--scenarios", "adaptive:a01_straight_free", "--frames-per-batch", "64",
+            "--minibatch-size", "64", "--epochs", "1", "--envs", "1", "--total-steps", "64", "--eval-episodes", "0",
+            "--quiet"]  # fmt: skip
+    assert main([*base, "--out-dir", str(tmp_path / "rtp")]) == 0
+    source = torch.load(tmp_path / "rtp" / "final.pt", weights_only=True)
+    assert main([*base, "--action-space", "continuous", "--init-from", str(tmp_path / "rtp" / "final.pt"),
+                 "--out-dir", str(tmp_path / "c")]) == 0  # fmt: skip
+    tuned = torch.load(tmp_path / "c" / "final.pt", weights_only=True)
+    assert tuned["action"]["space"] == "continuous" and tuned["step"] == 64  # a new run, from step 0
+    assert not torch.equal(tuned["actor"]["net.0.weight"], source["actor"]["net.0.weight"])  # trained on
+    torch.testing.assert_close(tuned["normalizer"]["count"], source["normalizer"]["count"] + 64)
+    # Another observation is refused before anything is built.
+    assert main([*base, "--interface", "{lead: true}", "--init-from", str(tmp_path / "rtp" / "final.pt"),
+                 "--out-dir", str(tmp_path / "x")]) == 2  # fmt: skip
+    assert "trained with observation interface" in capsys.readouterr().err and not (tmp_path / "x").exists()

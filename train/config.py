@@ -88,6 +88,10 @@ class TrainConfig:
     own benchmark seeds (1000, 2000) are neither, so selection and the final score are held out."""
     torch_threads: int = 1
     """torch threads per process (one is fastest for these small networks on a loaded machine)."""
+    init_from: str | None = None
+    """Start from the networks and observation statistics of this checkpoint (a new run: fresh
+    optimiser, step 0), e.g. a platoon policy fine-tuned on the pybullet car; unlike ``--resume``
+    the action space may differ, the observation and the commands' meaning may not."""
     out: str = "runs/train"
     ray_address: str | None = None
 
@@ -226,7 +230,7 @@ def load_config(task: str | None = None, path: str | Path | None = None, overrid
     for name, value in {**data, **(overrides or {})}.items():
         if name not in kinds:
             raise ConfigError(f"{source}: {name}: unknown setting; known: {', '.join(kinds)}")
-        if value is None and name not in ("ray_address", "eval_suite"):
+        if value is None and name not in ("ray_address", "eval_suite", "init_from"):
             continue
         origin = "command line" if overrides and name in overrides else source
         values[name] = _coerce(name, value, kinds[name], origin)

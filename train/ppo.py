@@ -295,6 +295,31 @@ def check_resume(resume: Path, cfg: TrainConfig) -> dict:
     return blob
 
 
+def check_init_from(path: Path, cfg: TrainConfig) -> dict:
+    """A checkpoint to start a new run from (fine-tuning, e.g. the platoon policy on the pybullet
+    car): it must read the same observation and give commands of the same meaning (controller,
+    command box), whatever action space drives the vehicle; checked before anything is built."""
+    blob = load_checkpoint(path)
+    mine = {
+        "controller": cfg.controller,
+        "observation interface": _interface_dict(cfg),
+        "hidden layers": list(cfg.hidden),
+    }
+    theirs = {
+        "controller": blob["action"].get("controller", "direct"),
+        "observation interface": blob.get("interface"),
+        "hidden layers": list(blob["hidden"]),
+    }
+    for what, value in mine.items():
+        if theirs[what] != value:
+            raise CheckpointError(f"{path}: trained with {what} {theirs[what]!r}; this run uses {value!r}")
+    if cfg.controller == "direct" and blob["action"]["space"] != ACTION_SPACES[cfg.action_space]:
+        raise CheckpointError(
+            f"{path}: direct actions of {blob['action']['space']!r} mean nothing in {ACTION_SPACES[cfg.action_space]!r}"
+        )
+    return blob
+
+
 def _lane_relative_dict(cfg: TrainConfig) -> dict | None:
     if cfg.controller != "lane_relative":
         return None
@@ -316,6 +341,9 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
 
     torch.set_num_threads(cfg.torch_threads)
     blob = check_resume(resume, cfg) if resume is not None else None
+    start_from = check_init_from(Path(cfg.init_from), cfg) if cfg.init_from else None
+    if blob is not None and start_from is not None:
+        raise ValueError("resume continues a run and init_from starts a new one from trained networks: give one")
     torch.manual_seed(cfg.seed)
     np.random.seed(cfg.seed)
     out.mkdir(parents=True, exist_ok=True)
@@ -350,6 +378,13 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
         step = int(blob["step"])
         if step >= cfg.total_steps:
             raise ValueError(f"{resume}: already at {step} steps; raise --total-steps to continue")
+    if start_from is not None:  # networks and statistics only: a fresh optimiser from step 0
+        try:
+            actor_net.load_state_dict(start_from["actor"])
+            critic_net.load_state_dict(start_from["critic"])
+            normalizer.load_state_dict(start_from["normalizer"])
+        except (RuntimeError, ValueError) as err:
+            raise CheckpointError(f"{cfg.init_from}: does not match this training setup ({err})") from None
     # A whole number of steps of every slot per batch (torchrl rounds up to it anyway).
     slots = int(np.prod(env.batch_size)) if not cfg.ray_address else 1
     frames = -(-cfg.frames_per_batch // slots) * slots
