@@ -484,6 +484,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                     scores = evaluate_into(checkpoint, cfg, out / "evals" / f"step_{step}", writer, step)
                     if scores.get("S_bench", -np.inf) > best_score:  # selection on held-out seeds
                         best_score = scores["S_bench"]
+                        metrics.update({f"eval/{k}": v for k, v in scores.items()})
                         save(out / "best.pt")
                         writer.add_scalar("eval/best_S_bench", best_score, step)
                 bar.update(task, completed=min(step, cfg.total_steps),
