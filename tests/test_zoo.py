@@ -10,12 +10,25 @@ from zoo import ZOO, make_policy
 
 @pytest.mark.parametrize("name", sorted(ZOO))
 def test_every_zoo_agent_acts_in_its_action_space(name):
+    """Each agent, in the env built as the benchmark builds it (its action space, controller and
+    observation interface), returns actions of that env's action box."""
+    from smarts.benchmark.runner import PolicySetup, scenario_for
+    from smarts.env import DrivingParallelEnv
+    from smarts.scenario import load_scenario
+
     policy = make_policy(f"zoo:{name}")
-    env = gymnasium.make("smarts/Driving-v0", scenario="straight_2lane_cruise")
+    setup = PolicySetup(policy.action_space, getattr(policy, "controller", "direct"), getattr(policy, "interface", None),
+                        getattr(policy, "lane_relative", None))  # fmt: skip
+    spec = scenario_for(load_scenario("straight_2lane_cruise"), setup)
+    env = DrivingParallelEnv(spec, observation=setup.interface, lane_relative=setup.lane_relative)
     obs, _ = env.reset(seed=0)
-    action = np.asarray(policy.act({k: v[None] for k, v in obs.items()}))
-    assert action.shape == (1, 3) and np.isfinite(action).all()
+    batch = {k: np.stack([obs[a][k] for a in env.agents]) for k in obs["agent_0"]}
+    action = np.asarray(policy.act(batch))
+    box = env.action_space("agent_0")
+    assert action.shape == (2, box.shape[0]) and np.isfinite(action).all()
+    assert all(box.contains(a.astype(np.float32)) for a in action)
     assert policy.action_space in ("relative_target_pose", "continuous")
+    env.close()
 
 
 def test_zoo_cards_exist_for_checkpoints():

@@ -145,8 +145,11 @@ def ray_env_factories(cfg: TrainConfig) -> list:
     specs = training_specs(cfg)
     per = [specs[w :: cfg.workers] for w in range(cfg.workers)]
     base = TRAIN_SEED_BASE + cfg.seed * 1_000_003
+    # Ray stacks the collectors' batches: pad every collector to the same number of slots.
+    slots = max(sum(not a.is_social for spec in p for a in spec.agents) for p in per)
+    options = {**env_options(cfg), "slots": slots}
     # Seeds spaced apart per collector so their copies never share an episode seed.
-    return [functools.partial(transformed_batched_env, p, base + w * 10_000_019, env_options(cfg))
+    return [functools.partial(transformed_batched_env, p, base + w * 10_000_019, options)
             for w, p in enumerate(per)]  # fmt: skip
 
 
@@ -417,6 +420,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
             task = bar.add_task(f"PPO {cfg.task}", total=cfg.total_steps)
             for data in collector:
                 collect_time = time.perf_counter()
+                data = data.reshape(-1, data.shape[-1])  # [slots (of every collector), time]
                 flat = data.reshape(-1)
                 ended = flat["next", "done"].reshape(-1) & flat["valid"].reshape(-1)
                 returns = flat["next", "episode_reward"].reshape(-1)[ended]  # in the reward's units

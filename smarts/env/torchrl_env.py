@@ -362,7 +362,9 @@ class SmartsBatchedEnv(EnvBase):
     per episode, so the same seed gives the same rollout. Built-in traffic only (libsumo allows one
     SUMO per process: SUMO scenarios need ``make_parallel_env`` or one copy per worker process).
     ``reward_factory`` builds one reward function per copy (``smarts.env.task_rewards``);
-    ``env_kwargs`` go to every ``DrivingParallelEnv``.
+    ``slots`` pads the batch with slots that never act (always invalid) up to that many, so that
+    batches of different scenarios can be stacked (Ray collectors); ``env_kwargs`` go to every
+    ``DrivingParallelEnv``.
     """
 
     def __init__(
@@ -370,6 +372,7 @@ class SmartsBatchedEnv(EnvBase):
         scenarios: list[ScenarioSource],
         *,
         reward_factory: Callable[[], Any] | None = None,
+        slots: int | None = None,
         device: torch.device | str = "cpu",
         **env_kwargs: Any,
     ):
@@ -384,12 +387,18 @@ class SmartsBatchedEnv(EnvBase):
             for s in scenarios
         ]
         self.slots: list[tuple[int, str]] = [(i, a) for i, env in enumerate(self.envs) for a in env.possible_agents]
+        if slots is not None:
+            if slots < len(self.slots):
+                raise ValueError(f"slots: {slots} is fewer than the {len(self.slots)} learning agents of the scenarios")
+            self.slots += [(-1, "")] * (slots - len(self.slots))  # padding: never acts, always invalid
         k = len(self.slots)
         super().__init__(device=device, batch_size=torch.Size([k]))
         first_env, first_agent = self.envs[0], self.envs[0].possible_agents[0]
         obs_space = first_env.observation_space(first_agent)
         act_space = first_env.action_space(first_agent)
         for i, agent in self.slots:
+            if i < 0:
+                continue
             env = self.envs[i]
             if _layout(env.observation_space(agent)) != _layout(obs_space) or env.action_space(agent) != act_space:
                 raise ValueError(
@@ -408,7 +417,7 @@ class SmartsBatchedEnv(EnvBase):
         self.action_spec = space_to_spec(act_space, (k,), device)
         self.reward_spec = Unbounded(shape=(k, 1), dtype=torch.float32, device=device)
         self.full_done_spec = Composite(_done_specs((k, 1), device), shape=(k,), device=device)
-        self._slot_of = {(i, a): j for j, (i, a) in enumerate(self.slots)}
+        self._slot_of = {(i, a): j for j, (i, a) in enumerate(self.slots) if i >= 0}
         self._zero = {key: np.zeros(sp.shape, dtype=sp.dtype) for key, sp in obs_space.spaces.items()}
         self._obs = {key: np.zeros((k, *sp.shape), dtype=sp.dtype) for key, sp in obs_space.spaces.items()}
         self._live = np.zeros(k, dtype=bool)
