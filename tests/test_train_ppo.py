@@ -159,6 +159,22 @@ def test_periodic_evaluation_selects_best_by_s_bench_and_logs_it(tmp_path):
     assert (tmp_path / "eval" / "results.json").is_file()
 
 
+def test_periodic_evaluation_does_not_change_the_training_run(tmp_path):
+    from pathlib import Path
+
+    suite = Path(__file__).parent / "benchmark" / "tiny_suite.yaml"
+    base = ["ppo", "--task", "drive", "--scenarios", "collaborative:c01_4way_1lane_left_free", "--total-steps", "384",
+            "--frames-per-batch", "128", "--minibatch-size", "64", "--epochs", "1", "--envs", "1",
+            "--eval-suite", str(suite), "--quiet"]  # fmt: skip
+    assert main(base + ["--eval-every", "128", "--eval-episodes", "1", "--out-dir", str(tmp_path / "a")]) == 0
+    assert main(base + ["--eval-episodes", "0", "--out-dir", str(tmp_path / "b")]) == 0
+    with_eval = torch.load(tmp_path / "a" / "final.pt", weights_only=True)
+    without = torch.load(tmp_path / "b" / "final.pt", weights_only=True)
+    assert with_eval["step"] == without["step"] == 384
+    for name, tensor in without["actor"].items():
+        assert torch.equal(with_eval["actor"][name], tensor), name
+
+
 def test_init_from_starts_a_new_run_from_trained_networks_in_another_action_space(tmp_path, capsys):
     base = ["ppo", "--task", "platoon", "--scenarios", "adaptive:a01_straight_free", "--frames-per-batch", "64",
             "--minibatch-size", "64", "--epochs", "1", "--envs", "1", "--total-steps", "64", "--eval-episodes", "0",

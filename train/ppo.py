@@ -516,7 +516,19 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
 
 def evaluate_into(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int) -> dict:
     """Run the task's benchmark suite on ``checkpoint`` with the held-out ``eval_seed`` (report
-    under ``out``) and log its metrics and a few evaluation trajectory figures to TensorBoard."""
+    under ``out``) and log its metrics and a few evaluation trajectory figures to TensorBoard.
+    Training's random state is left as it was, so evaluating does not change the run."""
+    # Loading the agents builds networks, which draws from torch's global generator: without
+    # this, every evaluation would change the rest of the training run.
+    numpy_state = np.random.get_state()
+    with torch.random.fork_rng(devices=[]):
+        try:
+            return _evaluate(checkpoint, cfg, out, writer, step)
+        finally:
+            np.random.set_state(numpy_state)
+
+
+def _evaluate(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int) -> dict:
     from PIL import Image
 
     from smarts.benchmark.report import write_report
