@@ -200,14 +200,14 @@ def _time_v2v(env, actions: dict, parts: dict[str, list[float]], record: bool = 
 
 
 def _sumo_case(n: int, steps: int) -> dict:
-    from smarts.traffic.sumo_benchmark import sumo_step_benchmark
+    from smarts.diagnostic.sumo_step import sumo_step_benchmark
 
     r = sumo_step_benchmark(n, steps)
     return {"engine": "sumo", "vehicles": n, "vehicles_on_road": r["vehicles"], "step_ms": r["step_ms"], "provider_ms": r["sumo_ms"]}
 
 
 def _builtin_case(n: int, steps: int) -> dict:
-    from smarts.traffic.builtin import builtin_step_benchmark
+    from smarts.diagnostic.builtin_step import builtin_step_benchmark
 
     r = builtin_step_benchmark(n, steps)
     return {

@@ -29,7 +29,7 @@ from smarts.scenario.traffic import (
     TripSpec,
     VehicleTypeSpec,
 )
-from smarts.traffic.builtin import kernels as K
+import smarts.traffic.builtin.kernels as K
 from smarts.traffic.builtin.junctions import junction_table
 from smarts.traffic.builtin.routes import NO_WAY, RouteTable
 from smarts.traffic.density import density_flows

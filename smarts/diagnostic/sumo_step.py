@@ -1,4 +1,5 @@
-"""Cost of a simulation step with N SUMO vehicles (for ``python -m smarts.diagnostic``).
+"""Cost of a simulation step with N SUMO vehicles (the SUMO rows of ``python -m smarts.diagnostic``;
+``python -m smarts.diagnostic.sumo_step`` prints 1, 10, 20, 50 and 200 vehicles on its own).
 
 Same set-up as SMARTS's ``n_sumo_actors`` diagnostic: the 455 m 6-lane highway (its 1.28 km
 version for more than 50 vehicles, which the short road cannot hold), 5 flows at 3600 vehicles

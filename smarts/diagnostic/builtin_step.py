@@ -1,4 +1,5 @@
-"""Step timing of the built-in traffic model at a given number of vehicles.
+"""Step timing of the built-in traffic model at a given number of vehicles (the built-in rows of
+``python -m smarts.diagnostic``).
 
 Like SMARTS's diagnostic "n local actors" case: five flows of 3600 vehicles per hour enter the
 six-lane highway until ``n_vehicles`` are on it (slow, closely following vehicles, so that many
