@@ -5,7 +5,7 @@ import json
 from PIL import Image
 
 from smarts.diagnostic.__main__ import main as diagnostic_main
-from smarts.sensors.figure import main as figure_main
+from smarts.diagnostic.sensor_figure import main as figure_main
 
 
 def test_figure_command_writes_a_small_png(tmp_path, capsys):
