@@ -1,6 +1,6 @@
 """Memory growth of the SUMO provider over many resets.
 
-``python -m smarts.traffic.reset_memory [--resets 1000] [--steps 5]`` resets a scenario with
+``python -m smarts.diagnostic.reset_memory [--resets 1000] [--steps 5]`` resets a scenario with
 medium-density SUMO traffic on a 4-way intersection again and again (a few steps each) and prints
 the process's resident memory after a warm-up and at the end. Each reset reloads the one libsumo
 simulation of the process (``simulation.load``), so growth here is what a long training run would
@@ -86,7 +86,7 @@ def _episode(sim, seed: int, steps: int, actions) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m smarts.diagnostic.reset_memory", description=__doc__.splitlines()[0])
     parser.add_argument("--resets", type=int, default=1000, help="resets to measure (default 1000)")
     parser.add_argument("--steps", type=int, default=5, help="steps after each reset (default 5)")
     parser.add_argument("--density", default="medium", help="traffic density (default medium)")
