@@ -30,11 +30,12 @@ import numpy as np
 from smarts.benchmark.metrics.log import TIME_LIMIT_TOLERANCE, AgentTrace, EpisodeLog
 from smarts.benchmark.metrics.params import MetricParams
 from smarts.benchmark.metrics.scores import time_gap_to_margin
+from smarts.core.errors import MapError
 from smarts.core.events import Event
 from smarts.core.following import LEAD_SIGHT, lead_state
 from smarts.core.missions import GOAL_ROAD
 from smarts.core.simulation import Simulation
-from smarts.maps import MapError, project, route_polyline, shortest_route
+from smarts.maps import project, route_polyline, shortest_route
 
 _COLUMNS = (
     "time", "x", "y", "heading", "speed", "accel_long", "accel_lat", "jerk_long", "jerk_lat",

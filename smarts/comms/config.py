@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from smarts.core.errors import ScenarioError
+
 HEADER_BYTES = 16
 """Bytes of a message besides its payload: sender id (4) and sender x, y, heading as float32 (12)."""
 
@@ -20,9 +22,6 @@ PAYLOAD_BYTES_PER_FLOAT = 4  # payload floats travel as float32
 
 
 def _fail(message: str) -> None:
-    # Imported here: the scenario package may import this module while it is being initialised.
-    from smarts.scenario.errors import ScenarioError
-
     raise ScenarioError(message)
 
 

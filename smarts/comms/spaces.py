@@ -24,7 +24,7 @@ import numpy as np
 
 from smarts.comms.config import CommsConfig
 from smarts.comms.network import TRAFFIC_PAYLOAD_BOUND, Received, SenderKind
-from smarts.dynamics.action_spaces import ActionError
+from smarts.core.errors import ActionError
 
 MESSAGE_FEATURES: tuple[str, ...] = ("from_agent", "from_traffic", "dx", "dy", "dheading", "age")
 """Leading features of one received message; the payload floats follow."""

@@ -4,10 +4,10 @@ The pybullet names (``PhysicsWorld``, ``ChassisState``, ``apply_continuous``) lo
 importing this package does not start pybullet (which also prints a banner on import).
 """
 
+from smarts.core.errors import ActionError
 from smarts.core.geometry import wrap_angle
 from smarts.dynamics.action_spaces import (
     ACTION_COMPONENTS,
-    ActionError,
     ActionSpaceType,
     action_space,
     check_actions,

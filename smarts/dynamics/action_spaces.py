@@ -14,6 +14,7 @@ from typing import Sequence
 import gymnasium
 import numpy as np
 
+from smarts.core.errors import ActionError
 from smarts.dynamics.limits import ReachLimits
 
 # Bounds of the world-frame target position, m: large enough for any map, small enough for float32.
@@ -38,15 +39,6 @@ ACTION_COMPONENTS: dict[ActionSpaceType, tuple[str, ...]] = {
 CONTROLLERS = ("direct", "lane_relative")
 """How an agent's actions reach its action space (see ``smarts.dynamics.lane_relative``)."""
 LANE_RELATIVE_COMPONENTS = ("speed", "lane_change")
-
-
-class ActionError(ValueError):
-    """An action that cannot be applied; ``agent_ids`` lists the agents whose actions are bad, so a
-    caller can drop those agents without touching the others."""
-
-    def __init__(self, message: str, agent_ids: Sequence[str] = ()):
-        super().__init__(message)
-        self.agent_ids = list(agent_ids)
 
 
 def _as_kind(kind: ActionSpaceType | str) -> ActionSpaceType:

@@ -10,13 +10,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from smarts.core.errors import ActionError
 from smarts.core.provider import ProviderBase
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import Role, VehicleType
 from smarts.dynamics.action_spaces import (
     ACTION_COMPONENTS,
     LANE_RELATIVE_COMPONENTS,
-    ActionError,
     ActionSpaceType,
     check_actions,
     lane_command,

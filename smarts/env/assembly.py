@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from smarts.core.errors import ScenarioError
 from smarts.core.events import NUM_EVENTS, event_from_name
 from smarts.core.missions import resolve_mission
 from smarts.core.simulation import EventConfig, Simulation
@@ -19,7 +20,7 @@ from smarts.dynamics.agent_provider import AgentProvider, AgentVehicle
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
 from smarts.maps import RoadMap, load_map
-from smarts.scenario import ScenarioError, ScenarioSpec, load_scenario
+from smarts.scenario import ScenarioSpec, load_scenario
 from smarts.traffic.signals import FixedTimeSignals, SignalState
 
 

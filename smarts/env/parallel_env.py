@@ -19,8 +19,9 @@ import gymnasium as gym
 import numpy as np
 from pettingzoo import ParallelEnv
 
+from smarts.core.errors import ActionError
 from smarts.core.events import EVENT_NAMES, Event
-from smarts.dynamics.action_spaces import ActionError, agent_action_space
+from smarts.dynamics.action_spaces import agent_action_space
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
 from smarts.env.assembly import as_spec, build_simulation

@@ -45,6 +45,7 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
+from smarts.core.errors import WorkerError
 from smarts.env.assembly import as_spec
 from smarts.env.parallel_env import DrivingParallelEnv
 from smarts.scenario import ScenarioSpec
@@ -211,10 +212,6 @@ def _worker(remote: Any, parent_remote: Any, factory_bytes: bytes, name: str) ->
         except Exception as exc:  # noqa: BLE001  (any failure goes back to the parent, which raises it)
             remote.send(("error", (type(exc).__name__, str(exc), traceback.format_exc())))
     remote.close()
-
-
-class WorkerError(RuntimeError):
-    """An exception raised inside an env worker process (the message carries its traceback)."""
 
 
 class SmartsVecEnv(VecEnv):

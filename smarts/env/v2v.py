@@ -29,7 +29,7 @@ from smarts.comms import (
     split_message_action,
 )
 from smarts.core.simulation import Simulation
-from smarts.dynamics.action_spaces import ActionError
+from smarts.core.errors import ActionError
 from smarts.sensors.suite import Batch
 
 

@@ -6,7 +6,7 @@ from smarts.scenario.builtin_maps import (
     builtin_map_path,
     compile_map,
 )
-from smarts.scenario.errors import NetconvertError, ScenarioError
+from smarts.core.errors import NetconvertError, ScenarioError
 from smarts.scenario.library import list_scenarios, load_scenario, scenario_path
 from smarts.scenario.spec import (
     ACTION_SPACES,

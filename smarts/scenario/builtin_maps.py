@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from smarts.cache import cache_home
-from smarts.scenario.errors import NetconvertError, ScenarioError
+from smarts.core.errors import NetconvertError, ScenarioError
 
 CACHE_LAYOUT_VERSION = 2
 """Part of the cache key; bump it when the layout of a cache entry changes."""

@@ -8,8 +8,8 @@ import sys
 from rich.console import Console
 from rich.table import Table
 
+from smarts.core.errors import NetconvertError, ScenarioError
 from smarts.scenario.builtin_maps import BUILTIN_MAPS, builtin_map_path
-from smarts.scenario.errors import NetconvertError, ScenarioError
 from smarts.scenario.library import list_scenarios, load_scenario
 
 

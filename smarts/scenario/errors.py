@@ -1,11 +1,6 @@
-"""Errors raised while reading scenarios and building their maps."""
+"""Errors raised while reading scenarios and building their maps (defined in ``smarts.core.errors``;
+kept here so existing imports keep working)."""
 
-from __future__ import annotations
+from smarts.core.errors import NetconvertError, ScenarioError
 
-
-class ScenarioError(ValueError):
-    """A scenario file, field or name is invalid; the message names where and what was expected."""
-
-
-class NetconvertError(RuntimeError):
-    """netconvert failed on a generated map; the message carries its stderr."""
+__all__ = ["NetconvertError", "ScenarioError"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from smarts.scenario.errors import ScenarioError
+from smarts.core.errors import ScenarioError
 from smarts.scenario.spec import ScenarioSpec
 
 LIBRARY_DIR = Path(__file__).resolve().parent / "library"

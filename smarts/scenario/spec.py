@@ -19,7 +19,7 @@ import yaml
 
 from smarts.core.vehicle_table import VEHICLE_DIMENSIONS, VehicleType
 from smarts.scenario.builtin_maps import BUILTIN_MAPS, builtin_map_path
-from smarts.scenario.errors import ScenarioError
+from smarts.core.errors import ScenarioError
 from smarts.scenario.traffic import (
     DEFAULT_VEHICLE_TYPES,
     DENSITY_LEVELS,

@@ -5,10 +5,10 @@ Only the plain interface dataclasses are imported here, so the scenario reader c
 without loading the compiled sensors.
 """
 
+from smarts.core.errors import InterfaceError
 from smarts.sensors.interface import (
     AgentInterface,
     EgoInterface,
-    InterfaceError,
     LidarInterface,
     NeighboursInterface,
     OcclusionInterface,

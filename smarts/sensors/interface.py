@@ -16,19 +16,13 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+from smarts.core.errors import InterfaceError
+
 RASTER_LAYERS = ("drivable", "lanes", "route", "occupancy", "occlusion")
 """Raster layers an interface may ask for, drawn in the order the interface lists them."""
 OCCLUSION_MODES = ("hide", "flag")
 """hide: fully hidden road users are left out of ``neighbours``; flag: they stay, with visible
 fraction 0."""
-
-
-class InterfaceError(ValueError):
-    """An invalid interface field; ``path`` is the dotted field (``interface.lidar.rays``)."""
-
-    def __init__(self, path: str, problem: str):
-        self.path, self.problem = path, problem
-        super().__init__(f"{path}: {problem}")
 
 
 def _positive_int(where: str, value: Any) -> None:

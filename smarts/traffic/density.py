@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from smarts.maps import RoadMap
-from smarts.scenario.errors import ScenarioError
+from smarts.core.errors import ScenarioError
 from smarts.scenario.traffic import DENSITY_LEVELS, DENSITY_RATES, FlowSpec, TrafficSpec
 
 DENSITY_FLOW_END = 86400.0

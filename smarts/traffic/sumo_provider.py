@@ -54,7 +54,7 @@ import numpy as np
 from smarts.core.provider import ProviderBase
 from smarts.core.vehicle_table import COLUMN, Role, VehicleType
 from smarts.maps import RoadMap, project
-from smarts.scenario.errors import ScenarioError
+from smarts.core.errors import ScenarioError
 from smarts.scenario.traffic import TrafficSpec
 from smarts.traffic.density import exit_roads
 from smarts.traffic.signals import SignalState

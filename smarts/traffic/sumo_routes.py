@@ -21,10 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
+from smarts.core.errors import MapError, NoRouteError, ScenarioError
 from smarts.core.vehicle_table import VEHICLE_DIMENSIONS, VehicleType
-from smarts.maps import NoRouteError, RoadMap, shortest_route, sumo_net_path
-from smarts.maps.errors import MapError
-from smarts.scenario.errors import ScenarioError
+from smarts.maps import RoadMap, shortest_route, sumo_net_path
 from smarts.scenario.traffic import (
     DEFAULT_VEHICLE_TYPES,
     DENSITY_LEVELS,

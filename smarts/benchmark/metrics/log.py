@@ -80,6 +80,8 @@ from typing import Any
 
 import numpy as np
 
+from smarts.core.errors import LogError
+
 FORMAT_NAME = "smarts-episode-log"
 FORMAT_VERSION = 1
 TASKS = ("collaborative", "adaptive")
@@ -106,42 +108,6 @@ ALL_COLUMNS = REQUIRED_COLUMNS + FOLLOW_COLUMNS
 _BOOL_KINDS = set(BOOL_COLUMNS) | {"in_follow_margin", "lead_in_lane_and_visible"}
 # Columns that are undefined once the vehicle has left the road entirely.
 _ON_ROAD_ONLY = ("lane_offset", "lane_width")
-
-
-class LogError(ValueError):
-    """An episode log is malformed; the message names the file, agent and column at fault."""
-
-    def __init__(
-        self,
-        problem: str,
-        *,
-        source: str | None = None,
-        agent: str | None = None,
-        column: str | None = None,
-    ) -> None:
-        self.source = source or "<in-memory log>"
-        self.agent = agent
-        self.column = column
-        where = [self.source]
-        if agent is not None:
-            where.append(f"agent {agent!r}")
-        if column is not None:
-            where.append(f"column {column!r}")
-        self.problem = problem
-        super().__init__(f"{': '.join(where)}: {problem}")
-
-    def __reduce__(self):
-        # Keep the structured fields when the error crosses a process boundary (parallel runner).
-        return (
-            _rebuild_log_error,
-            (self.problem, self.source, self.agent, self.column),
-        )
-
-
-def _rebuild_log_error(
-    problem: str, source: str, agent: str | None, column: str | None
-) -> LogError:
-    return LogError(problem, source=source, agent=agent, column=column)
 
 
 @dataclass(eq=False)

@@ -19,7 +19,7 @@ import numpy as np
 from smarts.core.provider import ProviderBase
 from smarts.core.vehicle_table import COLUMN, VEHICLE_DIMENSIONS, Role, VehicleType
 from smarts.maps import RoadMap, project
-from smarts.scenario.errors import ScenarioError
+from smarts.core.errors import ScenarioError
 from smarts.scenario.traffic import (
     DEFAULT_VEHICLE_TYPES,
     DEPART_LANES,

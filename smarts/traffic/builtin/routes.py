@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from smarts.maps import RoadMap, extend_route
-from smarts.scenario.errors import ScenarioError
+from smarts.core.errors import ScenarioError
 from smarts.traffic.density import lane_exits, road_links
 
 NEXT_NONE = -1  # the lane does not continue on the route: change lanes before its end
