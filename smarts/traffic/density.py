@@ -11,9 +11,9 @@ import math
 
 import numpy as np
 
-from smarts.maps import RoadMap
 from smarts.core.errors import ScenarioError
-from smarts.scenario.traffic import DENSITY_LEVELS, DENSITY_RATES, FlowSpec, TrafficSpec
+from smarts.core.spec.traffic import DENSITY_LEVELS, DENSITY_RATES, FlowSpec, TrafficSpec
+from smarts.maps import RoadMap
 
 DENSITY_FLOW_END = 86400.0
 """Generated flows run for a day of simulated time, i.e. for any episode."""

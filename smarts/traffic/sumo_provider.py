@@ -51,11 +51,11 @@ from typing import TYPE_CHECKING
 import numba
 import numpy as np
 
+from smarts.core.errors import ScenarioError
 from smarts.core.provider import ProviderBase
+from smarts.core.spec.traffic import TrafficSpec
 from smarts.core.vehicle_table import COLUMN, Role, VehicleType
 from smarts.maps import RoadMap, project
-from smarts.core.errors import ScenarioError
-from smarts.scenario.traffic import TrafficSpec
 from smarts.traffic.density import exit_roads
 from smarts.traffic.signals import SignalState
 from smarts.traffic.sumo_routes import (

@@ -22,9 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from smarts.core.errors import MapError, NoRouteError, ScenarioError
-from smarts.core.vehicle_table import VEHICLE_DIMENSIONS, VehicleType
-from smarts.maps import RoadMap, shortest_route, sumo_net_path
-from smarts.scenario.traffic import (
+from smarts.core.spec.traffic import (
     DEFAULT_VEHICLE_TYPES,
     DENSITY_LEVELS,
     DEPART_LANES,
@@ -35,6 +33,8 @@ from smarts.scenario.traffic import (
     TripSpec,
     VehicleTypeSpec,
 )
+from smarts.core.vehicle_table import VEHICLE_DIMENSIONS, VehicleType
+from smarts.maps import RoadMap, shortest_route, sumo_net_path
 from smarts.traffic.density import density_flows
 
 AGENT_VTYPE = "smarts.agent"

@@ -1,7 +1,7 @@
 import pytest
 
 from smarts.comms import CommsConfig
-from smarts.scenario.errors import ScenarioError
+from smarts.core.errors import ScenarioError
 
 
 @pytest.mark.parametrize(

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from smarts.core.events import box_collisions
+from smarts.core.spec.traffic import TrafficSpec
 from smarts.env.assembly import build_simulation
-from smarts.scenario.traffic import TrafficSpec
 from smarts.traffic.builtin import BuiltinTrafficProvider
 from smarts.traffic.signals import FixedTimeSignals, SignalState
 from tests.builders import agent, make_spec

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from smarts.core.spec.traffic import DENSITY_RATES, FlowSpec, TrafficSpec, TripSpec
 from smarts.maps import load_map
 from smarts.scenario import builtin_map_path
-from smarts.scenario.traffic import DENSITY_RATES, FlowSpec, TrafficSpec, TripSpec
 from smarts.traffic.density import density_flows
 from tests.traffic.builtin_support import step, traffic_rows, traffic_sim
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from smarts.scenario.traffic import FlowSpec, TrafficSpec, TripSpec, VehicleTypeSpec
+from smarts.core.spec.traffic import FlowSpec, TrafficSpec, TripSpec, VehicleTypeSpec
 from tests.traffic.builtin_support import step, traffic_rows, traffic_sim
 
 STEADY = {"speed_dev": 0.0}  # every vehicle drives at exactly its type's desired speed

@@ -2,15 +2,15 @@
 
 import pytest
 
-from smarts.maps import load_map
-from smarts.scenario import ScenarioError, builtin_map_path
-from smarts.scenario.traffic import (
+from smarts.core.spec.traffic import (
     FlowSpec,
     PedestrianFlowSpec,
     TrafficSpec,
     TripSpec,
     VehicleTypeSpec,
 )
+from smarts.maps import load_map
+from smarts.scenario import ScenarioError, builtin_map_path
 from smarts.traffic.builtin import BuiltinTrafficProvider
 
 

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from smarts.core.spec.traffic import TrafficSpec, TripSpec
 from smarts.core.vehicle_table import Role
 from smarts.env.assembly import build_simulation
-from smarts.scenario.traffic import TrafficSpec, TripSpec
 from smarts.traffic.builtin import BuiltinTrafficProvider
 from tests.builders import agent, make_spec
 from tests.traffic.builtin_support import step, traffic_sim

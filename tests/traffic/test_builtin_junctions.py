@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from smarts.scenario.traffic import FlowSpec, TrafficSpec, TripSpec
+from smarts.core.spec.traffic import FlowSpec, TrafficSpec, TripSpec
 from smarts.traffic.signals import RED
 from tests.traffic.builtin_support import (
     front_to_lane_end,

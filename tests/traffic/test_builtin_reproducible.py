@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from smarts.scenario.traffic import FlowSpec, TrafficSpec
+from smarts.core.spec.traffic import FlowSpec, TrafficSpec
 from tests.traffic.builtin_support import step, traffic_rows, traffic_sim
 
 TRAFFIC = TrafficSpec(

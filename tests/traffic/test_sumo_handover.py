@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from smarts.core.provider import ProviderBase
+from smarts.core.spec.traffic import TrafficSpec, TripSpec
 from smarts.core.vehicle_table import Role
 from smarts.env.assembly import build_simulation
 from smarts.maps import sumo_net_path
-from smarts.scenario.traffic import TrafficSpec, TripSpec
 from smarts.traffic.sumo_provider import (
     DEFAULT_SPEED_MODE,
     SumoTrafficProvider,

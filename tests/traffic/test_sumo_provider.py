@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from smarts.core.events import Event
+from smarts.core.spec.traffic import FlowSpec, TrafficSpec, TripSpec, VehicleTypeSpec
 from smarts.core.vehicle_table import Role, VehicleType
 from smarts.env.assembly import build_simulation
 from smarts.maps import sumo_net_path
 from smarts.scenario import ScenarioError
-from smarts.scenario.traffic import FlowSpec, TrafficSpec, TripSpec, VehicleTypeSpec
 from smarts.traffic.sumo_provider import SumoTrafficProvider
 from tests.builders import agent, make_spec
 

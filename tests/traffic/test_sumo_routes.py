@@ -6,10 +6,7 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from smarts.core.vehicle_table import VEHICLE_DIMENSIONS, VehicleType
-from smarts.maps import load_map, sumo_net_path
-from smarts.scenario import ScenarioError, builtin_map_path
-from smarts.scenario.traffic import (
+from smarts.core.spec.traffic import (
     DENSITY_RATES,
     FlowSpec,
     PedestrianFlowSpec,
@@ -17,6 +14,9 @@ from smarts.scenario.traffic import (
     TripSpec,
     VehicleTypeSpec,
 )
+from smarts.core.vehicle_table import VEHICLE_DIMENSIONS, VehicleType
+from smarts.maps import load_map, sumo_net_path
+from smarts.scenario import ScenarioError, builtin_map_path
 from smarts.traffic.density import density_flows
 from smarts.traffic.sumo_routes import AGENT_VTYPE, write_route_file
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from smarts.core.spec.traffic import PedestrianFlowSpec, TrafficSpec, TripSpec
 from smarts.core.vehicle_table import Role, VehicleType
 from smarts.env.assembly import build_simulation
 from smarts.maps import sumo_net_path
-from smarts.scenario.traffic import PedestrianFlowSpec, TrafficSpec, TripSpec
 from smarts.traffic.signals import GREEN, RED, SignalState
 from smarts.traffic.sumo_provider import SumoTrafficProvider
 from tests.builders import agent, make_spec

@@ -16,11 +16,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from smarts.core.provider import ProviderBase
-from smarts.core.vehicle_table import COLUMN, VEHICLE_DIMENSIONS, Role, VehicleType
-from smarts.maps import RoadMap, project
 from smarts.core.errors import ScenarioError
-from smarts.scenario.traffic import (
+from smarts.core.provider import ProviderBase
+from smarts.core.spec.traffic import (
     DEFAULT_VEHICLE_TYPES,
     DEPART_LANES,
     DEPART_SPEEDS,
@@ -29,6 +27,8 @@ from smarts.scenario.traffic import (
     TripSpec,
     VehicleTypeSpec,
 )
+from smarts.core.vehicle_table import COLUMN, VEHICLE_DIMENSIONS, Role, VehicleType
+from smarts.maps import RoadMap, project
 import smarts.traffic.builtin.kernels as K
 from smarts.traffic.builtin.junctions import junction_table
 from smarts.traffic.builtin.routes import NO_WAY, RouteTable

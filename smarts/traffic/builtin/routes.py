@@ -16,8 +16,8 @@ import math
 
 import numpy as np
 
-from smarts.maps import RoadMap, extend_route
 from smarts.core.errors import ScenarioError
+from smarts.maps import RoadMap, extend_route
 from smarts.traffic.density import lane_exits, road_links
 
 NEXT_NONE = -1  # the lane does not continue on the route: change lanes before its end

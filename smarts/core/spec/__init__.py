@@ -1,0 +1,71 @@
+"""Scenario spec datatypes: what a scenario file holds, as plain dataclasses every layer can read.
+
+``smarts.core.spec.scenario`` holds the scenario, its agents and missions; ``smarts.core.spec.traffic``
+the traffic section. Reading and writing YAML lives in ``smarts.scenario``.
+"""
+
+from smarts.core.spec.scenario import (
+    ACTION_SPACES,
+    BUILTIN_PREFIX,
+    CONTROLLERS,
+    DEFAULT_TERMINATE_ON,
+    LANE_RELATIVE_SPACES,
+    MISSION_END_ACTIONS,
+    TERMINATION_EVENTS,
+    VEHICLE_TYPES,
+    AgentSpec,
+    EventsSpec,
+    GoalSpec,
+    MissionSpec,
+    RewardSpec,
+    ScenarioSpec,
+    StartSpec,
+    VehicleDimensions,
+    VehicleSpec,
+)
+from smarts.core.spec.traffic import (
+    DEFAULT_VEHICLE_TYPES,
+    DENSITY_LEVELS,
+    DENSITY_RATES,
+    DEPART_LANES,
+    DEPART_SPEEDS,
+    TRAFFIC_ENGINES,
+    TRAFFIC_VEHICLE_BASES,
+    FlowSpec,
+    PedestrianFlowSpec,
+    TrafficSpec,
+    TripSpec,
+    VehicleTypeSpec,
+)
+
+__all__ = [
+    "ACTION_SPACES",
+    "BUILTIN_PREFIX",
+    "CONTROLLERS",
+    "DEFAULT_TERMINATE_ON",
+    "DEFAULT_VEHICLE_TYPES",
+    "DENSITY_LEVELS",
+    "DENSITY_RATES",
+    "DEPART_LANES",
+    "DEPART_SPEEDS",
+    "LANE_RELATIVE_SPACES",
+    "MISSION_END_ACTIONS",
+    "TERMINATION_EVENTS",
+    "TRAFFIC_ENGINES",
+    "TRAFFIC_VEHICLE_BASES",
+    "VEHICLE_TYPES",
+    "AgentSpec",
+    "EventsSpec",
+    "FlowSpec",
+    "GoalSpec",
+    "MissionSpec",
+    "PedestrianFlowSpec",
+    "RewardSpec",
+    "ScenarioSpec",
+    "StartSpec",
+    "TrafficSpec",
+    "TripSpec",
+    "VehicleDimensions",
+    "VehicleSpec",
+    "VehicleTypeSpec",
+]
