@@ -6,6 +6,7 @@ provider protocol, so adding traffic or replay providers changes this file, not 
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,7 @@ import numpy as np
 from smarts.core.errors import ScenarioError
 from smarts.core.events import NUM_EVENTS, event_from_name
 from smarts.core.missions import resolve_mission
+from smarts.core.spec import ScenarioSpec as PlainScenarioSpec
 from smarts.core.simulation import EventConfig, Simulation
 from smarts.core.vehicle_table import Role, VehicleType
 from smarts.dynamics.action_spaces import ActionSpaceType
@@ -24,9 +26,14 @@ from smarts.scenario import ScenarioSpec, load_scenario
 from smarts.traffic.signals import FixedTimeSignals, SignalState
 
 
-def as_spec(scenario: str | Path | ScenarioSpec) -> ScenarioSpec:
-    """A spec from a library name, a YAML path or a spec object."""
-    return scenario if isinstance(scenario, ScenarioSpec) else load_scenario(scenario)
+def as_spec(scenario: str | Path | PlainScenarioSpec) -> ScenarioSpec:
+    """A spec from a library name, a YAML path or a spec object (a plain ``smarts.core.spec``
+    dataclass gains the reader's ``map_path`` and ``check_map``; its fields are kept as they are)."""
+    if isinstance(scenario, ScenarioSpec):
+        return scenario
+    if isinstance(scenario, PlainScenarioSpec):
+        return ScenarioSpec(**{f.name: getattr(scenario, f.name) for f in dataclasses.fields(scenario)})
+    return load_scenario(scenario)
 
 
 def scenario_map(spec: ScenarioSpec) -> RoadMap:

@@ -67,6 +67,19 @@ def test_a_read_scenario_is_the_core_dataclass_with_yaml_methods():
     assert type(again) is ScenarioSpec and again.map_path() == spec.map_path()
 
 
+def test_the_env_takes_a_plain_core_spec():
+    from smarts.env.assembly import as_spec
+
+    spec = load_scenario("straight_2lane_cruise")
+    plain = core_spec.ScenarioSpec(
+        **{f.name: getattr(spec, f.name) for f in dataclasses.fields(spec)}
+    )
+    assert type(plain) is core_spec.ScenarioSpec
+    built = as_spec(plain)
+    assert type(built) is ScenarioSpec and built == spec and built.base_dir == spec.base_dir
+    assert as_spec(spec) is spec
+
+
 def test_core_spec_and_errors_load_without_the_layers_above():
     code = (
         "import sys, smarts.core.spec, smarts.core.errors, smarts.sensors.interface, smarts.comms.config\n"
