@@ -3,19 +3,22 @@
 The observation dict is flattened in a fixed key order into one vector (``ObservationLayout``),
 then an MLP gives the mean of a Gaussian over the action box (log-std is a learned vector) and a
 separate MLP gives the state value. Training (``train/ppo.py``) uses torchrl's losses on these
-modules; evaluation and the benchmark load a checkpoint into ``PPOPolicy``, which acts with the
-mean action. Checkpoints are plain tensors and JSON-able metadata, loaded with
-``torch.load(..., weights_only=True)``.
+modules; evaluation and the benchmark load a checkpoint into ``PPOPolicy`` (through
+``agents.loader``), which acts with the mean action. Checkpoints are plain tensors and JSON-able
+metadata, loaded with ``torch.load(..., weights_only=True)``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
+
+from agents.checkpoint import CheckpointError, checkpoint_format, read_checkpoint
 
 CHECKPOINT_FORMAT = "smarts-ppo-v1"
 
@@ -168,7 +171,8 @@ def save_checkpoint(path: Path, *, actor: Actor, critic: Critic, normalizer: Obs
 
     ``action_space`` and ``controller`` say how the actions drive a vehicle and ``interface`` (the
     plain-data form of ``smarts.sensors.interface.AgentInterface``) which observation the policy
-    reads, so evaluation and the benchmark build the env this policy was trained in."""
+    reads, so evaluation and the benchmark build the env this policy was trained in (and validate
+    the interface and ``lane_relative`` settings there)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     blob = {
@@ -194,46 +198,28 @@ def save_checkpoint(path: Path, *, actor: Actor, critic: Critic, normalizer: Obs
     return path
 
 
-class CheckpointError(ValueError):
-    pass
-
-
-def load_policy_file(path: str | Path):
-    """The batched policy stored in a checkpoint file: a torchrl PPO or an exported SB3 policy."""
-    path = Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"{path}: no such checkpoint file")
-    try:
-        blob = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as err:
-        raise CheckpointError(f"{path}: not a readable checkpoint ({type(err).__name__}: {err})") from None
-    if isinstance(blob, dict) and blob.get("format") == "smarts-sb3-ppo-v1":
-        from train.sb3_ppo import SB3Policy
-
-        return SB3Policy(blob)
-    return PPOPolicy.load(path)
-
-
-def load_checkpoint(path: Path) -> dict:
-    """Read a checkpoint with ``weights_only=True``; a corrupted or foreign file is a clear error."""
-    path = Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"{path}: no such checkpoint file")
-    try:
-        blob = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as err:  # unpickling errors come in many types
-        raise CheckpointError(f"{path}: not a readable checkpoint ({type(err).__name__}: {err})") from None
-    if not isinstance(blob, dict) or blob.get("format") != CHECKPOINT_FORMAT:
-        found = blob.get("format") if isinstance(blob, dict) else type(blob).__name__
-        raise CheckpointError(f"{path}: expected a {CHECKPOINT_FORMAT} checkpoint, found {found!r}")
+def check_checkpoint(blob: Any, path: str | Path) -> dict:
+    """``blob`` if it is a complete PPO checkpoint; :class:`CheckpointError` naming ``path`` otherwise."""
+    found = checkpoint_format(blob)
+    if found != CHECKPOINT_FORMAT:
+        shown = found if isinstance(blob, dict) else type(blob).__name__
+        raise CheckpointError(f"{path}: expected a {CHECKPOINT_FORMAT} checkpoint, found {shown!r}")
     for key in ("actor", "critic", "normalizer", "layout", "action", "hidden"):
         if key not in blob:
             raise CheckpointError(f"{path}: checkpoint lacks {key!r}")
     return blob
 
 
+def load_checkpoint(path: Path) -> dict:
+    """Read a PPO checkpoint with ``weights_only=True``; a corrupted or foreign file is a clear error."""
+    return check_checkpoint(read_checkpoint(path), path)
+
+
 class PPOPolicy:
-    """A trained PPO actor as a batched policy (``act(obs) -> actions``), for eval and the zoo."""
+    """A trained PPO actor as a batched policy (``act(obs) -> actions``), for eval and the zoo.
+
+    ``interface`` and ``lane_relative`` are the recorded plain data (None: the scenario's
+    interface, the default settings); ``source`` names the file for error messages."""
 
     def __init__(self, blob: dict, source: str = "<checkpoint>"):
         layout = ObservationLayout(tuple(blob["layout"]["keys"]), tuple(tuple(s) for s in blob["layout"]["shapes"]))
@@ -241,22 +227,10 @@ class PPOPolicy:
         self.action_space = blob["action"]["space"]
         self.controller = blob["action"].get("controller", "direct")
         self.mean_map = blob["action"].get("mean", "tanh")
-        self.lane_relative = None
-        if blob.get("lane_relative") is not None:
-            from smarts.dynamics.lane_relative import LaneRelativeParams
-
-            try:
-                self.lane_relative = LaneRelativeParams(**blob["lane_relative"])
-            except (TypeError, ValueError) as err:
-                raise CheckpointError(f"{source}: recorded lane-relative settings are invalid ({err})") from None
-        self.interface = None
-        if blob.get("interface") is not None:
-            from smarts.sensors.interface import InterfaceError, interface_from_dict
-
-            try:
-                self.interface = interface_from_dict(blob["interface"])
-            except InterfaceError as err:
-                raise CheckpointError(f"{source}: recorded observation interface is invalid ({err})") from None
+        # Plain data, validated by the simulator where it builds the env (agents import no simulator).
+        self.interface = blob.get("interface")
+        self.lane_relative = blob.get("lane_relative")
+        self.source = source
         self.low = torch.tensor(blob["action"]["low"], dtype=torch.float32)
         self.high = torch.tensor(blob["action"]["high"], dtype=torch.float32)
         self.actor = Actor(layout.size, len(self.low), tuple(blob["hidden"]))

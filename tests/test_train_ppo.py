@@ -35,7 +35,8 @@ def test_bad_training_settings_name_the_field(tmp_path, capsys):
 
 
 def test_sb3_training_exports_a_checkpoint_the_benchmark_can_load(tmp_path):
-    from agents.ppo import load_policy_file
+    from agents.loader import load_policy_file
+    from smarts.benchmark.runner import policy_setup
 
     out = tmp_path / "sb3"
     args = ["ppo", "--task", "platoon", "--lib", "sb3", "--total-steps", "128", "--envs", "2", "--frames-per-batch",
@@ -44,12 +45,13 @@ def test_sb3_training_exports_a_checkpoint_the_benchmark_can_load(tmp_path):
     assert list((out / "tensorboard").rglob("events.out.tfevents.*"))
     policy = load_policy_file(out / "final.pt")  # weights_only load of the exported SB3 policy
     assert (policy.action_space, policy.controller) == ("relative_target_pose", "lane_relative")
-    assert policy.interface is not None and policy.interface.lead
+    setup = policy_setup(policy, str(out / "final.pt"))  # the recorded interface, validated
+    assert setup.interface is not None and setup.interface.lead
     from smarts.env import DrivingParallelEnv
     from train.ppo import training_spec
 
     env = DrivingParallelEnv(training_spec("adaptive:a01_straight_free", "rtp", "lane_relative"),
-                             observation=policy.interface)  # fmt: skip
+                             observation=setup.interface, lane_relative=setup.lane_relative)  # fmt: skip
     obs, _ = env.reset(seed=0)
     action = policy.act({k: v[None] for k, v in obs["agent_0"].items()})
     assert action.shape == (1, 2) and env.action_space("agent_0").contains(action[0].astype("float32"))

@@ -12,13 +12,12 @@ from zoo import ZOO, make_policy
 def test_every_zoo_agent_acts_in_its_action_space(name):
     """Each agent, in the env built as the benchmark builds it (its action space, controller and
     observation interface), returns actions of that env's action box."""
-    from smarts.benchmark.runner import PolicySetup, scenario_for
+    from smarts.benchmark.runner import policy_setup, scenario_for
     from smarts.env import DrivingParallelEnv
     from smarts.scenario import load_scenario
 
     policy = make_policy(f"zoo:{name}")
-    setup = PolicySetup(policy.action_space, getattr(policy, "controller", "direct"), getattr(policy, "interface", None),
-                        getattr(policy, "lane_relative", None))  # fmt: skip
+    setup = policy_setup(policy, f"zoo:{name}")  # validates the recorded interface and lane-relative settings
     spec = scenario_for(load_scenario("straight_2lane_cruise"), setup)
     env = DrivingParallelEnv(spec, observation=setup.interface, lane_relative=setup.lane_relative)
     obs, _ = env.reset(seed=0)

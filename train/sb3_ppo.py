@@ -3,7 +3,7 @@
 Every agent of every env copy is one VecEnv slot (``SmartsVecEnv``, parameter sharing); SB3's PPO
 trains on it unchanged with ``MultiInputPolicy``. The policy is exported in the project's
 checkpoint format (tensors + metadata, ``weights_only`` loadable) so evaluation and the benchmark
-load it like the torchrl checkpoints.
+load it like the torchrl checkpoints (``agents.sb3_policy.SB3Policy``).
 """
 
 from __future__ import annotations
@@ -16,9 +16,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from agents.sb3_policy import SB3_FORMAT
 from train.config import ACTION_SPACES, TrainConfig
-
-SB3_FORMAT = "smarts-sb3-ppo-v1"
 
 
 def make_vec_env(cfg: TrainConfig):
@@ -116,40 +115,3 @@ def _interface_dict(cfg: TrainConfig) -> dict:
     from smarts.sensors.interface import interface_to_dict
 
     return interface_to_dict(cfg.observation_interface())
-
-
-class SB3Policy:
-    """An exported SB3 PPO policy as a batched policy (deterministic actions)."""
-
-    def __init__(self, blob: dict):
-        import gymnasium as gym
-        from stable_baselines3.common.policies import MultiInputActorCriticPolicy
-
-        obs_space = gym.spaces.Dict(
-            {k: gym.spaces.Box(-np.inf, np.inf, tuple(shape), np.float32) for k, shape in blob["observation"].items()}
-        )
-        self.low = np.asarray(blob["action"]["low"], dtype=np.float32)
-        self.high = np.asarray(blob["action"]["high"], dtype=np.float32)
-        self.action_space = blob["action"]["space"]
-        self.controller = blob["action"].get("controller", "direct")
-        self.interface = None
-        if blob.get("interface") is not None:
-            from smarts.sensors.interface import interface_from_dict
-
-            self.interface = interface_from_dict(blob["interface"])
-        self.lane_relative = None
-        if blob.get("lane_relative") is not None:
-            from smarts.dynamics.lane_relative import LaneRelativeParams
-
-            self.lane_relative = LaneRelativeParams(**blob["lane_relative"])
-        act_space = gym.spaces.Box(-1.0, 1.0, self.low.shape, np.float32)
-        self.policy = MultiInputActorCriticPolicy(obs_space, act_space, lambda _: 0.0, net_arch=blob["net_arch"])
-        self.policy.load_state_dict(blob["policy"])
-        self.policy.eval()
-        self.keys = list(blob["observation"])
-
-    @torch.no_grad()
-    def act(self, obs: dict) -> np.ndarray:
-        action, _ = self.policy.predict({k: np.asarray(obs[k]) for k in self.keys}, deterministic=True)
-        action = np.clip(action, -1.0, 1.0)
-        return self.low + (action + 1.0) * 0.5 * (self.high - self.low)

@@ -1,11 +1,15 @@
-"""Ready agents by locator: ``zoo:<name>`` (or just ``<name>``) -> a policy object.
+"""Ready agents by locator: ``zoo:<name>`` (or just ``<name>``, or a checkpoint file) -> a policy.
 
 A policy is batched: ``policy.act(obs)`` takes ``{key: [n, ...]}`` observations of n agents and
 returns their actions ``[n, k]``; ``policy.action_space`` names the simulator action space it
 acts in (relative_target_pose | target_pose | continuous | lane). It may also declare
-``policy.controller`` (``direct`` when absent, or ``lane_relative``) and ``policy.interface`` (an
-``AgentInterface``; None or absent: the scenario's observation). The benchmark runs every agent
-in its own action space, controller and interface.
+``policy.controller`` (``direct`` when absent, or ``lane_relative``), ``policy.interface`` and
+``policy.lane_relative`` (plain data the simulator validates; None or absent: the scenario's
+observation, the default settings). The benchmark runs every agent in its own action space,
+controller and interface.
+
+``make_policy`` is the simulator's default policy resolver (``smarts.core.policies``, registered as
+an entry point in ``pyproject.toml``): the simulator reaches the zoo through it, never by import.
 
 Reference agents (benchmarked beside every agent, ``smarts.benchmark.runner.REFERENCE_AGENTS``):
 ``zoo:keep-lane`` (IDM on the route's waypoints), ``zoo:random`` (uniform random steps) and
@@ -35,14 +39,29 @@ ZOO: dict[str, tuple[str, str, str]] = {
 """name -> (module, class, one-line description)."""
 
 
+def is_checkpoint_path(locator: str) -> bool:
+    """A locator that names a checkpoint file (``*.pt``, or any existing file) rather than an agent."""
+    return locator.endswith(".pt") or Path(locator).is_file()
+
+
 def make_policy(locator: str, **kwargs: Any):
-    """Build the policy a locator names; unknown names raise ValueError listing the known ones."""
-    name = locator[len("zoo:") :] if locator.startswith("zoo:") else locator
+    """Build the policy a locator names (``kwargs`` go to an agent class); a checkpoint path loads
+    that file. Unknown names raise ValueError listing the known ones."""
+    name = locator.removeprefix("zoo:")
     if name not in ZOO:
-        raise ValueError(f"unknown agent locator {locator!r}; known: {', '.join('zoo:' + n for n in ZOO)}")
+        if name == locator and is_checkpoint_path(locator):
+            return _load_file(Path(locator), kwargs)
+        known = ", ".join("zoo:" + n for n in ZOO)
+        raise ValueError(f"unknown agent locator {locator!r}; known: {known}, or a checkpoint file (*.pt)")
     module, target, _ = ZOO[name]
     if module == CHECKPOINT:
-        from agents.ppo import load_policy_file
-
-        return load_policy_file(ZOO_DIR / target)
+        return _load_file(ZOO_DIR / target, kwargs)
     return getattr(importlib.import_module(module), target)(**kwargs)
+
+
+def _load_file(path: Path, kwargs: dict[str, Any]):
+    from agents.loader import load_policy_file
+
+    if kwargs:
+        raise TypeError(f"{path}: a checkpoint policy takes no options, got {', '.join(sorted(kwargs))}")
+    return load_policy_file(path)

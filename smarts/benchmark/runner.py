@@ -1,6 +1,6 @@
 """Run agents through a benchmark suite and write logs, scores and the report.
 
-Each (agent, scenario, episode) is one job: load the agent's batched policy, build the scenario
+Each (agent, scenario, episode) is one job: resolve the agent's batched policy, build the scenario
 with every learning (non-social) agent in the policy's own action space and controller (and the
 policy's observation interface when it declares one), reset it with the episode's seed, drive
 every mission vehicle with the policy, record the episode log and write it to disk at once (so
@@ -14,6 +14,13 @@ goes on.
 
 Reference agents (:data:`REFERENCE_AGENTS`) are benchmarked beside the requested ones with the
 same suite, seeds and episode count, so every report has its floor and its simple baseline.
+
+Agents are locators (``zoo:keep-lane``, a checkpoint path) that a policy resolver turns into
+policies (``smarts.core.policies``): the installed default (the zoo), or ``policy_resolver=``
+given to :func:`plan_jobs` and :func:`run_jobs` alike (a module-level function, so that worker
+processes and Ray tasks receive it; it resolves the reference agents too). A policy may declare
+its interface and lane-relative settings as plain data; they are validated here, before any
+episode runs, with errors naming the agent, its file and the field.
 """
 
 from __future__ import annotations
@@ -31,16 +38,19 @@ from typing import Any
 import numpy as np
 
 from smarts.benchmark.suites import Suite, SuiteScenario, load_suite
+from smarts.core.policies import Policy, PolicyResolver, resolve_policy
+from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.scenario.spec import ACTION_SPACES, CONTROLLERS, LANE_RELATIVE_SPACES, ScenarioSpec
-from smarts.sensors.interface import AgentInterface, interface_to_dict
+from smarts.sensors.interface import AgentInterface, interface_from_dict, interface_to_dict
 
 REFERENCE_AGENTS = ("zoo:keep-lane", "zoo:random", "zoo:stand-still")
 """Benchmarked with every suite run unless asked not to: a simple baseline, chance, doing nothing."""
 
 
 class AgentSetupError(ValueError):
-    """A policy cannot be benchmarked as declared (unknown action space or controller, or one the
-    suite does not host); the message names the agent."""
+    """A policy cannot be benchmarked as declared (unknown action space or controller, one the
+    suite does not host, an invalid interface or lane-relative settings); the message names the
+    agent (and the file it came from)."""
 
 
 @dataclass(frozen=True)
@@ -52,8 +62,8 @@ class PolicySetup:
     action_space: str
     controller: str = "direct"
     interface: AgentInterface | None = None
-    lane_relative: Any = None
-    """``LaneRelativeParams`` the policy was trained with (lane-relative controller); None: defaults."""
+    lane_relative: LaneRelativeParams | None = None
+    """The settings the policy was trained with (lane-relative controller); None: defaults."""
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -81,24 +91,55 @@ def agent_label(locator: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(locator).stem if "/" in locator else locator).strip("_")
 
 
-def load_policy(locator: str, seed: int = 0):
-    """A batched policy from a zoo locator (``zoo:keep-lane``, ``zoo:random``) or a PPO
-    checkpoint file (``*.pt``); a clear error otherwise."""
-    from zoo import make_policy
-
-    if locator.endswith(".pt") or Path(locator).is_file():
-        from agents.ppo import load_policy_file
-
-        return load_policy_file(locator)
-    policy = make_policy(locator)
+def load_policy(locator: str, seed: int = 0, policy_resolver: PolicyResolver | None = None) -> Policy:
+    """The batched policy a locator names (``zoo:keep-lane``, a checkpoint file ``*.pt``), from
+    ``policy_resolver`` or the installed default; seeded when it takes a seed. Unknown locators
+    and unreadable checkpoints are ``ValueError``s that say why."""
+    policy = resolve_policy(locator, policy_resolver)
     if hasattr(policy, "seed"):
         policy.seed(seed)
     return policy
 
 
-def policy_setup(policy, locator: str) -> PolicySetup:
-    """Read a policy's ``action_space``, ``controller`` (default ``direct``) and ``interface``
-    (default None); :class:`AgentSetupError` naming the agent when one is not valid."""
+def _who(policy: Any, locator: str) -> str:
+    source = getattr(policy, "source", None)
+    return f"agent {locator!r}" + (f" ({source})" if source and str(source) != locator else "")
+
+
+def _interface(policy: Any, locator: str) -> AgentInterface | None:
+    """The policy's interface: an ``AgentInterface``, or its plain data validated here."""
+    value = getattr(policy, "interface", None)
+    if value is None or isinstance(value, AgentInterface):
+        return value
+    try:
+        return interface_from_dict(value)
+    except (TypeError, ValueError) as err:
+        raise AgentSetupError(f"{_who(policy, locator)}: recorded observation interface is invalid ({err})") from None
+
+
+def _lane_relative(policy: Any, locator: str) -> LaneRelativeParams | None:
+    """The policy's lane-relative settings: ``LaneRelativeParams``, or their plain data validated here."""
+    value = getattr(policy, "lane_relative", None)
+    if value is None or isinstance(value, LaneRelativeParams):
+        return value
+    problem = None
+    known = [f.name for f in dataclasses.fields(LaneRelativeParams)]
+    if not isinstance(value, dict):
+        problem = f"lane_relative: expected a mapping of {', '.join(known)}, got {type(value).__name__}"
+    elif unknown := sorted(set(value) - set(known)):
+        problem = f"lane_relative.{unknown[0]}: unknown field; known: {', '.join(known)}"
+    else:
+        try:
+            return LaneRelativeParams(**value)
+        except (TypeError, ValueError) as err:
+            problem = str(err)
+    raise AgentSetupError(f"{_who(policy, locator)}: recorded lane-relative settings are invalid ({problem})")
+
+
+def policy_setup(policy: Policy, locator: str) -> PolicySetup:
+    """Read a policy's ``action_space``, ``controller`` (default ``direct``), ``interface`` and
+    ``lane_relative`` (default None; objects or their plain data, validated here);
+    :class:`AgentSetupError` naming the agent when one is not valid."""
     space = getattr(policy, "action_space", None)
     if space not in ACTION_SPACES:
         raise AgentSetupError(
@@ -111,12 +152,7 @@ def policy_setup(policy, locator: str) -> PolicySetup:
         raise AgentSetupError(
             f"agent {locator!r}: the lane_relative controller drives {', '.join(LANE_RELATIVE_SPACES)}, not {space!r}"
         )
-    interface = getattr(policy, "interface", None)
-    if interface is not None and not isinstance(interface, AgentInterface):
-        raise AgentSetupError(
-            f"agent {locator!r}: interface must be a smarts.sensors.interface.AgentInterface or None, got {type(interface).__name__}"
-        )
-    return PolicySetup(space, controller, interface, getattr(policy, "lane_relative", None))
+    return PolicySetup(space, controller, _interface(policy, locator), _lane_relative(policy, locator))
 
 
 def check_hosted(locator: str, setup: PolicySetup, suite: Suite) -> None:
@@ -128,12 +164,14 @@ def check_hosted(locator: str, setup: PolicySetup, suite: Suite) -> None:
         )
 
 
-def check_agents(agents: list[str], suite: Suite) -> dict[str, PolicySetup]:
+def check_agents(
+    agents: list[str], suite: Suite, policy_resolver: PolicyResolver | None = None
+) -> dict[str, PolicySetup]:
     """Load every agent and check the suite hosts its action space, before any episode runs;
     returns each agent's setup. An unknown locator or unloadable checkpoint raises too."""
     setups = {}
     for locator in agents:
-        setup = policy_setup(load_policy(locator), locator)
+        setup = policy_setup(load_policy(locator, policy_resolver=policy_resolver), locator)
         check_hosted(locator, setup, suite)
         setups[locator] = setup
     return setups
@@ -161,7 +199,7 @@ def _summary(job: Job, scenario: str, failure: str | None, info: dict) -> dict:
             "failure": failure, "log": job.log_path, **{k: info.get(k) for k in ("action_space", "controller")}}  # fmt: skip
 
 
-def run_episode(job: Job) -> dict:
+def run_episode(job: Job, policy_resolver: PolicyResolver | None = None) -> dict:
     """Run one episode and write its log; returns a short summary (never raises for agent faults)."""
     from smarts.benchmark.metrics import EpisodeLog, write_episode
     from smarts.benchmark.recorder import EpisodeRecorder
@@ -170,7 +208,7 @@ def run_episode(job: Job) -> dict:
     entry = suite.scenarios[job.scenario_index]
     info: dict[str, Any] = {"agent": job.agent}
     try:
-        policy = load_policy(job.agent, job.seed)
+        policy = load_policy(job.agent, job.seed, policy_resolver)
         setup = policy_setup(policy, job.agent)
         check_hosted(job.agent, setup, suite)
     except Exception as err:  # an unknown, broken or misdeclared agent fails every episode, visibly
@@ -252,6 +290,7 @@ def plan_jobs(
     references: bool = True,
     reference_cache: Path | None = None,
     check: bool = True,
+    policy_resolver: PolicyResolver | None = None,
 ) -> list[Job]:
     """One job per (agent, scenario, episode); episode ``e`` of every scenario has seed
     ``seed + e`` (``seed`` defaults to the suite's).
@@ -261,13 +300,14 @@ def plan_jobs(
     kept and reused when already there (keyed by :func:`reference_cache_key`; for repeated
     evaluations during training; the logs do not depend on the agent under test). ``check``:
     load every agent and refuse one whose action space the suite does not host
-    (:func:`check_agents`) before any job exists."""
+    (:func:`check_agents`) before any job exists. ``policy_resolver``: turns the agents' locators
+    into policies (None: the installed default); give :func:`run_jobs` the same one."""
     base = suite.seed if seed is None else seed
     out_dir = Path(out_dir)
     agents = list(agents)
     extra = [a for a in REFERENCE_AGENTS if a not in agents] if references else []
     if check:
-        check_agents(agents + extra, suite)
+        check_agents(agents + extra, suite, policy_resolver)
     cache = Path(reference_cache) / reference_cache_key(suite, base) if reference_cache is not None else None
     jobs = []
     for agent in agents + extra:
@@ -280,9 +320,17 @@ def plan_jobs(
     return jobs
 
 
-def run_jobs(jobs: list[Job], workers: int = 1, progress: bool = True, ray_address: str | None = None) -> list[dict]:
+def run_jobs(
+    jobs: list[Job],
+    workers: int = 1,
+    progress: bool = True,
+    ray_address: str | None = None,
+    policy_resolver: PolicyResolver | None = None,
+) -> list[dict]:
     """Run jobs in ``workers`` processes (inline when 1), or as Ray tasks when ``ray_address`` is
-    given (``auto``, ``local`` or ``HOST:PORT``); results in job order either way."""
+    given (``auto``, ``local`` or ``HOST:PORT``); results in job order either way.
+    ``policy_resolver`` (None: the installed default) goes to every worker, so it must pickle:
+    a module-level function or an instance of a module-level class."""
     from rich.progress import Progress
 
     results: list[dict | None] = [None] * len(jobs)
@@ -293,7 +341,7 @@ def run_jobs(jobs: list[Job], workers: int = 1, progress: bool = True, ray_addre
 
             with ray_session(ray_address, num_cpus=max(2, workers)) as ray:
                 remote = ray.remote(run_episode_guarded)
-                pending = {remote.remote(job): k for k, job in enumerate(jobs)}
+                pending = {remote.remote(job, policy_resolver): k for k, job in enumerate(jobs)}
                 while pending:
                     done, _ = ray.wait(list(pending), num_returns=1)
                     for ref in done:
@@ -301,19 +349,19 @@ def run_jobs(jobs: list[Job], workers: int = 1, progress: bool = True, ray_addre
                         bar.advance(task)
         elif workers <= 1:
             for k, job in enumerate(jobs):
-                results[k] = run_episode_guarded(job)
+                results[k] = run_episode_guarded(job, policy_resolver)
                 bar.advance(task)
         else:
             ctx = multiprocessing.get_context("spawn")
             with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-                futures = {pool.submit(run_episode_guarded, job): k for k, job in enumerate(jobs)}
+                futures = {pool.submit(run_episode_guarded, job, policy_resolver): k for k, job in enumerate(jobs)}
                 for future in cf.as_completed(futures):
                     results[futures[future]] = future.result()
                     bar.advance(task)
     return results  # type: ignore[return-value]
 
 
-def run_episode_guarded(job: Job) -> dict:
+def run_episode_guarded(job: Job, policy_resolver: PolicyResolver | None = None) -> dict:
     """``run_episode`` that turns a crash of the episode itself into a recorded failure (and
     reuses a cached log for a job marked ``reuse``)."""
     if job.reuse and Path(job.log_path).is_file():
@@ -327,7 +375,7 @@ def run_episode_guarded(job: Job) -> dict:
             if log.seed == job.seed and log.episode == job.episode:
                 return _summary(job, log.scenario, log.failure, log.info)
     try:
-        return run_episode(job)
+        return run_episode(job, policy_resolver)
     except Exception as err:
         scenario = None
         try:

@@ -21,6 +21,7 @@ from pettingzoo import ParallelEnv
 
 from smarts.core.errors import ActionError
 from smarts.core.events import EVENT_NAMES, Event
+from smarts.core.policies import PolicyResolver
 from smarts.dynamics.action_spaces import agent_action_space
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
@@ -52,13 +53,16 @@ class DrivingParallelEnv(ParallelEnv):
         render_view: str = "map",
         lane_relative: LaneRelativeParams | None = None,
         reward: RewardFunction | None = None,
+        policy_resolver: PolicyResolver | None = None,
     ):
         """``observation`` overrides the scenario's agent interfaces: one interface (or the basic
         ``ObservationConfig``) for every agent, or a mapping from agent id to one. ``render_view``
         is ``map`` (the whole map), ``ego`` (centred on the first live agent) or ``ego:<agent
         id>``. ``lane_relative`` sets how lane-relative commands drive (agents with
         ``controller: lane_relative``); ``reward`` replaces the scenario's default reward with a
-        task reward (``smarts.env.task_rewards``)."""
+        task reward (``smarts.env.task_rewards``); ``policy_resolver`` turns the social agents'
+        ``policy`` locators into policies (``smarts.core.policies``; None: the installed default,
+        the zoo)."""
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.scenario = as_spec(scenario)
@@ -70,7 +74,7 @@ class DrivingParallelEnv(ParallelEnv):
         self.render_mode = render_mode
         self.render_view = render_view
         self._ego_renderer = None
-        self.social = SocialAgents(self.scenario, self.sim)
+        self.social = SocialAgents(self.scenario, self.sim, policy_resolver)
         self.possible_agents = [a for a, s in zip(self.sim.agent_ids, self.social.is_social) if not s]
         if not self.possible_agents:
             raise ValueError(f"{self.scenario.source}: every agent has a policy; at least one must learn")

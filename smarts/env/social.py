@@ -1,22 +1,24 @@
-"""Social agents: scenario agents driven by zoo policies instead of the learner.
+"""Social agents: scenario agents driven by policies (``policy: zoo:keep-lane``), not the learner.
 
 They live in the simulation like every agent (same missions, events, observation and action
 machinery); the env asks their policies for actions from the observations of the previous step
-and merges them with the learner's actions. Agents sharing a policy locator are batched.
+and merges them with the learner's actions. Agents sharing a policy locator are batched. Locators
+become policies through a resolver (``smarts.core.policies``): the env's own, or the installed
+default (the zoo), so the simulator never imports the policies it runs.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from smarts.core.policies import PolicyResolver, resolve_policy
 from smarts.core.simulation import Simulation
 from smarts.scenario import ScenarioSpec
 
 
 class SocialAgents:
-    def __init__(self, spec: ScenarioSpec, sim: Simulation):
-        from zoo import make_policy
-
+    def __init__(self, spec: ScenarioSpec, sim: Simulation, resolver: PolicyResolver | None = None):
+        """``resolver`` turns each agent's ``policy`` locator into a policy (None: the default)."""
         self.is_social = np.zeros(len(sim.agent_ids), dtype=bool)
         by_locator: dict[str, list[int]] = {}
         for i, agent in enumerate(spec.agents):
@@ -27,7 +29,7 @@ class SocialAgents:
         self.groups = []
         for locator, members in by_locator.items():
             try:
-                policy = make_policy(locator)
+                policy = resolve_policy(locator, resolver)
             except ValueError as err:
                 raise ValueError(f"{spec.source}: agents[{members[0]}].policy: {err}") from None
             if hasattr(policy, "dt"):

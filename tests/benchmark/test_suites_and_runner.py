@@ -222,3 +222,30 @@ def test_a_checkpoint_evaluates_like_train_ppo_does(tmp_path):
     mine = doc["agents"][str(frozen)]
     assert mine["action_space"] == "continuous" and mine["scores"]["overall"]["S_bench"] >= 0.0
     assert doc["references"] == list(REFERENCE_AGENTS)
+
+
+@pytest.mark.parametrize(
+    "section, value, problem",
+    [
+        ("interface", {"lidar": {"rays": 0}}, "recorded observation interface is invalid (interface.lidar.rays: expected"),
+        ("interface", ["lead"], "recorded observation interface is invalid (interface: expected a mapping"),
+        ("lane_relative", {"max_jerk": -1.0}, "recorded lane-relative settings are invalid (LaneRelativeParams.max_jerk:"),
+        ("lane_relative", {"max_jerks": 1.0}, "recorded lane-relative settings are invalid (lane_relative.max_jerks: unknown"),
+    ],
+)
+def test_a_checkpoint_with_bad_recorded_settings_is_refused_before_any_episode(tmp_path, capsys, section, value, problem):
+    """The policy carries its settings as plain data; the runner validates them (and `train eval`
+    exits with the file and the field) before any episode runs."""
+    import torch
+
+    blob = torch.load(Path(zoo.registry.ZOO_DIR) / "checkpoints" / "platoon-c.pt", weights_only=True)
+    blob[section] = value
+    bad = tmp_path / "bad.pt"
+    torch.save(blob, bad)
+    with pytest.raises(AgentSetupError) as raised:
+        plan_jobs([str(bad)], load_suite(TINY), 1, tmp_path / "a")
+    assert str(raised.value).startswith(f"agent {str(bad)!r}: {problem}")
+    out = tmp_path / "eval"
+    assert main(["eval", "--agent", str(bad), "--suite", TINY, "--episodes", "1", "--workers", "1", "--quiet",
+                 "--out", str(out)]) == 2  # fmt: skip
+    assert f"{bad}': {problem}" in capsys.readouterr().err and not out.exists()

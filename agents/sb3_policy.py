@@ -1,0 +1,58 @@
+"""Stable-Baselines3 PPO policies exported by ``python -m train ppo --lib sb3``, as batched policies.
+
+The export holds the SB3 policy's tensors, the observation keys and shapes it reads, its action box
+and the settings it was trained with (action space, controller, observation interface and
+lane-relative settings as plain data). Loading needs Stable-Baselines3 (which built the network)
+but nothing of the trainer, so evaluation and the benchmark load it like the torchrl checkpoints.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+
+from agents.checkpoint import CheckpointError
+
+SB3_FORMAT = "smarts-sb3-ppo-v1"
+REQUIRED = ("policy", "observation", "action", "net_arch")
+
+
+class SB3Policy:
+    """An exported SB3 PPO policy acting deterministically on batched observations.
+
+    ``interface`` and ``lane_relative`` are the recorded plain data (None: the scenario's
+    interface, the default settings); the simulator validates them when it builds the env."""
+
+    def __init__(self, blob: dict[str, Any], source: str = "<checkpoint>"):
+        import gymnasium as gym
+        from stable_baselines3.common.policies import MultiInputActorCriticPolicy
+
+        missing = [key for key in REQUIRED if key not in blob]
+        if missing:
+            raise CheckpointError(f"{source}: SB3 export lacks {', '.join(map(repr, missing))}")
+        self.source = source
+        obs_space = gym.spaces.Dict(
+            {k: gym.spaces.Box(-np.inf, np.inf, tuple(shape), np.float32) for k, shape in blob["observation"].items()}
+        )
+        self.low = np.asarray(blob["action"]["low"], dtype=np.float32)
+        self.high = np.asarray(blob["action"]["high"], dtype=np.float32)
+        self.action_space = blob["action"]["space"]
+        self.controller = blob["action"].get("controller", "direct")
+        self.interface = blob.get("interface")
+        self.lane_relative = blob.get("lane_relative")
+        act_space = gym.spaces.Box(-1.0, 1.0, self.low.shape, np.float32)
+        self.policy = MultiInputActorCriticPolicy(obs_space, act_space, lambda _: 0.0, net_arch=blob["net_arch"])
+        try:
+            self.policy.load_state_dict(blob["policy"])
+        except RuntimeError as err:
+            raise CheckpointError(f"{source}: weights do not match the recorded observation and layers ({err})") from None
+        self.policy.eval()
+        self.keys = list(blob["observation"])
+
+    @torch.no_grad()
+    def act(self, obs: dict) -> np.ndarray:
+        action, _ = self.policy.predict({k: np.asarray(obs[k]) for k in self.keys}, deterministic=True)
+        action = np.clip(action, -1.0, 1.0)
+        return self.low + (action + 1.0) * 0.5 * (self.high - self.low)
