@@ -1,12 +1,11 @@
 """``python -m smarts.diagnostic.sensor_figure --out docs/figure1.png``: the README's sensor figure.
 
-An agent driven by a route follower (the keep-lane rule: IDM speed along the route's waypoints,
-stopping for red lights) approaches the signalised two-lane intersection to turn left, among
-built-in traffic. The picture is its ego-centred RGB view (road, lane centre lines, route, the ego
-in red, other vehicles by role, occluded ground shaded, ground beyond the sensor range darker) with
-its lidar rays and hits drawn on top, and below it the five raster layers of its observation.
-Everything is made by the project's own sensors from a seeded run, so the figure regenerates
-identically.
+An agent driven by the keep-lane policy (``--policy`` picks another) approaches the signalised
+two-lane intersection to turn left, among built-in traffic. The picture is its ego-centred RGB view
+(road, lane centre lines, route, the ego in red, other vehicles by role, occluded ground shaded,
+ground beyond the sensor range darker) with its lidar rays and hits drawn on top, and below it the
+five raster layers of its observation. Everything is made by the project's own sensors from a seeded
+run, so the figure regenerates identically.
 """
 
 from __future__ import annotations
@@ -16,9 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
+from smarts.core.policies import PolicyResolver, resolve_policy
+
 SCENARIO = "intersection_4way_signal_traffic"
 SEED = 8
 STEPS = 200
+POLICY = "zoo:keep-lane"
 VIEW_SIZE, VIEW_RESOLUTION = 512, 0.125  # 64 m across
 LAYER_TILE = 96
 GAP = 8
@@ -26,46 +28,11 @@ RAY_START = 2.5  # metres: rays are drawn from just outside the ego's box
 LIDAR_COLOURS = {1: (255, 230, 60), 2: (255, 255, 255), 3: (255, 120, 220)}  # vehicle, pedestrian, edge
 
 
-class RouteFollower:
-    """The figure's driver, batched like a zoo policy: the Intelligent Driver Model's speed behind
-    the nearest vehicle ahead in the lane (or a red or yellow light's stop line), moved along the
-    route's waypoints in RelativeTargetPose. The same rule as ``zoo:keep-lane``, kept here so the
-    docs tooling needs no agent package."""
-
-    def __init__(self, dt: float = 0.1, accel: float = 2.0, decel: float = 3.0, time_gap: float = 1.5,
-                 min_gap: float = 3.0):  # fmt: skip
-        self.dt, self.accel, self.decel, self.time_gap, self.min_gap = dt, accel, decel, time_gap, min_gap
-
-    def act(self, obs: dict[str, np.ndarray]) -> np.ndarray:
-        ego, nb, mask = obs["ego"], obs["neighbours"], obs["neighbour_mask"]
-        speed = ego[:, 0].astype(np.float64)
-        desired = np.maximum(ego[:, 9], 0.1)  # the lane's speed limit
-        half_lane = 0.5 * np.maximum(ego[:, 8:9], 2.5)
-        ahead = (mask > 0) & (nb[..., 0] > 0) & (np.abs(nb[..., 1]) < half_lane)
-        gap = np.where(ahead, nb[..., 0] - 0.5 * (nb[..., 6] + ego[:, 10:11]), np.inf).min(axis=1)
-        if "signal" in obs:
-            sig = obs["signal"]
-            stop = (sig[:, 0] + sig[:, 1] > 0) & (sig[:, 3] > 0.5 * ego[:, 10])
-            gap = np.where(stop, np.minimum(gap, sig[:, 3] - 0.5 * ego[:, 10]), gap)
-        closing = np.where(ahead, -nb[..., 4], 0.0)
-        first = np.where(ahead, nb[..., 0], np.inf).argmin(axis=1)
-        closing = closing[np.arange(len(speed)), first]
-        s_star = self.min_gap + speed * self.time_gap + speed * closing / (2 * np.sqrt(self.accel * self.decel))
-        free = 1.0 - (speed / desired) ** 4
-        interaction = np.where(np.isfinite(gap), (np.maximum(s_star, 0.0) / np.maximum(gap, 0.1)) ** 2, 0.0)
-        a = np.clip(self.accel * (free - interaction), -9.0, self.accel)
-        step = np.maximum(speed + a * self.dt, 0.0) * self.dt
-        wp = obs["waypoints"][:, 0, 1]  # two waypoints ahead, (x, y, heading) in the ego frame
-        length = np.maximum(np.hypot(wp[:, 0], wp[:, 1]), 1e-6)
-        scale = np.where(obs["waypoint_mask"][:, 0, 1] > 0, step / length, 0.0)
-        action = np.stack([wp[:, 0] * scale, wp[:, 1] * scale, wp[:, 2] * scale], axis=1)
-        action[scale == 0.0, 0] = step[scale == 0.0]  # no route left: straight ahead
-        return action.astype(np.float32)
-
-
-def make_figure(steps: int = STEPS, seed: int = SEED, policy=None) -> np.ndarray:
-    """The figure as uint8 [H, W, 3]. ``policy``: a batched policy (``act({key: [n, ...]}) ->
-    [n, 3]`` RelativeTargetPose actions, as the zoo's); None: ``RouteFollower``."""
+def make_figure(
+    steps: int = STEPS, seed: int = SEED, policy: str = POLICY, policy_resolver: PolicyResolver | None = None
+) -> np.ndarray:
+    """The figure as uint8 [H, W, 3]. ``policy`` is a locator that ``policy_resolver`` (None: the
+    installed default, ``smarts.core.policies``) turns into a RelativeTargetPose policy."""
     from PIL import Image, ImageDraw
 
     from smarts.env import DrivingParallelEnv
@@ -84,14 +51,25 @@ def make_figure(steps: int = STEPS, seed: int = SEED, policy=None) -> np.ndarray
         lidar=LidarInterface(rays=96, range=28.0),
     )
     env = DrivingParallelEnv(SCENARIO, observation=interface)
-    if policy is None:
-        policy = RouteFollower(dt=env.scenario.step_length)
+    wanted = env.scenario.agents[0].action_space
+    try:
+        driver = resolve_policy(policy, policy_resolver)
+        acts = (getattr(driver, "action_space", None), getattr(driver, "controller", None) or "direct")
+        if acts != (wanted, "direct"):
+            raise ValueError(f"it acts in {acts[0]!r} with the {acts[1]!r} controller; the figure needs {wanted!r}, direct")
+    except ValueError as error:
+        env.close()
+        raise ValueError(f"policy {policy!r}: {error}") from error
+    if hasattr(driver, "dt"):
+        driver.dt = env.scenario.step_length
+    if hasattr(driver, "seed"):
+        driver.seed(seed)
     obs, _ = env.reset(seed=seed)
     for _ in range(steps):
         if not env.agents:
             break
         batch = {k: np.stack([obs[a][k] for a in env.agents]) for k in obs[env.agents[0]]}
-        actions = dict(zip(env.agents, policy.act(batch)))
+        actions = dict(zip(env.agents, driver.act(batch)))
         obs, *_ = env.step(actions)
     if not env.agents:
         raise RuntimeError(f"{SCENARIO}: the agent left before step {steps}; pick fewer steps")
@@ -141,12 +119,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("docs/figure1.png"), help="PNG file to write")
     parser.add_argument("--steps", type=int, default=STEPS, help=f"steps driven before the picture (default {STEPS})")
     parser.add_argument("--seed", type=int, default=SEED, help=f"episode seed (default {SEED})")
+    parser.add_argument("--policy", default=POLICY, help=f"locator of the RelativeTargetPose policy that drives (default {POLICY})")
     args = parser.parse_args(argv)
     if args.steps < 0:
         parser.error("--steps must be >= 0")
     from PIL import Image
 
-    figure = make_figure(args.steps, args.seed)
+    try:
+        figure = make_figure(args.steps, args.seed, args.policy)
+    except ValueError as error:
+        parser.error(f"--{error}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     Image.fromarray(figure).save(args.out, optimize=True)
     print(f"wrote {args.out} ({figure.shape[1]}x{figure.shape[0]})")

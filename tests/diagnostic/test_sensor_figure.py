@@ -2,10 +2,12 @@
 
 import json
 
+import pytest
 from PIL import Image
 
 from smarts.diagnostic.__main__ import main as diagnostic_main
 from smarts.diagnostic.sensor_figure import main as figure_main
+from smarts.diagnostic.sensor_figure import make_figure
 
 
 def test_figure_command_writes_a_small_png(tmp_path, capsys):
@@ -17,6 +19,24 @@ def test_figure_command_writes_a_small_png(tmp_path, capsys):
     pixels = image.convert("RGB").getcolors(1 << 16)
     assert len(pixels) > 8  # a picture, not a blank canvas
     assert "wrote" in capsys.readouterr().out
+
+
+def test_figure_policy_comes_from_the_resolver_and_must_fit_the_agent(capsys):
+    asked = []
+
+    class Throttle:
+        action_space = "continuous"
+
+    def resolver(locator):
+        asked.append(locator)
+        return Throttle()
+
+    with pytest.raises(ValueError, match="policy 'mine:throttle': it acts in 'continuous'"):
+        make_figure(steps=1, policy="mine:throttle", policy_resolver=resolver)
+    assert asked == ["mine:throttle"]
+    with pytest.raises(SystemExit):
+        figure_main(["--policy", "zoo:no-such-agent", "--steps", "1"])
+    assert "--policy 'zoo:no-such-agent'" in capsys.readouterr().err
 
 
 def test_diagnostic_times_the_all_sensors_case(tmp_path, capsys):
