@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from smarts.scenario.traffic import FlowSpec, TrafficSpec, VehicleTypeSpec
+from smarts.core.spec.traffic import FlowSpec, TrafficSpec, VehicleTypeSpec
 
 BENCH_MAP = "highway_6lane_ramp"
 BENCH_FLOWS = 5

@@ -16,9 +16,9 @@ import time
 
 import numpy as np
 
+from smarts.core.spec.traffic import FlowSpec, TrafficSpec
 from smarts.core.vehicle_table import Role
 from smarts.scenario import ScenarioSpec
-from smarts.scenario.traffic import FlowSpec, TrafficSpec
 from smarts.traffic.sumo_provider import SumoTrafficProvider
 
 BENCHMARK_MAP = "highway_6lane_ramp"
