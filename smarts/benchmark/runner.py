@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from smarts.benchmark.suites import Suite, SuiteScenario, load_suite
+from smarts.core.errors import AgentSetupError
 from smarts.core.policies import Policy, PolicyResolver, resolve_policy
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.scenario.spec import ACTION_SPACES, CONTROLLERS, LANE_RELATIVE_SPACES, ScenarioSpec
@@ -45,12 +46,6 @@ from smarts.sensors.interface import AgentInterface, interface_from_dict, interf
 
 REFERENCE_AGENTS = ("zoo:keep-lane", "zoo:random", "zoo:stand-still")
 """Benchmarked with every suite run unless asked not to: a simple baseline, chance, doing nothing."""
-
-
-class AgentSetupError(ValueError):
-    """A policy cannot be benchmarked as declared (unknown action space or controller, one the
-    suite does not host, an invalid interface or lane-relative settings); the message names the
-    agent (and the file it came from)."""
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """The simulator's error types, in one module every layer can import.
 
 Each is a ``ValueError`` (bad input the caller can fix: a map, a scenario field, an action, an
-interface, a metrics config or log) or a ``RuntimeError`` (a tool or worker that failed), so an
+interface, an episode log, a policy set up for the benchmark) or a ``RuntimeError`` (a tool or worker that failed), so an
 ``except ValueError`` written for one keeps catching it. Messages name the file or field at fault
 and what was expected.
 
@@ -18,10 +18,10 @@ _MAP_ERRORS = ("MapError", "NoRouteError")
 
 __all__ = [
     "ActionError",
+    "AgentSetupError",
     "InterfaceError",
     "LogError",
     "MapError",
-    "MetricParamsError",
     "NetconvertError",
     "NoRouteError",
     "ScenarioError",
@@ -57,8 +57,10 @@ class InterfaceError(ValueError):
         super().__init__(f"{path}: {problem}")
 
 
-class MetricParamsError(ValueError):
-    """A metrics config file or value is invalid; the message names the file and key."""
+class AgentSetupError(ValueError):
+    """A policy cannot be benchmarked as declared (unknown action space or controller, one the
+    suite does not host, an invalid interface or lane-relative settings); the message names the
+    agent (and the file it came from)."""
 
 
 class LogError(ValueError):

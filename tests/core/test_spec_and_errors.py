@@ -23,6 +23,7 @@ def test_old_import_paths_give_the_same_classes():
     import smarts.scenario.spec as scenario_spec
     import smarts.scenario.traffic as scenario_traffic
     import smarts.sensors as sensors
+    from smarts.benchmark.runner import AgentSetupError
     from smarts.dynamics.action_spaces import ActionError
     from smarts.env.sb3_vec_env import WorkerError
     from smarts.sensors.interface import InterfaceError
@@ -33,6 +34,7 @@ def test_old_import_paths_give_the_same_classes():
     assert InterfaceError is sensors.InterfaceError is errors.InterfaceError
     assert metrics.LogError is errors.LogError
     assert WorkerError is errors.WorkerError
+    assert AgentSetupError is errors.AgentSetupError
     assert maps.MapError is errors.MapError and maps.NoRouteError is errors.NoRouteError
     for name in scenario_traffic.__all__:
         assert getattr(scenario_traffic, name) is getattr(core_spec, name)
@@ -44,9 +46,8 @@ def test_old_import_paths_give_the_same_classes():
 
 
 def test_error_types_keep_their_bases():
-    for name in ("ScenarioError", "ActionError", "InterfaceError", "LogError", "MetricParamsError", "MapError"):
-        if hasattr(errors, name):
-            assert issubclass(getattr(errors, name), ValueError), name
+    for name in ("ScenarioError", "ActionError", "AgentSetupError", "InterfaceError", "LogError", "MapError"):
+        assert issubclass(getattr(errors, name), ValueError), name
     assert issubclass(errors.NoRouteError, errors.MapError)
     assert issubclass(errors.NetconvertError, RuntimeError)
     assert issubclass(errors.WorkerError, RuntimeError)
