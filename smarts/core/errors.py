@@ -1,9 +1,9 @@
 """The simulator's error types, in one module every layer can import.
 
 Each is a ``ValueError`` (bad input the caller can fix: a map, a scenario field, an action, an
-interface, an episode log, a policy set up for the benchmark) or a ``RuntimeError`` (a tool or worker that failed), so an
-``except ValueError`` written for one keeps catching it. Messages name the file or field at fault
-and what was expected.
+interface, an episode log, a policy locator or its benchmark setup) or a ``RuntimeError`` (a tool
+or worker that failed), so an ``except ValueError`` written for one keeps catching it. Messages
+name the file or field at fault and what was expected.
 
 ``MapError`` and ``NoRouteError`` are defined with the maps (``smarts.maps.errors``, the one
 package below core) and are the same classes here. They load on first use, so importing this
@@ -23,6 +23,7 @@ __all__ = [
     "LogError",
     "MapError",
     "NetconvertError",
+    "NoResolverError",
     "NoRouteError",
     "ScenarioError",
     "WorkerError",
@@ -61,6 +62,10 @@ class AgentSetupError(ValueError):
     """A policy cannot be benchmarked as declared (unknown action space or controller, one the
     suite does not host, an invalid interface or lane-relative settings); the message names the
     agent (and the file it came from)."""
+
+
+class NoResolverError(ValueError):
+    """No installed resolver handles a locator (the package that registers it is not installed)."""
 
 
 class LogError(ValueError):

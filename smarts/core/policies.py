@@ -23,6 +23,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from smarts.core.errors import NoResolverError
+
 ENTRY_POINT_GROUP = "smarts.policies"
 FALLBACK = "default"
 """The entry point that resolves locators without a registered scheme."""
@@ -44,10 +46,6 @@ class Policy(Protocol):
 
 class PolicyResolver(Protocol):
     def __call__(self, locator: str, /, **kwargs: Any) -> Policy: ...
-
-
-class NoResolverError(ValueError):
-    """No installed resolver handles a locator (the package that registers it is not installed)."""
 
 
 @functools.cache

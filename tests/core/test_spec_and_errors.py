@@ -24,6 +24,7 @@ def test_old_import_paths_give_the_same_classes():
     import smarts.scenario.traffic as scenario_traffic
     import smarts.sensors as sensors
     from smarts.benchmark.runner import AgentSetupError
+    from smarts.core.policies import NoResolverError
     from smarts.dynamics.action_spaces import ActionError
     from smarts.env.sb3_vec_env import WorkerError
     from smarts.sensors.interface import InterfaceError
@@ -35,6 +36,7 @@ def test_old_import_paths_give_the_same_classes():
     assert metrics.LogError is errors.LogError
     assert WorkerError is errors.WorkerError
     assert AgentSetupError is errors.AgentSetupError
+    assert NoResolverError is errors.NoResolverError
     assert maps.MapError is errors.MapError and maps.NoRouteError is errors.NoRouteError
     for name in scenario_traffic.__all__:
         assert getattr(scenario_traffic, name) is getattr(core_spec, name)
@@ -46,7 +48,8 @@ def test_old_import_paths_give_the_same_classes():
 
 
 def test_error_types_keep_their_bases():
-    for name in ("ScenarioError", "ActionError", "AgentSetupError", "InterfaceError", "LogError", "MapError"):
+    value_errors = ("ScenarioError", "ActionError", "AgentSetupError", "NoResolverError", "InterfaceError")
+    for name in (*value_errors, "LogError", "MapError"):
         assert issubclass(getattr(errors, name), ValueError), name
     assert issubclass(errors.NoRouteError, errors.MapError)
     assert issubclass(errors.NetconvertError, RuntimeError)
