@@ -48,7 +48,7 @@ def test_sb3_training_exports_a_checkpoint_the_benchmark_can_load(tmp_path):
     setup = policy_setup(policy, str(out / "final.pt"))  # the recorded interface, validated
     assert setup.interface is not None and setup.interface.lead
     from smarts.env import DrivingParallelEnv
-    from train.ppo import training_spec
+    from train.run import training_spec
 
     env = DrivingParallelEnv(training_spec("adaptive:a01_straight_free", "rtp", "lane_relative"),
                              observation=setup.interface, lane_relative=setup.lane_relative)  # fmt: skip
@@ -96,7 +96,7 @@ def test_resume_refuses_a_checkpoint_of_another_setup_before_touching_the_run(tm
 
 def test_training_config_takes_every_suite_scenario_and_the_task_reward():
     from train.config import load_config
-    from train.ppo import scenario_names
+    from train.run import scenario_names
 
     cfg = load_config("platoon")
     names = scenario_names(cfg.scenarios)

@@ -1,6 +1,7 @@
 """``python -m train <command>``: train PPO, evaluate checkpoints, run the benchmark.
 
     python -m train ppo --task platoon [--action-space rtp|continuous] [--total-steps N] [--envs E]
+    python -m train ppo --task platoon --lib sb3 --resume runs/train/platoon/last.pt
     python -m train eval --agent runs/train/platoon/final.pt --suite adaptive
     python -m train benchmark --agent zoo:keep-lane --agent zoo:random --suite collaborative
     add --ray-address auto|local|HOST:PORT to run episodes (benchmark, eval) or collectors (ppo) on Ray
@@ -44,14 +45,15 @@ def _ppo(args: argparse.Namespace) -> int:
     overrides.pop("task", None)
     cfg = load_config(args.task, args.config, overrides)
     out = Path(args.out_dir) if args.out_dir else Path(cfg.out)
+    resume = Path(args.resume) if args.resume else None
     if cfg.lib == "sb3":
         from train.sb3_ppo import train_sb3
 
-        final = train_sb3(cfg, out, progress=not args.quiet)
+        final = train_sb3(cfg, out, progress=not args.quiet, resume=resume)
     else:
         from train.ppo import train
 
-        final = train(cfg, out, progress=not args.quiet, resume=Path(args.resume) if args.resume else None)
+        final = train(cfg, out, progress=not args.quiet, resume=resume)
     print(f"checkpoint: {final}\nTensorBoard: tensorboard --logdir {out / 'tensorboard'}")
     return 0
 
@@ -83,9 +85,12 @@ def build_parser() -> argparse.ArgumentParser:
     ppo = sub.add_parser("ppo", help="train a PPO driving policy (torchrl collectors, GAE, ClipPPOLoss)")
     ppo.add_argument("--task", default="platoon", help="platoon | drive (defaults in configs/train/<task>.yaml)")
     ppo.add_argument("--config", default=None, help="a training config YAML instead of the task's")
-    ppo.add_argument("--out-dir", default=None, help="output folder (default: the config's out)")
+    ppo.add_argument("--out-dir", default=None,
+                     help="run folder (default: the config's out); one that holds another run is refused")  # fmt: skip
     ppo.add_argument("--quiet", action="store_true", help="no progress bar")
-    ppo.add_argument("--resume", default=None, help="continue from a checkpoint (torchrl trainer)")
+    ppo.add_argument("--resume", default=None,
+                     help="continue a run from one of its .pt checkpoints (e.g. runs/train/platoon/last.pt), "
+                          "either library")  # fmt: skip
     for f in dataclasses.fields(TrainConfig):
         if f.name in ("task", "out"):
             continue

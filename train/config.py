@@ -83,6 +83,9 @@ class TrainConfig:
     eval_suite: str | None = None
     """The benchmark suite of the evaluations (a name or a YAML path); None: the task's own
     (``adaptive`` for platoon, ``collaborative`` for drive)."""
+    eval_workers: int = 2
+    """Processes that run each evaluation's episodes; 1 runs them in the training process (no
+    start-up cost, for small suites; not with SUMO traffic while training SUMO in this process)."""
     eval_seed: int = 3000
     """First seed of the evaluations; training episodes use seeds from 100_000 up, and the suites'
     own benchmark seeds (1000, 2000) are neither, so selection and the final score are held out."""
@@ -119,7 +122,7 @@ class TrainConfig:
             raise fail("reward", str(err)) from None
         if self.lib not in LIBS:
             raise fail("lib", f"expected one of {', '.join(LIBS)}, got {self.lib!r}")
-        for name in ("total_steps", "envs", "workers", "frames_per_batch", "minibatch_size", "epochs"):
+        for name in ("total_steps", "envs", "workers", "frames_per_batch", "minibatch_size", "epochs", "eval_workers"):
             if getattr(self, name) < 1:
                 raise fail(name, f"expected a positive integer, got {getattr(self, name)}")
         if self.workers > self.envs:

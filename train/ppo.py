@@ -16,6 +16,9 @@ The whole algorithm in one readable loop:
    after every batch (``last.pt``) and on Ctrl-C. Every ``eval_every`` steps the task's benchmark
    suite runs on the checkpoint with held-out seeds; ``best.pt`` is the one with the highest
    S_bench. At the end ``final.pt`` is evaluated the same way.
+
+The run folder, checkpoint set, TensorBoard tags, evaluations and summary are the ones every
+trainer shares (``train.run``; ``train.sb3_ppo`` trains SB3's PPO under the same contract).
 """
 
 from __future__ import annotations
@@ -23,7 +26,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
-import json
 import time
 from pathlib import Path
 
@@ -52,54 +54,7 @@ from agents.ppo import (
 from smarts.env.task_rewards import reward_factory
 from smarts.env.torchrl_env import SmartsBatchedEnv
 from train.config import ACTION_SPACES, TrainConfig
-
-TASK_SUITE = {"platoon": "adaptive", "drive": "collaborative"}
-TRAIN_SEED_BASE = 100_000
-"""Training episodes use seeds from here up (``seed * 1_000_003`` further on); evaluation uses
-``eval_seed`` and the benchmark suites their own seeds, so neither is seen in training."""
-
-
-def scenario_names(names: list[str]) -> list[str]:
-    """``suite:*`` expanded to every scenario of that suite, in suite order."""
-    from smarts.benchmark.suites import load_suite
-
-    out = []
-    for name in names:
-        if name.endswith(":*"):
-            out += [f"{name[:-2]}:{s.name}" for s in load_suite(name[:-2]).scenarios]
-        else:
-            out.append(name)
-    return out
-
-
-def training_spec(name, action_space: str, controller: str = "direct"):
-    """A scenario spec from ``suite:scenario``, a library name or a spec, every learning agent on
-    ``action_space`` driven through ``controller`` (social agents keep their own)."""
-    from smarts.benchmark.suites import load_suite
-    from smarts.scenario import load_scenario
-
-    if not isinstance(name, str):
-        spec = name
-    elif ":" in name:
-        suite_name, scenario = name.split(":", 1)
-        suite = load_suite(suite_name)
-        matches = [s.spec for s in suite.scenarios if s.name == scenario]
-        if not matches:
-            raise ValueError(f"suite {suite_name!r} has no scenario {scenario!r}")
-        spec = matches[0]
-    else:
-        spec = load_scenario(name)
-    agents = [
-        a if a.is_social else dataclasses.replace(a, action_space=ACTION_SPACES[action_space], controller=controller)
-        for a in spec.agents
-    ]
-    return dataclasses.replace(spec, agents=agents)
-
-
-def training_specs(cfg: TrainConfig) -> list:
-    names = scenario_names(cfg.scenarios)
-    return [training_spec(names[i % len(names)], cfg.action_space, cfg.controller) for i in range(cfg.envs)]
-
+from train.run import TRAIN_SEED_BASE, Run, check_resume, interface_dict, lane_relative_dict, training_specs
 
 def env_options(cfg: TrainConfig) -> dict:
     """What every training env copy gets besides its scenario: observation and task reward."""
@@ -274,30 +229,6 @@ def action_bound_loss(actor_net: Actor, normalizer: ObsNormalizer, layout: Obser
     return ((mean - high).clamp(min=0.0) ** 2 + (low - mean).clamp(min=0.0) ** 2).sum(-1).mean()
 
 
-def check_resume(resume: Path, cfg: TrainConfig) -> dict:
-    """The checkpoint to resume from, refused (before any env is built or file written) when it
-    was trained for another action space, controller, observation or network."""
-    blob = load_checkpoint(resume)
-    mine = {
-        "action space": ACTION_SPACES[cfg.action_space],
-        "controller": cfg.controller,
-        "observation interface": _interface_dict(cfg),
-        "hidden layers": list(cfg.hidden),
-        "lane-relative settings": _lane_relative_dict(cfg),
-    }
-    theirs = {
-        "action space": blob["action"]["space"],
-        "controller": blob["action"].get("controller", "direct"),
-        "observation interface": blob.get("interface"),
-        "hidden layers": list(blob["hidden"]),
-        "lane-relative settings": blob.get("lane_relative"),
-    }
-    for what, value in mine.items():
-        if theirs[what] != value:
-            raise CheckpointError(f"{resume}: trained with {what} {theirs[what]!r}; this run uses {value!r}")
-    return blob
-
-
 def check_init_from(path: Path, cfg: TrainConfig) -> dict:
     """A checkpoint to start a new run from (fine-tuning, e.g. the platoon policy on the pybullet
     car): it must read the same observation and give commands of the same meaning (controller,
@@ -305,7 +236,7 @@ def check_init_from(path: Path, cfg: TrainConfig) -> dict:
     blob = load_checkpoint(path)
     mine = {
         "controller": cfg.controller,
-        "observation interface": _interface_dict(cfg),
+        "observation interface": interface_dict(cfg),
         "hidden layers": list(cfg.hidden),
     }
     theirs = {
@@ -323,24 +254,11 @@ def check_init_from(path: Path, cfg: TrainConfig) -> dict:
     return blob
 
 
-def _lane_relative_dict(cfg: TrainConfig) -> dict | None:
-    if cfg.controller != "lane_relative":
-        return None
-    return dataclasses.asdict(cfg.lane_relative_params())
-
-
-def _interface_dict(cfg: TrainConfig) -> dict:
-    from smarts.sensors.interface import interface_to_dict
-
-    return interface_to_dict(cfg.observation_interface())
-
-
 def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | None = None) -> Path:
     """Train, log and checkpoint under ``out``; returns the final checkpoint path. ``resume``
     continues from a checkpoint (networks, observation statistics, optimiser, step count) up to
     ``total_steps``."""
     from rich.progress import Progress
-    from torch.utils.tensorboard import SummaryWriter
 
     torch.set_num_threads(cfg.torch_threads)
     blob = check_resume(resume, cfg) if resume is not None else None
@@ -349,8 +267,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
         raise ValueError("resume continues a run and init_from starts a new one from trained networks: give one")
     torch.manual_seed(cfg.seed)
     np.random.seed(cfg.seed)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "config.json").write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
+    run = Run(cfg, out, resume)  # the run folder (never another run's), config.json, TensorBoard
     scale_out = contextlib.ExitStack()
     if cfg.ray_address:
         from smarts.ray_session import ray_session
@@ -379,8 +296,6 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
         except (RuntimeError, ValueError) as err:
             raise CheckpointError(f"{resume}: does not match this training setup ({err})") from None
         step = int(blob["step"])
-        if step >= cfg.total_steps:
-            raise ValueError(f"{resume}: already at {step} steps; raise --total-steps to continue")
     if start_from is not None:  # networks and statistics only: a fresh optimiser from step 0
         try:
             actor_net.load_state_dict(start_from["actor"])
@@ -402,16 +317,13 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                               auto_register_policy_transforms=False)
     buffer = ReplayBuffer(storage=LazyTensorStorage(frames, ndim=1), sampler=SamplerWithoutReplacement(),
                           batch_size=cfg.minibatch_size)  # fmt: skip
-    writer = SummaryWriter(log_dir=str(out / "tensorboard"))
     metrics, start, first_step = {}, time.perf_counter(), step
-    best_score = -np.inf
-    checkpoint = out / "last.pt"
 
     def save(path: Path) -> Path:
         return save_checkpoint(path, actor=actor_net, critic=critic_net, normalizer=normalizer, layout=layout,
                                low=low, high=high, action_space=ACTION_SPACES[cfg.action_space],
-                               controller=cfg.controller, interface=_interface_dict(cfg),
-                               lane_relative=_lane_relative_dict(cfg),
+                               controller=cfg.controller, interface=interface_dict(cfg),
+                               lane_relative=lane_relative_dict(cfg),
                                config=dataclasses.asdict(cfg), step=step, metrics=metrics,
                                optimizer_state=optimizer.state_dict())  # fmt: skip
 
@@ -479,77 +391,15 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                 if len(returns):
                     metrics["episode/return"] = float(returns.mean())
                     metrics["episode/length"] = float(lengths.float().mean())
-                for name, value in metrics.items():
-                    if np.isfinite(value):
-                        writer.add_scalar(name, value, step)
-                save(checkpoint)
-                periodic = cfg.eval_every and step // cfg.eval_every > (step - data.numel()) // cfg.eval_every
-                if periodic and cfg.eval_episodes and step < cfg.total_steps:  # (the last one is the final)
-                    scores = evaluate_into(checkpoint, cfg, out / "evals" / f"step_{step}", writer, step)
-                    if scores.get("S_bench", -np.inf) > best_score:  # selection on held-out seeds
-                        best_score = scores["S_bench"]
-                        metrics.update({f"eval/{k}": v for k, v in scores.items()})
-                        save(out / "best.pt")
-                        writer.add_scalar("eval/best_S_bench", best_score, step)
+                # TensorBoard, last.pt and, every eval_every steps, a held-out evaluation (best.pt).
+                run.end_of_batch(step, data.numel(), metrics, save)
                 bar.update(task, completed=min(step, cfg.total_steps),
                            description=f"PPO {cfg.task} return {metrics.get('episode/return', float('nan')):.1f}")  # fmt: skip
     except KeyboardInterrupt:
-        save(out / "interrupted.pt")
-        print(f"interrupted at {step} steps; checkpoint saved to {out / 'interrupted.pt'}")
+        run.interrupted(step, save)  # interrupted.pt
         raise
     finally:
         collector.shutdown()
         env.close(raise_if_closed=False)  # the collector may have closed it already
-        writer.flush()
         scale_out.close()
-    final = save(out / "final.pt")
-    if cfg.eval_episodes > 0:
-        scores = evaluate_into(final, cfg, out / "eval", writer, step)
-        metrics.update({f"eval/{k}": v for k, v in scores.items()})
-        if scores.get("S_bench", -np.inf) > best_score:
-            best_score = scores["S_bench"]
-            save(out / "best.pt")
-    writer.close()
-    print(json.dumps({"steps": step, "wall_s": round(time.perf_counter() - start, 1), **metrics}, indent=2))
-    return final
-
-
-def evaluate_into(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int) -> dict:
-    """Run the task's benchmark suite on ``checkpoint`` with the held-out ``eval_seed`` (report
-    under ``out``) and log its metrics and a few evaluation trajectory figures to TensorBoard.
-    Training's random state is left as it was, so evaluating does not change the run."""
-    # Loading the agents builds networks, which draws from torch's global generator: without
-    # this, every evaluation would change the rest of the training run.
-    numpy_state = np.random.get_state()
-    with torch.random.fork_rng(devices=[]):
-        try:
-            return _evaluate(checkpoint, cfg, out, writer, step)
-        finally:
-            np.random.set_state(numpy_state)
-
-
-def _evaluate(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int) -> dict:
-    from PIL import Image
-
-    from smarts.benchmark.report import write_report
-    from smarts.benchmark.runner import plan_jobs, run_jobs
-    from smarts.benchmark.suites import load_suite
-
-    suite = load_suite(cfg.eval_suite or TASK_SUITE[cfg.task])
-    frozen = out / "policy.pt"  # the runner reads the file later: keep this step's weights
-    out.mkdir(parents=True, exist_ok=True)
-    frozen.write_bytes(Path(checkpoint).read_bytes())
-    # The reference agents' episodes (same seeds every time) are run once per training run and reused.
-    cache = out.parent / "reference_cache" if out.parent.name == "evals" else out.parent / "evals" / "reference_cache"
-    jobs = plan_jobs([str(frozen)], suite, cfg.eval_episodes, out, seed=cfg.eval_seed, reference_cache=cache)
-    results = run_jobs(jobs, workers=2, progress=False)
-    write_report(out, suite, [str(frozen)], results)
-    scores = json.loads((out / "results.json").read_text())["agents"][str(frozen)]["scores"]
-    overall = scores["overall"] if scores else {}
-    for name, value in overall.items():
-        if isinstance(value, (int, float)):
-            writer.add_scalar(f"eval/{name}", value, step)
-    for figure in sorted((out / "plots").glob("trajectories_*.png"))[:3]:
-        image = np.asarray(Image.open(figure).convert("RGB"))
-        writer.add_image(f"eval_trajectories/{figure.stem[len('trajectories_'):]}", image, step, dataformats="HWC")
-    return {k: v for k, v in overall.items() if isinstance(v, (int, float))}
+    return run.finish(step, metrics, save, start)  # final.pt, its evaluation, the summary

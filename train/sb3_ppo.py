@@ -1,23 +1,28 @@
 """PPO with Stable-Baselines3 on the simulator (``--lib sb3``): the same tasks, configs and outputs.
 
 Every agent of every env copy is one VecEnv slot (``SmartsVecEnv``, parameter sharing); SB3's PPO
-trains on it unchanged with ``MultiInputPolicy``. The policy is exported in the project's
-checkpoint format (tensors + metadata, ``weights_only`` loadable) so evaluation and the benchmark
-load it like the torchrl checkpoints (``agents.sb3_policy.SB3Policy``).
+trains on it unchanged with ``MultiInputPolicy``; the loop below is SB3's own ``learn()`` written
+out, so that every rollout ends like a torchrl batch: the run's TensorBoard tags, ``last.pt`` and
+the periodic held-out evaluations that pick ``best.pt`` (``train.run``, shared by both trainers).
+The policy is exported in the project's checkpoint format (tensors + metadata, ``weights_only``
+loadable) so evaluation and the benchmark load it like the torchrl checkpoints
+(``agents.sb3_policy.SB3Policy``), with SB3's own save beside each (``final_sb3.zip``, ...) for
+``stable_baselines3.PPO.load``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from agents.checkpoint import CheckpointError
 from agents.sb3_policy import SB3_FORMAT
 from train.config import ACTION_SPACES, TrainConfig
+from train.run import TRAIN_SEED_BASE, Run, check_resume, interface_dict, lane_relative_dict, training_specs
 
 
 def make_vec_env(cfg: TrainConfig):
@@ -26,7 +31,6 @@ def make_vec_env(cfg: TrainConfig):
     from smarts.env import DrivingParallelEnv
     from smarts.env.sb3_vec_env import SmartsVecEnv
     from smarts.env.task_rewards import TaskReward
-    from train.ppo import TRAIN_SEED_BASE, training_specs
 
     interface, weights, lane = cfg.observation_interface(), cfg.reward_weights(), cfg.lane_relative_params()
     factories = [
@@ -37,17 +41,26 @@ def make_vec_env(cfg: TrainConfig):
                         processes=cfg.workers > 1)  # fmt: skip
 
 
-def train_sb3(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
+def train_sb3(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | None = None) -> Path:
+    """Train, log and checkpoint under ``out`` as ``train.ppo.train`` does; returns the final
+    checkpoint path. ``resume`` continues from an SB3 run's checkpoint (policy, optimiser, step
+    count) up to ``total_steps``."""
+    from rich.progress import Progress
     from stable_baselines3 import PPO
 
     torch.set_num_threads(cfg.torch_threads)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "config.json").write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
+    if cfg.init_from:
+        raise ValueError("init_from: starting from another run's networks is for lib torchrl; SB3 runs resume only")
+    if cfg.ray_address:
+        raise ValueError("ray_address: Ray collectors are for lib torchrl; SB3 runs step their envs in processes")
+    blob = check_resume(resume, cfg) if resume is not None else None
+    run = Run(cfg, out, resume)  # the run folder (never another run's), config.json, TensorBoard
     vec = make_vec_env(cfg)
+    n_steps = max(cfg.frames_per_batch // vec.num_envs, 8)  # per slot, per rollout
     model = PPO(
         "MultiInputPolicy",
         vec,
-        n_steps=max(cfg.frames_per_batch // vec.num_envs, 8),
+        n_steps=n_steps,
         batch_size=cfg.minibatch_size,
         n_epochs=cfg.epochs,
         learning_rate=cfg.lr,
@@ -58,43 +71,85 @@ def train_sb3(cfg: TrainConfig, out: Path, progress: bool = True) -> Path:
         vf_coef=cfg.critic_coeff,
         max_grad_norm=cfg.max_grad_norm,
         policy_kwargs={"net_arch": list(cfg.hidden)},
-        tensorboard_log=str(out / "tensorboard"),
+        stats_window_size=n_steps * vec.num_envs,  # room for every episode that ends in a rollout
         seed=cfg.seed,
         device="cpu",
         verbose=0,
     )
-    start = time.perf_counter()
+    if blob is not None:
+        try:
+            model.policy.load_state_dict(blob["policy"])
+            if "optimizer" in blob:
+                model.policy.optimizer.load_state_dict(blob["optimizer"])
+        except (RuntimeError, ValueError, KeyError) as err:
+            vec.close()
+            raise CheckpointError(f"{resume}: does not match this training setup ({err})") from None
+        model.num_timesteps = int(blob["step"])
+        model._n_updates = int(blob.get("n_updates", 0))
+    # SB3's own learn() loop, written out so that every rollout ends with the run's logging,
+    # checkpoints and evaluations (its logger has no outputs: the values are read back from it).
+    total, callback = model._setup_learn(cfg.total_steps - model.num_timesteps, reset_num_timesteps=False)
+    callback.on_training_start(locals(), globals())
+    step = model.num_timesteps
+    metrics, start, first_step = {}, time.perf_counter(), step
+
+    def save(path: Path) -> Path:
+        return save_sb3(path, model, vec, cfg, metrics)
+
     try:
-        model.learn(total_timesteps=cfg.total_steps, progress_bar=progress, tb_log_name="sb3")
+        with Progress(disable=not progress) as bar:
+            task = bar.add_task(f"PPO (SB3) {cfg.task}", total=cfg.total_steps)
+            while model.num_timesteps < total:
+                model.ep_info_buffer.clear()  # this rollout's episodes
+                model.collect_rollouts(vec, callback, model.rollout_buffer, n_rollout_steps=model.n_steps)
+                update_start = time.perf_counter()
+                model._update_current_progress_remaining(model.num_timesteps, total)
+                model.train()  # GAE was computed at the rollout's end; epochs of clipped-PPO minibatches
+                step = model.num_timesteps
+                logged = dict(model.logger.name_to_value)
+                model.logger.dump(step)  # (clears it)
+                metrics = {
+                    "loss/objective": logged["train/policy_gradient_loss"],
+                    "loss/critic": cfg.critic_coeff * logged["train/value_loss"],
+                    "loss/entropy": cfg.entropy_coeff * logged["train/entropy_loss"],
+                    "policy/entropy": -logged["train/entropy_loss"],
+                    "policy/kl_approx": logged["train/approx_kl"],
+                    "policy/action_std": logged.get("train/std", float("nan")),
+                    "policy/clip_fraction": logged["train/clip_fraction"],
+                    "train/explained_variance": logged["train/explained_variance"],
+                    "train/lr": logged["train/learning_rate"],
+                    "perf/env_steps_per_s": (step - first_step) / (time.perf_counter() - start),
+                    "perf/update_s": time.perf_counter() - update_start,
+                }
+                episodes = list(model.ep_info_buffer)
+                if episodes:
+                    metrics["episode/return"] = float(np.mean([e["r"] for e in episodes]))
+                    metrics["episode/length"] = float(np.mean([e["l"] for e in episodes]))
+                metrics = {k: float(v) for k, v in metrics.items()}
+                # TensorBoard, last.pt and, every eval_every steps, a held-out evaluation (best.pt).
+                run.end_of_batch(step, model.n_steps * vec.num_envs, metrics, save)
+                bar.update(task, completed=min(step, cfg.total_steps),
+                           description=f"PPO (SB3) {cfg.task} return {metrics.get('episode/return', float('nan')):.1f}")  # fmt: skip
     except KeyboardInterrupt:
-        save_sb3(out / "interrupted.pt", model, vec, cfg)
+        run.interrupted(step, save)  # interrupted.pt and interrupted_sb3.zip
         raise
     finally:
         vec.close()
-    final = save_sb3(out / "final.pt", model, vec, cfg)
-    if cfg.eval_episodes > 0:
-        from torch.utils.tensorboard import SummaryWriter
-
-        from train.ppo import evaluate_into
-
-        with SummaryWriter(log_dir=str(out / "tensorboard" / "eval")) as writer:
-            evaluate_into(final, cfg, out / "eval", writer, int(model.num_timesteps))
-    rewards = [e["r"] for e in model.ep_info_buffer]
-    summary = {"steps": int(model.num_timesteps), "wall_s": round(time.perf_counter() - start, 1),
-               "env_steps_per_s": model.num_timesteps / (time.perf_counter() - start),
-               "episode/return": float(np.mean(rewards)) if rewards else float("nan")}  # fmt: skip
-    print(json.dumps(summary, indent=2))
-    return final
+    return run.finish(step, metrics, save, start)  # final.pt, its evaluation, the summary
 
 
-def save_sb3(path: Path, model, vec, cfg: TrainConfig) -> Path:
+def save_sb3(path: Path, model, vec, cfg: TrainConfig, metrics: dict | None = None) -> Path:
+    """The policy exported in the project's format (``weights_only`` loadable; what evaluation, the
+    benchmark and ``--resume`` read) at ``path``, and SB3's own save beside it as ``<name>_sb3.zip``
+    (for ``stable_baselines3.PPO.load``)."""
     spaces = vec.observation_space.spaces
     blob = {
         "format": SB3_FORMAT,
         "policy": model.policy.state_dict(),
+        "optimizer": model.policy.optimizer.state_dict(),
         "observation": {k: list(s.shape) for k, s in spaces.items()},
-        "interface": _interface_dict(cfg),
-        "lane_relative": dataclasses.asdict(cfg.lane_relative_params()) if cfg.controller == "lane_relative" else None,
+        "interface": interface_dict(cfg),
+        "lane_relative": lane_relative_dict(cfg),
         "action": {
             "space": ACTION_SPACES[cfg.action_space],
             "controller": cfg.controller,
@@ -104,14 +159,16 @@ def save_sb3(path: Path, model, vec, cfg: TrainConfig) -> Path:
         "net_arch": list(cfg.hidden),
         "config": dataclasses.asdict(cfg),
         "step": int(model.num_timesteps),
+        "n_updates": int(model._n_updates),
+        "metrics": {k: float(v) for k, v in (metrics or {}).items()},
     }
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
     torch.save(blob, tmp)
     tmp.replace(path)
+    zipped = path.with_name(f"{path.stem}_sb3.zip")
+    tmp = zipped.with_name(zipped.name + ".tmp")
+    model.save(tmp)
+    tmp.replace(zipped)
     return path
-
-
-def _interface_dict(cfg: TrainConfig) -> dict:
-    from smarts.sensors.interface import interface_to_dict
-
-    return interface_to_dict(cfg.observation_interface())

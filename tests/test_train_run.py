@@ -1,0 +1,167 @@
+"""One run contract for both training libraries (``train.run``): the same files, TensorBoard tags,
+printed summary, resume and refusals for ``--lib torchrl`` and ``--lib sb3``; tiny budgets."""
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from train.__main__ import main
+from train.run import SCALAR_TAGS, SUMMARY_KEYS, Run
+
+TINY_SUITE = Path(__file__).parent / "benchmark" / "tiny_suite.yaml"
+SMALL = ["--frames-per-batch", "64", "--minibatch-size", "32", "--epochs", "1", "--envs", "2", "--quiet"]
+
+
+def printed_summary(text: str) -> dict:
+    return json.loads(re.search(r"^\{$.*?^\}$", text, re.S | re.M).group(0))
+
+
+def run_files(out: Path) -> set[str]:
+    """The run folder's files, event file names and SB3's own zips left out."""
+    names = set()
+    for path in out.rglob("*"):
+        if path.is_file() and not path.name.endswith("_sb3.zip"):
+            rel = path.relative_to(out).as_posix()
+            names.add(re.sub(r"events\.out\.tfevents\..*", "events", rel))
+    return names
+
+
+def scalar_tags(out: Path) -> set[str]:
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    acc = EventAccumulator(str(out / "tensorboard"), size_guidance={"scalars": 0})
+    acc.Reload()
+    return set(acc.Tags()["scalars"])
+
+
+def test_both_libraries_write_the_same_run(tmp_path, capsys):
+    from stable_baselines3 import PPO
+
+    from agents.loader import load_policy_file
+
+    # Episodes of 40 steps (so both end some in every batch); evaluations in this process (no start-up).
+    base = ["ppo", "--task", "drive", "--scenarios", f"{TINY_SUITE}:t1_left", "--total-steps", "256",
+            "--frames-per-batch", "128", "--minibatch-size", "64", "--epochs", "1", "--envs", "2", "--eval-every", "128",
+            "--eval-episodes", "1", "--eval-suite", str(TINY_SUITE), "--eval-workers", "1", "--quiet"]  # fmt: skip
+    files, tags, summaries = {}, {}, {}
+    for lib in ("torchrl", "sb3"):
+        out = tmp_path / lib
+        assert main([*base, "--lib", lib, "--out-dir", str(out)]) == 0
+        summaries[lib] = printed_summary(capsys.readouterr().out)
+        files[lib], tags[lib] = run_files(out), scalar_tags(out)
+        for name in ("last", "best", "final"):
+            blob = torch.load(out / f"{name}.pt", weights_only=True)
+            assert blob["config"]["lib"] == lib and "optimizer" in blob and "loss/objective" in blob["metrics"]
+        assert "eval/S_bench" in torch.load(out / "best.pt", weights_only=True)["metrics"]  # its held-out score
+    assert files["torchrl"] == files["sb3"]
+    for name in ("config.json", "last.pt", "best.pt", "final.pt", "tensorboard/events", "evals/step_128/report.md",
+                 "evals/step_128/policy.pt", "eval/report.md", "eval/results.json"):  # fmt: skip
+        assert name in files["sb3"], name
+    for lib in ("torchrl", "sb3"):
+        assert set(SCALAR_TAGS) | {"eval/S_bench", "eval/PR"} <= tags[lib], lib
+        assert list(summaries[lib])[: len(SUMMARY_KEYS)] == list(SUMMARY_KEYS)
+        assert summaries[lib]["steps"] == 256 and summaries[lib]["eval/S_bench"] is not None
+    assert set(summaries["torchrl"]) == set(summaries["sb3"])
+    # SB3's own save beside every checkpoint, readable by SB3 itself, acting as the exported policy.
+    out = tmp_path / "sb3"
+    assert {p.name for p in out.glob("*_sb3.zip")} == {"last_sb3.zip", "best_sb3.zip", "final_sb3.zip"}
+    model = PPO.load(out / "final_sb3.zip", device="cpu")
+    assert model.num_timesteps == 256
+    exported = load_policy_file(out / "final.pt")
+    obs = {k: np.random.default_rng(0).normal(size=(3, *space.shape)).astype(np.float32)
+           for k, space in model.observation_space.spaces.items()}  # fmt: skip
+    action, _ = model.predict(obs, deterministic=True)
+    np.testing.assert_allclose(exported.act(obs), np.clip(action, -1, 1), atol=1e-4)  # commands: [-1, 1]
+
+
+@pytest.mark.parametrize("lib", ["torchrl", "sb3"])
+def test_resume_continues_from_the_saved_step_and_the_folder_is_otherwise_never_reused(tmp_path, capsys, lib):
+    out = tmp_path / "run"
+    base = ["ppo", "--task", "platoon", "--lib", lib, "--scenarios", "adaptive:a01_straight_free", *SMALL,
+            "--eval-episodes", "0", "--out-dir", str(out)]  # fmt: skip
+    assert main([*base, "--total-steps", "128"]) == 0
+    first = torch.load(out / "final.pt", weights_only=True)
+    before = (out / "final.pt").read_bytes()
+    # A second run into the same folder is refused before anything is written.
+    assert main([*base, "--total-steps", "128"]) == 2
+    assert "already holds a training run" in capsys.readouterr().err
+    assert (out / "final.pt").read_bytes() == before
+    # --resume of its own checkpoint continues it: networks, optimiser and step count.
+    assert main([*base, "--total-steps", "256", "--resume", str(out / "last.pt")]) == 0
+    second = torch.load(out / "final.pt", weights_only=True)
+    assert (first["step"], second["step"]) == (128, 256)
+    assert float(second["optimizer"]["state"][0]["step"]) > float(first["optimizer"]["state"][0]["step"])
+    weights = "actor" if lib == "torchrl" else "policy"
+    name = next(iter(first[weights]))
+    assert not torch.equal(first[weights][name], second[weights][name])
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    acc = EventAccumulator(str(out / "tensorboard"), size_guidance={"scalars": 0})
+    acc.Reload()
+    assert [e.step for e in acc.Scalars("loss/objective")] == [64, 128, 192, 256]
+    if lib == "sb3":
+        from stable_baselines3 import PPO
+
+        assert PPO.load(out / "final_sb3.zip", device="cpu").num_timesteps == 256
+    # Already at the budget: refused, nothing built.
+    assert main([*base, "--total-steps", "256", "--resume", str(out / "final.pt")]) == 2
+    assert "already at 256 steps" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "trained, resumed, flags, what",
+    [
+        ("sb3", "torchrl", [], "library 'sb3'"),
+        ("torchrl", "sb3", [], "library 'torchrl'"),
+        ("sb3", "sb3", ["--hidden", "32,32"], "hidden layers"),
+        ("sb3", "sb3", ["--controller", "direct"], "controller"),
+    ],
+)
+def test_resume_refuses_another_library_or_setup_before_touching_the_run(tmp_path, capsys, trained, resumed, flags, what):
+    base = ["ppo", "--task", "platoon", "--scenarios", "adaptive:a01_straight_free", *SMALL, "--eval-episodes", "0"]
+    assert main([*base, "--lib", trained, "--total-steps", "64", "--out-dir", str(tmp_path / "first")]) == 0
+    second = tmp_path / "second"
+    args = [*base, "--lib", resumed, "--total-steps", "128", "--out-dir", str(second),
+            "--resume", str(tmp_path / "first" / "final.pt"), *flags]  # fmt: skip
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert f"trained with {what}" in err and "final.pt" in err
+    assert not second.exists()
+
+
+@pytest.mark.parametrize("lib", ["torchrl", "sb3"])
+def test_ctrl_c_saves_interrupted_checkpoint(tmp_path, monkeypatch, lib):
+    end_of_batch = Run.end_of_batch
+
+    def interrupt_after_the_first_batch(self, step, *args):
+        end_of_batch(self, step, *args)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Run, "end_of_batch", interrupt_after_the_first_batch)
+    out = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        main(["ppo", "--task", "platoon", "--lib", lib, "--scenarios", "adaptive:a01_straight_free", *SMALL,
+              "--total-steps", "256", "--eval-episodes", "0", "--out-dir", str(out)])  # fmt: skip
+    blob = torch.load(out / "interrupted.pt", weights_only=True)
+    assert blob["step"] == 64 and "optimizer" in blob
+    assert not (out / "final.pt").exists()
+    assert (out / "interrupted_sb3.zip").is_file() == (lib == "sb3")
+
+
+def test_evaluations_in_the_training_process_do_not_change_an_sb3_run(tmp_path):
+    base = ["ppo", "--lib", "sb3", "--task", "drive", "--scenarios", f"{TINY_SUITE}:t1_left", "--total-steps", "384",
+            "--frames-per-batch", "128", "--minibatch-size", "64", "--epochs", "1", "--envs", "1",
+            "--eval-suite", str(TINY_SUITE), "--quiet"]  # fmt: skip
+    assert main([*base, "--eval-every", "128", "--eval-episodes", "1", "--eval-workers", "1",
+                 "--out-dir", str(tmp_path / "a")]) == 0  # fmt: skip
+    assert main([*base, "--eval-episodes", "0", "--out-dir", str(tmp_path / "b")]) == 0
+    with_eval = torch.load(tmp_path / "a" / "final.pt", weights_only=True)
+    without = torch.load(tmp_path / "b" / "final.pt", weights_only=True)
+    assert with_eval["step"] == without["step"] == 384
+    assert (tmp_path / "a" / "evals" / "step_256" / "report.md").is_file()
+    for name, tensor in without["policy"].items():
+        assert torch.equal(with_eval["policy"][name], tensor), name

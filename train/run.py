@@ -1,0 +1,292 @@
+"""What every training run is, whichever library trains it (``train.ppo``: TorchRL, ``train.sb3_ppo``: SB3).
+
+A run owns its folder ``out``::
+
+    config.json        the run's settings
+    tensorboard/       one event stream: SCALAR_TAGS after every batch, eval/* and eval_trajectories/*
+                       at every evaluation, eval/best_S_bench when a periodic evaluation is the best
+    last.pt            after every batch (collection + update)
+    best.pt            the evaluated checkpoint with the highest S_bench on held-out seeds
+    final.pt           at the end, then evaluated into eval/
+    interrupted.pt     on Ctrl-C
+    evals/step_N/      the report of the evaluation every ``eval_every`` steps
+    eval/              the report of the final evaluation
+
+SB3 runs also write ``<name>_sb3.zip`` beside every ``<name>.pt``: SB3's own save, which
+``stable_baselines3.PPO.load`` reads (the ``.pt`` files are what the benchmark and ``--resume``
+read, with ``torch.load(..., weights_only=True)``).
+
+A folder that holds a run is never written over: only ``--resume`` of one of its own checkpoints
+continues in it. A checkpoint to resume from is checked against the run's settings (library, action
+space, controller, observation, network, lane-relative settings, step) before anything is built or
+written. At the end the trainer prints a JSON summary with the keys SUMMARY_KEYS (null where a
+value is not known, e.g. no episode ended in the last batch), then the final evaluation's eval/*.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+
+from agents.checkpoint import CheckpointError, checkpoint_format, read_checkpoint
+from agents.ppo import CHECKPOINT_FORMAT, check_checkpoint
+from agents.sb3_policy import SB3_FORMAT
+from train.config import ACTION_SPACES, TrainConfig
+
+SCALAR_TAGS = (
+    "episode/return",  # mean return (in the reward's own units) of the episodes that ended in the batch
+    "episode/length",
+    "loss/objective",  # the clipped surrogate
+    "loss/critic",  # weighted by critic_coeff
+    "loss/entropy",  # -entropy_coeff * entropy
+    "policy/entropy",
+    "policy/kl_approx",
+    "policy/action_std",  # relative to half the action range
+    "train/lr",
+    "perf/env_steps_per_s",  # agent steps per second since the start, evaluations included
+    "perf/update_s",  # seconds of the batch's PPO update
+)
+"""The TensorBoard scalars both trainers log after every batch (each may log more of its own)."""
+SUMMARY_KEYS = ("steps", "wall_s", *SCALAR_TAGS)
+CHECKPOINTS = ("last", "best", "final", "interrupted")
+LIBRARY_OF_FORMAT = {CHECKPOINT_FORMAT: "torchrl", SB3_FORMAT: "sb3"}
+TASK_SUITE = {"platoon": "adaptive", "drive": "collaborative"}
+TRAIN_SEED_BASE = 100_000
+"""Training episodes use seeds from here up (``seed * 1_000_003`` further on); evaluation uses
+``eval_seed`` and the benchmark suites their own seeds, so neither is seen in training."""
+
+Save = Callable[[Path], Path]
+"""A trainer's ``save(path) -> path``: its checkpoint of the current step and metrics."""
+
+
+# ------------------------------------------------------------------ what a run trains on
+def scenario_names(names: list[str]) -> list[str]:
+    """``suite:*`` expanded to every scenario of that suite, in suite order."""
+    from smarts.benchmark.suites import load_suite
+
+    out = []
+    for name in names:
+        if name.endswith(":*"):
+            out += [f"{name[:-2]}:{s.name}" for s in load_suite(name[:-2]).scenarios]
+        else:
+            out.append(name)
+    return out
+
+
+def training_spec(name, action_space: str, controller: str = "direct"):
+    """A scenario spec from ``suite:scenario``, a library name or a spec, every learning agent on
+    ``action_space`` driven through ``controller`` (social agents keep their own)."""
+    from smarts.benchmark.suites import load_suite
+    from smarts.scenario import load_scenario
+
+    if not isinstance(name, str):
+        spec = name
+    elif ":" in name:
+        suite_name, scenario = name.split(":", 1)
+        suite = load_suite(suite_name)
+        matches = [s.spec for s in suite.scenarios if s.name == scenario]
+        if not matches:
+            raise ValueError(f"suite {suite_name!r} has no scenario {scenario!r}")
+        spec = matches[0]
+    else:
+        spec = load_scenario(name)
+    agents = [
+        a if a.is_social else dataclasses.replace(a, action_space=ACTION_SPACES[action_space], controller=controller)
+        for a in spec.agents
+    ]
+    return dataclasses.replace(spec, agents=agents)
+
+
+def training_specs(cfg: TrainConfig) -> list:
+    """The ``envs`` scenario copies, cycling through the task's scenarios."""
+    names = scenario_names(cfg.scenarios)
+    return [training_spec(names[i % len(names)], cfg.action_space, cfg.controller) for i in range(cfg.envs)]
+
+
+def interface_dict(cfg: TrainConfig) -> dict:
+    """The observation interface as the plain data checkpoints record."""
+    from smarts.sensors.interface import interface_to_dict
+
+    return interface_to_dict(cfg.observation_interface())
+
+
+def lane_relative_dict(cfg: TrainConfig) -> dict | None:
+    """The lane-relative settings as checkpoints record them (None for direct actions)."""
+    if cfg.controller != "lane_relative":
+        return None
+    return dataclasses.asdict(cfg.lane_relative_params())
+
+
+# ------------------------------------------------------------------ resuming
+def checkpoint_setup(blob: dict) -> dict:
+    """What a checkpoint was trained with, in the terms ``check_resume`` compares."""
+    library = LIBRARY_OF_FORMAT[checkpoint_format(blob)]
+    return {
+        "action space": blob["action"]["space"],
+        "controller": blob["action"].get("controller", "direct"),
+        "observation interface": blob.get("interface"),
+        "hidden layers": list(blob["net_arch"] if library == "sb3" else blob["hidden"]),
+        "lane-relative settings": blob.get("lane_relative"),
+    }
+
+
+def config_setup(cfg: TrainConfig) -> dict:
+    return {
+        "action space": ACTION_SPACES[cfg.action_space],
+        "controller": cfg.controller,
+        "observation interface": interface_dict(cfg),
+        "hidden layers": list(cfg.hidden),
+        "lane-relative settings": lane_relative_dict(cfg),
+    }
+
+
+def check_resume(path: Path, cfg: TrainConfig) -> dict:
+    """The checkpoint to resume from, refused (before any env is built or file written) when it was
+    written by the other library or trained for another action space, controller, observation,
+    network or lane-relative settings, or when it already has ``total_steps``."""
+    path = Path(path)
+    blob = read_checkpoint(path)
+    library = LIBRARY_OF_FORMAT.get(checkpoint_format(blob))
+    if library is None:
+        found = checkpoint_format(blob) or type(blob).__name__
+        raise CheckpointError(f"{path}: expected a checkpoint of format {' or '.join(LIBRARY_OF_FORMAT)}, found {found!r}")
+    if library != cfg.lib:
+        raise CheckpointError(f"{path}: trained with library {library!r}; this run uses {cfg.lib!r}")
+    if library == "torchrl":
+        check_checkpoint(blob, path)
+    else:
+        missing = [k for k in ("policy", "observation", "action", "net_arch", "step") if k not in blob]
+        if missing:
+            raise CheckpointError(f"{path}: SB3 export lacks {', '.join(map(repr, missing))}")
+    theirs = checkpoint_setup(blob)
+    for what, value in config_setup(cfg).items():
+        if theirs[what] != value:
+            raise CheckpointError(f"{path}: trained with {what} {theirs[what]!r}; this run uses {value!r}")
+    if int(blob["step"]) >= cfg.total_steps:
+        raise ValueError(f"{path}: already at {int(blob['step'])} steps; raise --total-steps to continue")
+    return blob
+
+
+# ------------------------------------------------------------------ the run
+class Run:
+    """A run's folder, TensorBoard writer, checkpoints and held-out evaluations, for either trainer.
+
+    The trainer calls ``end_of_batch`` after every update, ``interrupted`` on Ctrl-C and ``finish``
+    at the end, each with its own ``save(path)``."""
+
+    def __init__(self, cfg: TrainConfig, out: Path, resume: Path | None = None):
+        from torch.utils.tensorboard import SummaryWriter
+
+        out = Path(out)
+        held = [n for n in ("config.json", *(f"{c}.pt" for c in CHECKPOINTS)) if (out / n).exists()]
+        continuing = resume is not None and Path(resume).resolve().parent == out.resolve()
+        if held and not continuing:
+            raise ValueError(f"{out} already holds a training run ({', '.join(held)}): give another --out-dir, "
+                             f"or continue it with --resume {out / 'last.pt'}")  # fmt: skip
+        self.cfg, self.out = cfg, out
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "config.json").write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
+        self.writer = SummaryWriter(log_dir=str(out / "tensorboard"))
+        self.best_score = -np.inf
+        if continuing and (out / "best.pt").is_file():  # a resumed run keeps its selection
+            recorded = read_checkpoint(out / "best.pt").get("metrics", {})
+            self.best_score = recorded.get("eval/S_bench", -np.inf)
+
+    def log(self, metrics: dict, step: int) -> None:
+        for name, value in metrics.items():
+            if np.isfinite(value):
+                self.writer.add_scalar(name, value, step)
+
+    def end_of_batch(self, step: int, batch_steps: int, metrics: dict, save: Save) -> None:
+        """Log the batch's ``metrics``, write ``last.pt`` and, every ``eval_every`` steps (but for
+        the last one, which ``finish`` evaluates), evaluate it on held-out seeds, keeping the best."""
+        self.log(metrics, step)
+        last = save(self.out / "last.pt")
+        cfg = self.cfg
+        periodic = cfg.eval_every and step // cfg.eval_every > (step - batch_steps) // cfg.eval_every
+        if periodic and cfg.eval_episodes and step < cfg.total_steps:
+            scores = evaluate_into(last, cfg, self.out / "evals" / f"step_{step}", self.writer, step)
+            if scores.get("S_bench", -np.inf) > self.best_score:  # selection on held-out seeds
+                self.best_score = scores["S_bench"]
+                metrics.update({f"eval/{k}": v for k, v in scores.items()})
+                save(self.out / "best.pt")
+                self.writer.add_scalar("eval/best_S_bench", self.best_score, step)
+
+    def interrupted(self, step: int, save: Save) -> None:
+        path = save(self.out / "interrupted.pt")
+        self.writer.flush()
+        print(f"interrupted at {step} steps; checkpoint saved to {path}")
+
+    def finish(self, step: int, metrics: dict, save: Save, start: float) -> Path:
+        """``final.pt``, its evaluation (best.pt if it is the best), the summary; the final path."""
+        final = save(self.out / "final.pt")
+        if self.cfg.eval_episodes > 0:
+            scores = evaluate_into(final, self.cfg, self.out / "eval", self.writer, step)
+            metrics.update({f"eval/{k}": v for k, v in scores.items()})
+            if scores.get("S_bench", -np.inf) > self.best_score:
+                self.best_score = scores["S_bench"]
+                save(self.out / "best.pt")
+        self.writer.close()
+        print(json.dumps(summary(step, time.perf_counter() - start, metrics), indent=2))
+        return final
+
+
+def summary(step: int, wall_s: float, metrics: dict) -> dict:
+    """The printed end-of-run summary: SUMMARY_KEYS, then the final evaluation's eval/*."""
+
+    def plain(value):
+        return float(value) if value is not None and math.isfinite(value) else None
+
+    out = {"steps": int(step), "wall_s": round(wall_s, 1)}
+    out.update({k: plain(metrics.get(k)) for k in SCALAR_TAGS})
+    out.update({k: plain(v) for k, v in metrics.items() if k.startswith("eval/")})
+    return out
+
+
+# ------------------------------------------------------------------ held-out evaluation
+def evaluate_into(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int) -> dict:
+    """Run the task's benchmark suite on ``checkpoint`` with the held-out ``eval_seed`` (report
+    under ``out``) and log its metrics and a few evaluation trajectory figures to TensorBoard.
+    Training's random state is left as it was, so evaluating does not change the run."""
+    # Loading the agents builds networks, which draws from torch's global generator: without
+    # this, every evaluation would change the rest of the training run.
+    numpy_state = np.random.get_state()
+    with torch.random.fork_rng(devices=[]):
+        try:
+            return _evaluate(checkpoint, cfg, out, writer, step)
+        finally:
+            np.random.set_state(numpy_state)
+
+
+def _evaluate(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int) -> dict:
+    from PIL import Image
+
+    from smarts.benchmark.report import write_report
+    from smarts.benchmark.runner import plan_jobs, run_jobs
+    from smarts.benchmark.suites import load_suite
+
+    suite = load_suite(cfg.eval_suite or TASK_SUITE[cfg.task])
+    frozen = out / "policy.pt"  # the runner reads the file later: keep this step's weights
+    out.mkdir(parents=True, exist_ok=True)
+    frozen.write_bytes(Path(checkpoint).read_bytes())
+    # The reference agents' episodes (same seeds every time) are run once per training run and reused.
+    cache = out.parent / "reference_cache" if out.parent.name == "evals" else out.parent / "evals" / "reference_cache"
+    jobs = plan_jobs([str(frozen)], suite, cfg.eval_episodes, out, seed=cfg.eval_seed, reference_cache=cache)
+    results = run_jobs(jobs, workers=cfg.eval_workers, progress=False)
+    write_report(out, suite, [str(frozen)], results)
+    scores = json.loads((out / "results.json").read_text())["agents"][str(frozen)]["scores"]
+    overall = scores["overall"] if scores else {}
+    for name, value in overall.items():
+        if isinstance(value, (int, float)):
+            writer.add_scalar(f"eval/{name}", value, step)
+    for figure in sorted((out / "plots").glob("trajectories_*.png"))[:3]:
+        image = np.asarray(Image.open(figure).convert("RGB"))
+        writer.add_image(f"eval_trajectories/{figure.stem[len('trajectories_'):]}", image, step, dataformats="HWC")
+    return {k: v for k, v in overall.items() if isinstance(v, (int, float))}
