@@ -54,24 +54,25 @@ def test_partial_override_keeps_other_defaults(tmp_path):
 @pytest.mark.parametrize(
     "text, message",
     [
-        ("weights: {pr: 0.1, rcc: 1}", "unknown key weights.rcc"),
+        ("weights: {pr: 0.1, rcc: 1}", "weights.rcc: unknown field; did you mean 'rc'"),
         (
             "humanness: {jerk_long_max: 0}",
-            "humanness.jerk_long_max: expected a finite number > 0",
+            "humanness.jerk_long_max: input should be greater than 0",
         ),
         (
             "humanness: {penalty_period_s: -1}",
-            "penalty_period_s: expected a finite number >= 0",
+            "penalty_period_s: input should be greater than or equal to 0",
         ),
-        ("rules: {overspeed_scale: fast}", "rules.overspeed_scale: expected a number"),
+        ("rules: {overspeed_scale: fast}", "rules.overspeed_scale: input should be a valid number"),
+        ("weights: {pr: true}", "weights.pr: input should be a valid number"),
         (
             "weights: {pr: 0, rc: 0, humanness: 0, mte: 0}",
             "weights of a task must not all be zero",
         ),
-        ("failed_episodes: ignore", "failed_episodes: expected one of worst, exclude"),
-        ("following: 3", "following: expected a mapping"),
+        ("failed_episodes: ignore", "failed_episodes: input should be 'worst' or 'exclude'"),
+        ("following: 3", "following: input should be a valid dictionary"),
         ("- a list", "expected a mapping at the top level"),
-        ("weights: {pr: .nan}", "weights.pr: expected a finite number"),
+        ("weights: {pr: .nan}", "weights.pr: input should be a finite number"),
     ],
 )
 def test_invalid_configs_name_file_and_key(tmp_path, text, message):
@@ -83,7 +84,9 @@ def test_invalid_configs_name_file_and_key(tmp_path, text, message):
 
 
 def test_direct_construction_is_validated():
-    with pytest.raises(MetricParamsError, match="weights.rc"):
+    with pytest.raises(ValueError, match="rc"):  # pydantic's ValidationError is a ValueError
         MetricParams(weights=Weights(rc=-1.0))
+    with pytest.raises(ValueError, match="frozen"):
+        MetricParams().weights.pr = 2.0
     with pytest.raises(MetricParamsError, match="cannot read"):
         load_params("/nonexistent/metrics.yaml")
