@@ -17,9 +17,11 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Annotated, Any, Literal
 
-import yaml
+from pydantic import Field, field_validator
 
+from smarts.core.schema import Schema, load_yaml, validate
 from smarts.scenario import ScenarioError, ScenarioSpec
 from smarts.scenario.spec import ACTION_SPACES
 
@@ -60,6 +62,36 @@ def suite_names() -> list[str]:
     return sorted(p.stem for p in SUITES_DIR.glob("*.yaml") if p.stem != "metrics")
 
 
+class SuiteScenarioFile(Schema):
+    """One scenario entry of a suite file, as written (the inline spec is read by the scenario
+    reader afterwards)."""
+
+    name: Annotated[str, Field(min_length=1)]
+    difficulty: Literal["easy", "medium", "hard"]
+    time_limit: Annotated[float, Field(gt=0, allow_inf_nan=False, description="seconds")]
+    scenario: dict[str, Any] = Field(description="an inline scenario spec")
+    follow: dict[str, str] = Field(default_factory=dict, description="mission agent id -> lead vehicle id")
+
+
+class SuiteFile(Schema):
+    """A suite file's top level."""
+
+    name: str | None = None
+    task: Literal["collaborative", "adaptive"]
+    episodes: Annotated[int, Field(ge=1)] = 3
+    seed: Annotated[int, Field(ge=0)] = 0
+    scenarios: Annotated[list[SuiteScenarioFile], Field(min_length=1)]
+    vehicle_types: Any = Field(None, description="a place for YAML anchors the scenarios refer to")
+    action_spaces: Annotated[list[str], Field(min_length=1)] = list(DEFAULT_ACTION_SPACES)
+
+    @field_validator("action_spaces")
+    @classmethod
+    def _known_spaces(cls, spaces: list[str]) -> list[str]:
+        if any(sp not in ACTION_SPACES for sp in spaces) or len(set(spaces)) != len(spaces):
+            raise ValueError(f"expected distinct names from {', '.join(ACTION_SPACES)}")
+        return spaces
+
+
 def load_suite(name_or_path: str | Path) -> Suite:
     """A suite by name (``collaborative``, ``adaptive``) or from a YAML file."""
     path = Path(name_or_path)
@@ -67,77 +99,28 @@ def load_suite(name_or_path: str | Path) -> Suite:
         path = SUITES_DIR / f"{name_or_path}.yaml"
         if not path.is_file():
             raise ValueError(f"unknown benchmark suite {str(name_or_path)!r}; known: {', '.join(suite_names())}")
-    source = str(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as err:
-        raise ScenarioError(f"{source}: cannot read suite file: {err.strerror or err}") from None
-    except yaml.YAMLError as err:
-        raise ScenarioError(f"{source}: invalid YAML: {err}") from None
-    return _read_suite(data, source)
+    return _read_suite(load_yaml(path, "suite file", ScenarioError), str(path))
 
 
 def _read_suite(data, source: str) -> Suite:
     def fail(where: str, message: str) -> ScenarioError:
         return ScenarioError(f"{source}: {where}: {message}")
 
-    if not isinstance(data, dict):
-        raise ScenarioError(f"{source}: expected a mapping with name, task and scenarios")
-    allowed = {"name", "task", "episodes", "seed", "scenarios", "vehicle_types", "action_spaces"}
-    for key in data:
-        if key not in allowed:
-            raise fail(str(key), f"unknown field; allowed: {', '.join(sorted(allowed))}")
-    task = data.get("task")
-    if task not in TASKS:
-        raise fail("task", f"expected one of {', '.join(TASKS)}, got {task!r}")
-    episodes = data.get("episodes", 3)
-    if not isinstance(episodes, int) or isinstance(episodes, bool) or episodes < 1:
-        raise fail("episodes", f"expected a positive integer, got {episodes!r}")
-    seed = data.get("seed", 0)
-    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
-        raise fail("seed", f"expected a non-negative integer, got {seed!r}")
-    spaces = data.get("action_spaces", list(DEFAULT_ACTION_SPACES))
-    if (
-        not isinstance(spaces, list)
-        or not spaces
-        or any(sp not in ACTION_SPACES for sp in spaces)
-        or len(set(spaces)) != len(spaces)
-    ):
-        raise fail("action_spaces", f"expected a non-empty list of distinct names from {', '.join(ACTION_SPACES)}, got {spaces!r}")
-    items = data.get("scenarios")
-    if not isinstance(items, list) or not items:
-        raise fail("scenarios", "expected a non-empty list")
+    suite = validate(SuiteFile, data, source, ScenarioError)
+    task = suite.task
     scenarios: list[SuiteScenario] = []
-    for i, item in enumerate(items):
+    for i, item in enumerate(suite.scenarios):
         where = f"scenarios[{i}]"
-        if not isinstance(item, dict):
-            raise fail(where, "expected a mapping")
-        for key in item:
-            if key not in {"name", "difficulty", "time_limit", "scenario", "follow"}:
-                raise fail(f"{where}.{key}", "unknown field; allowed: name, difficulty, time_limit, scenario, follow")
-        name = item.get("name")
-        if not isinstance(name, str) or not name:
-            raise fail(f"{where}.name", f"expected a non-empty string, got {name!r}")
+        name, limit = item.name, item.time_limit
         if any(s.name == name for s in scenarios):
             raise fail(f"{where}.name", f"duplicate scenario name {name!r}")
-        difficulty = item.get("difficulty")
-        if difficulty not in DIFFICULTIES:
-            raise fail(f"{where}.difficulty", f"expected one of {', '.join(DIFFICULTIES)}, got {difficulty!r}")
-        limit = item.get("time_limit")
-        if isinstance(limit, bool) or not isinstance(limit, (int, float)) or not limit > 0:
-            raise fail(f"{where}.time_limit", f"expected a positive number of seconds, got {limit!r}")
-        body = item.get("scenario")
-        if not isinstance(body, dict):
-            raise fail(f"{where}.scenario", "expected an inline scenario spec (a mapping)")
-        body = dict(body)
+        body = dict(item.scenario)
         dt = body.get("step_length", 0.1)
         body.setdefault("name", name)
         body.setdefault("episode_steps", int(math.ceil(float(limit) / float(dt) - 1e-9)))
         body.setdefault("events", {"terminate_on": TERMINATE_ON[task]})
         spec = ScenarioSpec.from_dict(body, source=f"{source}: {where}.scenario", base_dir=Path(source).parent)
-        follow = item.get("follow") or {}
-        if not isinstance(follow, dict):
-            raise fail(f"{where}.follow", "expected a mapping of agent id -> lead vehicle id")
+        follow = item.follow
         trips = {t.id for t in (spec.traffic.trips if spec.traffic else [])}
         for agent_id, lead in follow.items():
             if agent_id not in spec.agent_ids:
@@ -153,5 +136,6 @@ def _read_suite(data, source: str) -> Suite:
                 for a in spec.agents
             ]  # fmt: skip
             spec = dataclasses.replace(spec, agents=agents)
-        scenarios.append(SuiteScenario(name, difficulty, float(limit), spec, dict(follow)))
-    return Suite(str(data.get("name", Path(source).stem)), task, episodes, seed, scenarios, source, tuple(spaces))
+        scenarios.append(SuiteScenario(name, item.difficulty, float(limit), spec, dict(follow)))
+    name = suite.name or Path(source).stem
+    return Suite(name, task, suite.episodes, suite.seed, scenarios, source, tuple(suite.action_spaces))

@@ -62,6 +62,13 @@ def test_bad_suite_files_name_the_field(tmp_path):
         load_suite(bad)
     with pytest.raises(ValueError, match="unknown benchmark suite 'nope'"):
         load_suite("nope")
+    bad.write_text("task: adaptive\nepisodes: 0\nscenarioz: []\n")
+    with pytest.raises(ScenarioError) as err:
+        load_suite(bad)
+    lines = str(err.value).splitlines()  # every problem, each with the file and the field
+    assert any(line.startswith(f"{bad}: episodes: input should be greater than or equal to 1") for line in lines)
+    assert any("scenarioz: unknown field; did you mean 'scenarios'?" in line for line in lines)
+    assert any(line.endswith("scenarios: required field missing") for line in lines)
 
 
 def _run(out, *extra):
