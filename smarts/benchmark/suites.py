@@ -21,8 +21,9 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, field_validator
 
+from smarts.core.errors import ScenarioError
 from smarts.core.schema import Schema, load_yaml, validate
-from smarts.scenario import ScenarioError, ScenarioSpec
+from smarts.scenario import ScenarioSpec
 from smarts.scenario.spec import ACTION_SPACES
 
 SUITES_DIR = Path(__file__).resolve().parents[2] / "configs" / "benchmark"

@@ -22,6 +22,7 @@ __all__ = [
     "InterfaceError",
     "LogError",
     "MapError",
+    "MetricParamsError",
     "NetconvertError",
     "NoResolverError",
     "NoRouteError",
@@ -66,6 +67,10 @@ class AgentSetupError(ValueError):
 
 class NoResolverError(ValueError):
     """No installed resolver handles a locator (the package that registers it is not installed)."""
+
+
+class MetricParamsError(ValueError):
+    """A metrics config file or value is invalid; the message names the file and key."""
 
 
 class LogError(ValueError):

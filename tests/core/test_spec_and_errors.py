@@ -34,6 +34,7 @@ def test_old_import_paths_give_the_same_classes():
     assert ActionError is dynamics.ActionError is errors.ActionError
     assert InterfaceError is sensors.InterfaceError is errors.InterfaceError
     assert metrics.LogError is errors.LogError
+    assert metrics.MetricParamsError is metrics.params.MetricParamsError is errors.MetricParamsError
     assert WorkerError is errors.WorkerError
     assert AgentSetupError is errors.AgentSetupError
     assert NoResolverError is errors.NoResolverError
@@ -49,7 +50,7 @@ def test_old_import_paths_give_the_same_classes():
 
 def test_error_types_keep_their_bases():
     value_errors = ("ScenarioError", "ActionError", "AgentSetupError", "NoResolverError", "InterfaceError")
-    for name in (*value_errors, "LogError", "MapError"):
+    for name in (*value_errors, "LogError", "MetricParamsError", "MapError"):
         assert issubclass(getattr(errors, name), ValueError), name
     assert issubclass(errors.NoRouteError, errors.MapError)
     assert issubclass(errors.NetconvertError, RuntimeError)

@@ -16,7 +16,6 @@ from smarts.benchmark.metrics.log import (
     TASKS,
     AgentTrace,
     EpisodeLog,
-    LogError,
     episode_filename,
     export_csv,
     export_jsonl,
@@ -30,7 +29,6 @@ from smarts.benchmark.metrics.params import (
     FollowingParams,
     HumannessParams,
     MetricParams,
-    MetricParamsError,
     RulesParams,
     Weights,
     load_params,
@@ -44,6 +42,7 @@ from smarts.benchmark.metrics.scores import (
     score_episode,
     score_suite,
 )
+from smarts.core.errors import LogError, MetricParamsError
 
 __all__ = [
     "ALL_COLUMNS",

@@ -6,9 +6,10 @@ import argparse
 import json
 import sys
 
-from smarts.benchmark.metrics.log import LogError, read_episodes
-from smarts.benchmark.metrics.params import MetricParamsError, load_params
+from smarts.benchmark.metrics.log import read_episodes
+from smarts.benchmark.metrics.params import load_params
 from smarts.benchmark.metrics.scores import score_suite
+from smarts.core.errors import LogError, MetricParamsError
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -15,6 +15,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, model_validator
 
+from smarts.core.errors import MetricParamsError
 from smarts.core.schema import Schema, load_yaml, validate
 
 DEFAULT_CONFIG_PATH = (
@@ -23,10 +24,6 @@ DEFAULT_CONFIG_PATH = (
 """The repository's metrics config; used by :func:`load_params` when it exists."""
 
 FAILED_EPISODE_POLICIES = ("worst", "exclude")
-
-
-class MetricParamsError(ValueError):
-    """A metrics config file or value is invalid; the message names the file and key."""
 
 
 Weight = Annotated[float, Field(ge=0, allow_inf_nan=False)]
