@@ -15,6 +15,7 @@ import gymnasium
 import numpy as np
 
 from smarts.core.errors import ActionError
+from smarts.core.spec.scenario import CONTROLLERS  # noqa: F401  (how actions reach the action space)
 from smarts.dynamics.limits import ReachLimits
 
 # Bounds of the world-frame target position, m: large enough for any map, small enough for float32.
@@ -36,8 +37,6 @@ ACTION_COMPONENTS: dict[ActionSpaceType, tuple[str, ...]] = {
 }
 
 
-CONTROLLERS = ("direct", "lane_relative")
-"""How an agent's actions reach its action space (see ``smarts.dynamics.lane_relative``)."""
 LANE_RELATIVE_COMPONENTS = ("speed", "lane_change")
 
 

@@ -27,7 +27,7 @@ BUILTIN_PREFIX = "builtin:"
 ACTION_SPACES = ("relative_target_pose", "target_pose", "continuous", "lane")
 CONTROLLERS = ("direct", "lane_relative")
 """How an agent's actions reach its action space: ``direct`` (the space's own actions) or
-``lane_relative`` (acceleration and lane-change commands turned into that space's actions by
+``lane_relative`` (target-speed and lane-change commands turned into that space's actions by
 ``smarts.dynamics.lane_relative``)."""
 LANE_RELATIVE_SPACES = ("relative_target_pose", "target_pose", "continuous")
 TERMINATION_EVENTS = (
