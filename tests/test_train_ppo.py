@@ -106,7 +106,7 @@ def test_training_config_takes_every_suite_scenario_and_the_task_reward():
     assert load_config("drive").reward_weights().task == "drive"
     from train.config import ConfigError
 
-    with pytest.raises(ConfigError, match="reward: unknown reward terms"):
+    with pytest.raises(ConfigError, match="--reward: reward.speed_bonus: unknown field; did you mean 'speeding'"):
         load_config("platoon", overrides={"reward": "{speed_bonus: 1}"})
 
 

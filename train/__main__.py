@@ -10,7 +10,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from pathlib import Path
 
@@ -41,10 +40,9 @@ def _benchmark(args: argparse.Namespace) -> int:
 def _ppo(args: argparse.Namespace) -> int:
     from train.config import TrainConfig, load_config
 
-    overrides = {f.name: getattr(args, f.name) for f in dataclasses.fields(TrainConfig) if getattr(args, f.name, None) is not None}
-    overrides.pop("task", None)
-    cfg = load_config(args.task, args.config, overrides)
-    out = Path(args.out_dir) if args.out_dir else Path(cfg.out)
+    overrides = {name: getattr(args, name) for name in TrainConfig.model_fields if name != "task"}
+    cfg = load_config(args.task, args.config, {k: v for k, v in overrides.items() if v is not None})
+    out = Path(cfg.out)
     resume = Path(args.resume) if args.resume else None
     if cfg.lib == "sb3":
         from train.sb3_ppo import train_sb3
@@ -58,7 +56,43 @@ def _ppo(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+PPO_EPILOG = """Every setting of the training config is an option; the defaults shown are the task's
+configs/train/<task>.yaml (or --config FILE), else the schema's. Values are YAML: --hidden 256,256
+or --hidden "[256, 256]", --reward "{follow: 2}", --interface "{lead: true}", --eval-suite null; a
+list starting with a minus sign goes as --init-log-std=-1.2,-0.7 or "[-1.2, -0.7]"."""
+
+
+def _ppo_options(ppo: argparse.ArgumentParser, argv: list[str] | None) -> None:
+    """``--field-name`` for every field of the training config, its help showing the field's type and
+    its default in the YAML that ``--task``/``--config`` in ``argv`` select."""
+    from smarts.core.schema import cli_options
+    from train.config import TrainConfig, flag, task_defaults
+
+    argv = [str(a) for a in (sys.argv[1:] if argv is None else argv)]
+    values, file = task_defaults(_given(argv, "--task") or "platoon", _given(argv, "--config"))
+    for name, default, text in cli_options(TrainConfig):
+        if name in values:
+            text = text.replace(f"default: {default!r})", f"default: {values[name]!r} in {file})")
+        if name == "task":  # it picks the YAML of the defaults (with --config, the task the file may omit)
+            text = f"{text[:-1]}; it selects configs/train/<task>.yaml, the defaults of the options below)"
+            ppo.add_argument("--task", default="platoon", metavar="TASK", help=text)
+            continue
+        names = [flag(name), "--out"] if name == "out" else [flag(name)]
+        metavar = flag(name)[2:].upper().replace("-", "_")
+        ppo.add_argument(*names, dest=name, default=None, metavar=metavar, help=text.replace("%", "%%"))
+
+
+def _given(argv: list[str], option: str) -> str | None:
+    """The value of ``option`` in ``argv`` (``--option value`` or ``--option=value``), if any."""
+    for i, arg in enumerate(argv):
+        if arg == option and i + 1 < len(argv):
+            return argv[i + 1]
+        if arg.startswith(option + "="):
+            return arg.split("=", 1)[1]
+    return None
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m train", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     bench = sub.add_parser("benchmark", help="run agents through a benchmark suite and write a report")
@@ -80,32 +114,26 @@ def build_parser() -> argparse.ArgumentParser:
         evaluate._add_action(action)
     evaluate.set_defaults(run=_benchmark)
 
-    from train.config import TrainConfig
-
-    ppo = sub.add_parser("ppo", help="train a PPO driving policy (torchrl collectors, GAE, ClipPPOLoss)")
-    ppo.add_argument("--task", default="platoon", help="platoon | drive (defaults in configs/train/<task>.yaml)")
-    ppo.add_argument("--config", default=None, help="a training config YAML instead of the task's")
-    ppo.add_argument("--out-dir", default=None,
-                     help="run folder (default: the config's out); one that holds another run is refused")  # fmt: skip
+    ppo = sub.add_parser("ppo", help="train a PPO driving policy (torchrl collectors, GAE, ClipPPOLoss)",
+                         epilog=PPO_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    ppo.add_argument("--config", default=None, help="a training config YAML (or a run's config.json) instead of the task's")
     ppo.add_argument("--quiet", action="store_true", help="no progress bar")
     ppo.add_argument("--resume", default=None,
                      help="continue a run from one of its .pt checkpoints (e.g. runs/train/platoon/last.pt), "
                           "either library")  # fmt: skip
-    for f in dataclasses.fields(TrainConfig):
-        if f.name in ("task", "out"):
-            continue
-        ppo.add_argument("--" + f.name.replace("_", "-"), dest=f.name, default=None, help=f"override {f.name}")
+    _ppo_options(ppo, argv)
     ppo.set_defaults(run=_ppo)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser(argv)
+    args = parser.parse_args(argv)
     if args.command in ("benchmark", "eval"):
         if args.episodes is not None and args.episodes < 1:
-            build_parser().error("--episodes must be >= 1")
+            parser.error("--episodes must be >= 1")
         if args.workers < 1:
-            build_parser().error("--workers must be >= 1")
+            parser.error("--workers must be >= 1")
     try:
         return args.run(args)
     except ValueError as err:  # unknown suite, agent or malformed config: say it plainly

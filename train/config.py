@@ -1,242 +1,396 @@
-"""Training configuration: a dataclass schema, read from YAML, overridden by CLI flags.
+"""Training configuration: a schema (``smarts.core.schema``) read from YAML, overridden by CLI flags.
 
-``configs/train/<task>.yaml`` holds the defaults of a task; ``--config FILE`` replaces them and
-every field can be overridden as ``--field value`` (``--total-steps 20000``). Values are
-validated once, with errors naming the file and the field.
+``configs/train/<task>.yaml`` holds the defaults of a task; ``--config FILE`` replaces them (a run's
+``config.json`` too), and every top-level field can be overridden on the command line as
+``--field-name value``. Command-line values are YAML: ``--total-steps 20000``, ``--hidden 256,256``
+or ``--hidden [256,256]``, ``--reward "{follow: 2}"``, ``--eval-suite null``. The file and the
+overrides are validated together by one model, and every problem is reported at once, each naming
+the file (or the ``--flag``) and the dotted field, with a did-you-mean for a misspelt key.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field, fields
+import re
+import types
+import typing
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Callable, Literal
 
 import yaml
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    Field,
+    TypeAdapter,
+    ValidationError,
+    ValidationInfo,
+    create_model,
+    field_validator,
+    model_serializer,
+)
+
+from smarts.core.schema import Schema, describe, load_yaml
+from smarts.dynamics.lane_relative import LaneRelativeParams
+from smarts.env.task_rewards import RewardWeights
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs" / "train"
-TASKS = ("platoon", "drive")
+Task = Literal["platoon", "drive"]
+TASKS = typing.get_args(Task)
 ACTION_SPACES = {"rtp": "relative_target_pose", "continuous": "continuous"}
+"""The config's action-space names -> the simulator's."""
 LIBS = ("torchrl", "sb3")
 CONTROLLERS = ("direct", "lane_relative")
+FLAGS = {"out": "--out-dir"}
+"""Command-line flags whose name is not the field's (``--out`` is an alias of ``--out-dir``)."""
 
 
 class ConfigError(ValueError):
     pass
 
 
-@dataclass
-class TrainConfig:
-    task: str = "platoon"
-    scenarios: list[str] = field(default_factory=list)
-    """``suite:scenario`` names (e.g. ``adaptive:a01_straight_free``), ``suite:*`` for every
-    scenario of a suite, or library scenario names."""
-    action_space: str = "rtp"
-    controller: str = "lane_relative"
-    """``lane_relative``: the policy outputs (acceleration, lane change) commands that the env turns
-    into the action space's actions (``smarts.dynamics.lane_relative``); ``direct``: raw actions."""
-    lane_relative: dict = field(default_factory=dict)
-    """How lane-relative commands drive (``smarts.dynamics.lane_relative.LaneRelativeParams``
-    fields, e.g. ``{max_jerk: 2.0}``); recorded in checkpoints so evaluation drives the same."""
-    interface: dict = field(default_factory=dict)
-    """The observation interface (``smarts.sensors.interface`` fields, e.g. ``{lead: true}``)."""
-    reward: dict = field(default_factory=dict)
-    """Task reward weights (``smarts.env.task_rewards.RewardWeights`` fields); ``task`` defaults
-    to this config's task."""
-    lib: str = "torchrl"
-    total_steps: int = 60_000
-    envs: int = 16
-    """Scenario copies stepped together (in this process, or split over ``workers``)."""
-    workers: int = 1
-    seed: int = 0
-    frames_per_batch: int = 2048
-    minibatch_size: int = 256
-    epochs: int = 4
-    lr: float = 3e-4
-    gamma: float = 0.99
-    gae_lambda: float = 0.95
-    clip_epsilon: float = 0.2
-    entropy_coeff: float = 0.001
-    critic_coeff: float = 0.5
-    max_grad_norm: float = 0.5
-    target_kl: float = 0.05
-    """Stop a batch's remaining epochs once the approximate KL to the collecting policy exceeds
-    this (0: never)."""
-    action_bound_coeff: float = 1.0
-    """Weight of the loss on the Gaussian's mean outside the action box (``train.ppo.action_bound_loss``)."""
-    hidden: list[int] = field(default_factory=lambda: [128, 128])
-    init_log_std: list[float] = field(default_factory=lambda: [-0.5])
-    """Initial log standard deviation of the Gaussian policy: one value for every action
-    component, or one per component (for lane-relative commands: speed, lane change)."""
-    obs_norm: bool = True
-    """Normalise observations by running statistics (kept in the checkpoint)."""
-    reward_scaling: bool = True
-    """Divide rewards by the running standard deviation of the discounted return."""
-    obs_clip: float = 5.0
-    obs_std_floor: float = 0.1
-    """Normalised inputs are clipped to +-obs_clip; no feature is divided by less than this."""
-    eval_every: int = 0
-    """Env steps between benchmark evaluations on held-out seeds (0: only at the end); best.pt is
-    the checkpoint with the highest S_bench among them."""
-    eval_episodes: int = 1
-    """Episodes per scenario of each benchmark evaluation (0: none)."""
-    eval_suite: str | None = None
-    """The benchmark suite of the evaluations (a name or a YAML path); None: the task's own
-    (``adaptive`` for platoon, ``collaborative`` for drive)."""
-    eval_workers: int = 2
-    """Processes that run each evaluation's episodes; 1 runs them in the training process (no
-    start-up cost, for small suites; not with SUMO traffic while training SUMO in this process)."""
-    eval_seed: int = 3000
-    """First seed of the evaluations; training episodes use seeds from 100_000 up, and the suites'
-    own benchmark seeds (1000, 2000) are neither, so selection and the final score are held out."""
-    torch_threads: int = 1
-    """torch threads per process (one is fastest for these small networks on a loaded machine)."""
-    init_from: str | None = None
-    """Start from the networks and observation statistics of this checkpoint (a new run: fresh
-    optimiser, step 0), e.g. a platoon policy fine-tuned on the pybullet car; unlike ``--resume``
-    the action space may differ, the observation and the commands' meaning may not."""
-    out: str = "runs/train"
-    ray_address: str | None = None
+def flag(name: str) -> str:
+    """The command-line flag of field ``name`` (``total_steps`` -> ``--total-steps``)."""
+    return FLAGS.get(name, "--" + name.replace("_", "-"))
 
-    def validate(self, source: str) -> "TrainConfig":
-        def fail(name: str, message: str) -> ConfigError:
-            return ConfigError(f"{source}: {name}: {message}")
 
-        if self.task not in TASKS:
-            raise fail("task", f"expected one of {', '.join(TASKS)}, got {self.task!r}")
-        if self.action_space not in ACTION_SPACES:
-            raise fail("action_space", f"expected one of {', '.join(ACTION_SPACES)}, got {self.action_space!r}")
-        if self.controller not in CONTROLLERS:
-            raise fail("controller", f"expected one of {', '.join(CONTROLLERS)}, got {self.controller!r}")
+# ----------------------------------------------------------------------------- value rules
+def _rule(test: Callable[[Any], bool], message: str) -> AfterValidator:
+    def check(value: Any) -> Any:
+        if not test(value):
+            raise ValueError(message)
+        return value
+
+    return AfterValidator(check)
+
+
+_Finite = Field(allow_inf_nan=False)
+PositiveInt = Annotated[int, _rule(lambda v: v >= 1, "expected a positive integer")]
+NonNegativeInt = Annotated[int, _rule(lambda v: v >= 0, "expected a non-negative number")]
+Positive = Annotated[float, _Finite, _rule(lambda v: v > 0, "expected a positive number")]
+NonNegative = Annotated[float, _Finite, _rule(lambda v: v >= 0, "expected a non-negative number")]
+Fraction = Annotated[float, _rule(lambda v: 0 < v <= 1, "expected a number in (0, 1]")]
+
+
+# ----------------------------------------------------------------------------- sections
+class Section(Schema):
+    """Settings that override some fields of a settings dataclass; the others keep its defaults.
+    Dumped (config.json, checkpoints), a section holds only the fields it was given."""
+
+    @model_serializer(mode="wrap")
+    def _given(self, handler: Any) -> dict[str, Any]:
+        data = handler(self)
+        return {name: value for name, value in data.items() if name in self.model_fields_set}
+
+
+def _section(settings: type, name: str, doc: str, kinds: dict[str, Any], default: Any) -> type[Section]:
+    """A section model with the fields (and defaults) of the dataclass ``settings``."""
+    fields = {
+        f.name: kinds[f.name] if f.name in kinds else (default, Field(f.default))
+        for f in dataclasses.fields(settings)
+    }
+    return create_model(name, __base__=Section, __doc__=doc, __module__=__name__, **fields)
+
+
+RewardSection = _section(
+    RewardWeights,
+    "RewardSection",
+    "Task reward weights and limits (``smarts.env.task_rewards.RewardWeights`` fields).",
+    {
+        "task": (Task | None, Field(None, description="The task whose reward terms count; None: the config's task.")),
+        **{name: (Positive, Field(getattr(RewardWeights, name)))
+           for name in ("headway", "max_time_gap", "jerk_long_max", "jerk_lat_max", "accel_long_max", "accel_lat_max")},
+    },  # fmt: skip
+    NonNegative,
+)
+LaneRelativeSection = _section(
+    LaneRelativeParams,
+    "LaneRelativeSection",
+    "How lane-relative commands drive (``smarts.dynamics.lane_relative.LaneRelativeParams`` fields).",
+    {"threshold": (Annotated[float, _rule(lambda v: 0 < v < 1, "expected a number in (0, 1)")],
+                   Field(LaneRelativeParams.threshold))},  # fmt: skip
+    Positive,
+)
+
+
+# ----------------------------------------------------------------------------- the config
+class TrainConfig(Schema):
+    """A training run's settings (``configs/train/<task>.yaml``, recorded in its config.json)."""
+
+    task: Task = Field("platoon", description="platoon (follow a lead vehicle) | drive (turn at intersections, reach the exit).")
+    scenarios: list[str] = Field(
+        default_factory=list,
+        description="suite:scenario names (e.g. adaptive:a01_straight_free), suite:* for every scenario of a suite, "
+        "or library scenario names.",
+    )
+    action_space: Literal["rtp", "continuous"] = Field(
+        "rtp", description="rtp (RelativeTargetPose) | continuous (throttle, brake, steering on the pybullet car)."
+    )
+    controller: Literal["direct", "lane_relative"] = Field(
+        "lane_relative",
+        description="lane_relative: the policy outputs (target speed, lane change) commands that the env turns into "
+        "the action space's actions (smarts.dynamics.lane_relative); direct: raw actions.",
+    )
+    lane_relative: LaneRelativeSection = Field(
+        default_factory=LaneRelativeSection,
+        description="How lane-relative commands drive (smarts.dynamics.lane_relative.LaneRelativeParams fields, e.g. "
+        "{max_jerk: 2.0}); recorded in checkpoints so evaluation drives the same.",
+    )
+    interface: dict[str, Any] = Field(
+        default_factory=dict, description="The observation interface (smarts.sensors.interface fields, e.g. {lead: true})."
+    )
+    reward: RewardSection = Field(
+        default_factory=RewardSection,
+        description="Task reward weights (smarts.env.task_rewards.RewardWeights fields); task defaults to this "
+        "config's task.",
+    )
+    lib: Literal["torchrl", "sb3"] = Field("torchrl", description="torchrl | sb3 (Stable-Baselines3's PPO).")
+    total_steps: PositiveInt = Field(60_000, description="Env steps to train for, summed over the envs.")
+    envs: PositiveInt = Field(
+        16, description="Scenario copies stepped together (in this process, or split over workers)."
+    )
+    workers: PositiveInt = Field(
+        1, description="Processes that step the envs (<= envs); with ray_address, the Ray collectors."
+    )
+    seed: NonNegativeInt = Field(0, description="Seed of torch, numpy and the training episodes.")
+    frames_per_batch: PositiveInt = Field(2048, description="Env steps collected for each PPO update.")
+    minibatch_size: PositiveInt = Field(256, description="Samples per gradient step (<= frames_per_batch).")
+    epochs: PositiveInt = Field(4, description="Passes over each batch.")
+    lr: Positive = Field(3e-4, description="Adam's learning rate (> 0).")
+    gamma: Fraction = Field(0.99, description="Discount, in (0, 1].")
+    gae_lambda: Fraction = Field(0.95, description="GAE's lambda, in (0, 1].")
+    clip_epsilon: Positive = Field(0.2, description="PPO's ratio clip (> 0).")
+    entropy_coeff: NonNegative = Field(0.001, description="Weight of the entropy bonus.")
+    critic_coeff: NonNegative = Field(0.5, description="Weight of the value loss.")
+    max_grad_norm: Positive = Field(0.5, description="Gradients are clipped to this norm (> 0).")
+    target_kl: NonNegative = Field(
+        0.05,
+        description="Stop a batch's remaining epochs once the approximate KL to the collecting policy exceeds this "
+        "(0: never).",
+    )
+    action_bound_coeff: NonNegative = Field(
+        1.0, description="Weight of the loss on the Gaussian's mean outside the action box (train.ppo.action_bound_loss)."
+    )
+    hidden: list[int] = Field(default_factory=lambda: [128, 128], description="Hidden layer sizes of actor and critic.")
+    init_log_std: list[float] = Field(
+        default_factory=lambda: [-0.5],
+        description="Initial log standard deviation of the Gaussian policy, in [-5, 1]: one value for every action "
+        "component, or one per component (for lane-relative commands: speed, lane change).",
+    )
+    obs_norm: bool = Field(True, description="Normalise observations by running statistics (kept in the checkpoint).")
+    reward_scaling: bool = Field(True, description="Divide rewards by the running standard deviation of the discounted return.")
+    obs_clip: Positive = Field(5.0, description="Normalised inputs are clipped to +-obs_clip.")
+    obs_std_floor: Positive = Field(0.1, description="No feature is divided by less than this.")
+    eval_every: NonNegativeInt = Field(
+        0,
+        description="Env steps between benchmark evaluations on held-out seeds (0: only at the end); best.pt is the "
+        "checkpoint with the highest S_bench among them.",
+    )
+    eval_episodes: NonNegativeInt = Field(1, description="Episodes per scenario of each benchmark evaluation (0: none).")
+    eval_suite: str | None = Field(
+        None,
+        description="The benchmark suite of the evaluations (a name or a YAML path); null: the task's own (adaptive "
+        "for platoon, collaborative for drive).",
+    )
+    eval_workers: PositiveInt = Field(
+        2,
+        description="Processes that run each evaluation's episodes; 1 runs them in the training process (no start-up "
+        "cost, for small suites; not with SUMO traffic while training SUMO in this process).",
+    )
+    eval_seed: NonNegativeInt = Field(
+        3000,
+        description="First seed of the evaluations; training episodes use seeds from 100000 up, and the suites' own "
+        "benchmark seeds (1000, 2000) are neither, so selection and the final score are held out.",
+    )
+    torch_threads: PositiveInt = Field(
+        1, description="torch threads per process (one is fastest for these small networks on a loaded machine)."
+    )
+    init_from: str | None = Field(
+        None,
+        description="Start from the networks and observation statistics of this checkpoint (a new run: fresh "
+        "optimiser, step 0), e.g. a platoon policy fine-tuned on the pybullet car; unlike --resume the action space "
+        "may differ, the observation and the commands' meaning may not.",
+    )
+    out: str = Field(
+        "runs/train", description="The run folder (config.json, checkpoints, TensorBoard); one that holds another run is refused."
+    )
+    ray_address: str | None = Field(
+        None, description="Run the collectors as Ray actors: auto | local | HOST:PORT (needs the ray extra); null: no Ray."
+    )
+
+    # ------------------------------------------------------------------ cross-field and nested checks
+    @field_validator("scenarios")
+    @classmethod
+    def _some_scenarios(cls, names: list[str]) -> list[str]:
+        if not names or not all(names):
+            raise ValueError("expected at least one training scenario")
+        return names
+
+    @field_validator("hidden")
+    @classmethod
+    def _layers(cls, sizes: list[int]) -> list[int]:
+        if not sizes or any(h < 1 for h in sizes):
+            raise ValueError("expected a list of positive layer sizes")
+        return sizes
+
+    @field_validator("init_log_std")
+    @classmethod
+    def _log_std(cls, values: list[float]) -> list[float]:
+        if not values or not all(-5.0 <= v <= 1.0 for v in values):
+            raise ValueError("expected one or more numbers in [-5, 1]")
+        return values
+
+    @field_validator("workers")
+    @classmethod
+    def _workers_within_envs(cls, workers: int, info: ValidationInfo) -> int:
+        envs = info.data.get("envs")
+        if envs is not None and workers > envs:
+            raise ValueError(f"must be <= envs ({envs})")
+        return workers
+
+    @field_validator("minibatch_size")
+    @classmethod
+    def _minibatch_within_batch(cls, size: int, info: ValidationInfo) -> int:
+        frames = info.data.get("frames_per_batch")
+        if frames is not None and size > frames:
+            raise ValueError(f"must be <= frames_per_batch ({frames})")
+        return size
+
+    @field_validator("interface")
+    @classmethod
+    def _interface(cls, data: dict[str, Any]) -> dict[str, Any]:
+        from smarts.sensors.interface import interface_from_dict
+
         try:
-            self.observation_interface()
-        except ValueError as err:
-            raise fail("interface", str(err)) from None
-        try:
-            self.lane_relative_params()
+            interface_from_dict(data)
+        except ValueError as err:  # InterfaceError names the dotted field: keep the part below interface
+            path, problem = getattr(err, "path", ""), getattr(err, "problem", str(err))
+            raise ValueError(f"{path[len('interface.'):]}: {problem}" if path.startswith("interface.") else problem) from None
+        return data
+
+    @field_validator("reward", "lane_relative")
+    @classmethod
+    def _settings(cls, section: Section, info: ValidationInfo) -> Section:
+        try:  # the dataclass's own checks (the section's rules already hold them)
+            if info.field_name == "reward":
+                RewardWeights(**_reward_settings(section, info.data.get("task", "platoon")))
+            else:
+                LaneRelativeParams(**section.model_dump())
         except (TypeError, ValueError) as err:
-            raise fail("lane_relative", str(err)) from None
-        try:
-            self.reward_weights()
-        except (TypeError, ValueError) as err:
-            raise fail("reward", str(err)) from None
-        if self.lib not in LIBS:
-            raise fail("lib", f"expected one of {', '.join(LIBS)}, got {self.lib!r}")
-        for name in ("total_steps", "envs", "workers", "frames_per_batch", "minibatch_size", "epochs", "eval_workers"):
-            if getattr(self, name) < 1:
-                raise fail(name, f"expected a positive integer, got {getattr(self, name)}")
-        if self.workers > self.envs:
-            raise fail("workers", f"must be <= envs ({self.envs})")
-        if self.minibatch_size > self.frames_per_batch:
-            raise fail("minibatch_size", f"must be <= frames_per_batch ({self.frames_per_batch})")
-        for name in ("lr", "clip_epsilon", "max_grad_norm"):
-            if not getattr(self, name) > 0:
-                raise fail(name, f"expected a positive number, got {getattr(self, name)}")
-        for name in ("gamma", "gae_lambda"):
-            if not 0 < getattr(self, name) <= 1:
-                raise fail(name, f"expected a number in (0, 1], got {getattr(self, name)}")
-        for name in ("obs_clip", "obs_std_floor", "torch_threads"):
-            if not getattr(self, name) > 0:
-                raise fail(name, f"expected a positive number, got {getattr(self, name)}")
-        for name in ("entropy_coeff", "critic_coeff", "action_bound_coeff", "target_kl", "eval_every", "eval_episodes", "seed", "eval_seed"):
-            if getattr(self, name) < 0:
-                raise fail(name, f"expected a non-negative number, got {getattr(self, name)}")
-        if not self.init_log_std or not all(-5.0 <= v <= 1.0 for v in self.init_log_std):
-            raise fail("init_log_std", f"expected one or more numbers in [-5, 1], got {self.init_log_std}")
-        if not self.hidden or any(h < 1 for h in self.hidden):
-            raise fail("hidden", f"expected a list of positive layer sizes, got {self.hidden}")
-        if not self.scenarios:
-            raise fail("scenarios", "expected at least one training scenario")
-        return self
+            raise ValueError(str(err)) from None
+        return section
 
+    # ------------------------------------------------------------------ what the trainers build from it
     def observation_interface(self):
         """The ``AgentInterface`` of ``interface``."""
         from smarts.sensors.interface import interface_from_dict
 
         return interface_from_dict(self.interface)
 
-    def lane_relative_params(self):
+    def lane_relative_params(self) -> LaneRelativeParams:
         """The ``LaneRelativeParams`` of ``lane_relative``."""
-        from smarts.dynamics.lane_relative import LaneRelativeParams
+        return LaneRelativeParams(**self.lane_relative.model_dump())
 
-        known = {f.name for f in fields(LaneRelativeParams)}
-        unknown = sorted(set(self.lane_relative) - known)
-        if unknown:
-            raise ValueError(f"unknown settings {unknown}; known: {', '.join(sorted(known))}")
-        return LaneRelativeParams(**self.lane_relative)
-
-    def reward_weights(self):
+    def reward_weights(self) -> RewardWeights:
         """The ``RewardWeights`` of ``reward`` (the task's reward unless ``reward.task`` says)."""
-        from smarts.env.task_rewards import RewardWeights
-
-        known = {f.name for f in fields(RewardWeights)}
-        unknown = sorted(set(self.reward) - known)
-        if unknown:
-            raise ValueError(f"unknown reward terms {unknown}; known: {', '.join(sorted(known))}")
-        return RewardWeights(**{"task": self.task, **self.reward})
+        return RewardWeights(**_reward_settings(self.reward, self.task))
 
 
-def _coerce(name: str, value: Any, kind: Any, source: str) -> Any:
-    origin = getattr(kind, "__origin__", None)
-    text = str(kind)
+def _reward_settings(section: Section, task: str) -> dict[str, Any]:
+    settings = section.model_dump()
+    if settings.get("task") is None:
+        settings["task"] = task
+    return settings
+
+
+# ----------------------------------------------------------------------------- command-line values
+def _is_text(annotation: Any) -> bool:
+    """Whether a field holds text (str, a Literal of names, optional text): kept as written."""
+    if annotation is str:
+        return True
+    args = typing.get_args(annotation)
+    if typing.get_origin(annotation) is Literal:
+        return all(isinstance(a, str) for a in args)
+    if typing.get_origin(annotation) in (typing.Union, types.UnionType):
+        return all(a is type(None) or _is_text(a) for a in args)
+    return False
+
+
+def _yaml(text: str) -> Any:
     try:
-        if text == "bool":
-            if isinstance(value, str) and value.lower() in ("true", "false", "yes", "no", "1", "0"):
-                return value.lower() in ("true", "yes", "1")
-            if not isinstance(value, bool):
-                raise ConfigError(f"{source}: {name}: expected true or false, got {value!r}")
-            return value
-        if text == "dict":
-            if isinstance(value, str):  # from the command line: a YAML/JSON mapping
-                value = yaml.safe_load(value) or {}
-            if not isinstance(value, dict):
-                raise ConfigError(f"{source}: {name}: expected a mapping, got {value!r}")
-            return value
-        if isinstance(value, str) and ("int" in text and "list" not in text):
-            return int(value)
-        if isinstance(value, str) and text == "float":
-            return float(value)
-        if isinstance(value, str) and "list" in text:
-            items = [v for v in value.replace(",", " ").split() if v]
-            if "int" in text:
-                return [int(v) for v in items]
-            return [float(v) for v in items] if "float" in text else items
-        if text == "float" and isinstance(value, int) and not isinstance(value, bool):
-            return float(value)
-    except (ValueError, yaml.YAMLError):
-        raise ConfigError(f"{source}: {name}: expected {text}, got {value!r}") from None
-    expected = {"int": int, "float": float, "str": str}.get(text)
-    if expected is not None and (not isinstance(value, expected) or isinstance(value, bool)):
-        raise ConfigError(f"{source}: {name}: expected {text}, got {value!r}")
-    del origin
-    return value
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text  # the model then says what was expected
 
 
+def from_command_line(name: str, text: str) -> Any:
+    """The command-line string ``text`` of field ``name`` parsed into the field's type where it can
+    be (lax: ``"256"`` -> 256, ``"yes"`` -> true, ``"256,256"`` or ``"[256, 256]"`` -> [256, 256],
+    ``"{follow: 2}"`` -> a mapping, ``null`` -> None); what cannot be parsed is passed on as
+    written for the model to reject with the field's own message."""
+    info = TrainConfig.model_fields.get(name)
+    if info is None:
+        return text
+    kind = info.annotation
+    if _is_text(kind):
+        optional = type(None) in typing.get_args(kind)
+        return None if optional and text.strip() in ("", "null", "~", "None") else text
+    if typing.get_origin(kind) is list:
+        stripped = text.strip()
+        value = _yaml(stripped) if stripped.startswith("[") else [v for v in re.split(r"[,\s]+", stripped) if v]
+        if _is_text(typing.get_args(kind)[0]) or not isinstance(value, list):
+            return value
+    elif typing.get_origin(kind) is dict or (isinstance(kind, type) and issubclass(kind, BaseModel)):
+        value = _yaml(text)
+        return {} if value is None else value
+    else:
+        value = text
+    try:
+        return TypeAdapter(kind).validate_python(value, strict=False)
+    except ValidationError:
+        return value
+
+
+# ----------------------------------------------------------------------------- loading
 def load_config(task: str | None = None, path: str | Path | None = None, overrides: dict | None = None) -> TrainConfig:
-    """Defaults of ``task`` (or ``path``), then ``overrides``; validated."""
+    """Defaults of ``task`` (or the file ``path``: a config YAML or a run's config.json), then
+    ``overrides`` (field -> value; strings are parsed as on the command line), validated together.
+    Every problem is reported at once, named by the file or the override's ``--flag``."""
     if path is None:
         if task not in TASKS:
             raise ConfigError(f"unknown task {task!r}; expected one of {', '.join(TASKS)}")
         path = CONFIG_DIR / f"{task}.yaml"
-    path = Path(path)
     source = str(path)
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except OSError as err:
-        raise ConfigError(f"{source}: cannot read: {err.strerror or err}") from None
-    except yaml.YAMLError as err:
-        raise ConfigError(f"{source}: invalid YAML: {err}") from None
+    data = load_yaml(path, "training config", ConfigError)
+    if data is None:
+        data = {}
     if not isinstance(data, dict):
-        raise ConfigError(f"{source}: expected a mapping of training settings")
-    kinds = {f.name: f.type for f in fields(TrainConfig)}
-    values = {}
-    for name, value in {**data, **(overrides or {})}.items():
-        if name not in kinds:
-            raise ConfigError(f"{source}: {name}: unknown setting; known: {', '.join(kinds)}")
-        if value is None and name not in ("ray_address", "eval_suite", "init_from"):
-            continue
-        origin = "command line" if overrides and name in overrides else source
-        values[name] = _coerce(name, value, kinds[name], origin)
-    if task is not None and "task" not in values:
-        values["task"] = task
-    return dataclasses.replace(TrainConfig(), **values).validate(source)
+        raise ConfigError(f"{source}: expected a mapping of training settings, got {type(data).__name__}")
+    values, origin = dict(data), {}
+    if task is not None:
+        values.setdefault("task", task)
+    for name, value in (overrides or {}).items():
+        known = TrainConfig.model_fields.get(name)
+        if value is None and known is not None and known.default is not None:
+            continue  # not given
+        values[name] = from_command_line(name, value) if isinstance(value, str) else value
+        origin[name] = flag(name)
+    try:
+        return TrainConfig.model_validate(values)
+    except ValidationError as exc:
+        lines = [describe(TrainConfig, p, origin.get(p["loc"][0], source) if p["loc"] else source) for p in exc.errors()]
+        raise ConfigError("\n".join(lines)) from None
+
+
+def task_defaults(task: str | None, path: str | Path | None = None) -> tuple[dict[str, Any], str]:
+    """The raw settings of the task's YAML (or ``path``) and the file's name, for ``--help``; an
+    unreadable file gives no settings (the error comes when the config is loaded)."""
+    if path is None:
+        if task not in TASKS:
+            return {}, ""
+        path = CONFIG_DIR / f"{task}.yaml"
+    try:
+        data = load_yaml(path, "training config", ConfigError)
+    except ConfigError:
+        return {}, ""
+    return (data, Path(path).name) if isinstance(data, dict) else ({}, "")

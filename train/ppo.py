@@ -24,7 +24,6 @@ trainer shares (``train.run``; ``train.sb3_ppo`` trains SB3's PPO under the same
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import functools
 import time
 from pathlib import Path
@@ -324,7 +323,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                                low=low, high=high, action_space=ACTION_SPACES[cfg.action_space],
                                controller=cfg.controller, interface=interface_dict(cfg),
                                lane_relative=lane_relative_dict(cfg),
-                               config=dataclasses.asdict(cfg), step=step, metrics=metrics,
+                               config=cfg.model_dump(), step=step, metrics=metrics,
                                optimizer_state=optimizer.state_dict())  # fmt: skip
 
     try:

@@ -192,7 +192,7 @@ class Run:
                              f"or continue it with --resume {out / 'last.pt'}")  # fmt: skip
         self.cfg, self.out = cfg, out
         out.mkdir(parents=True, exist_ok=True)
-        (out / "config.json").write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
+        (out / "config.json").write_text(json.dumps(cfg.model_dump(), indent=2))
         self.writer = SummaryWriter(log_dir=str(out / "tensorboard"))
         self.best_score = -np.inf
         if continuing and (out / "best.pt").is_file():  # a resumed run keeps its selection

@@ -12,7 +12,6 @@ loadable) so evaluation and the benchmark load it like the torchrl checkpoints
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from pathlib import Path
 
@@ -157,7 +156,7 @@ def save_sb3(path: Path, model, vec, cfg: TrainConfig, metrics: dict | None = No
             "high": vec._agent_action_space.high.tolist(),
         },
         "net_arch": list(cfg.hidden),
-        "config": dataclasses.asdict(cfg),
+        "config": cfg.model_dump(),
         "step": int(model.num_timesteps),
         "n_updates": int(model._n_updates),
         "metrics": {k: float(v) for k, v in (metrics or {}).items()},
