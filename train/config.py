@@ -31,6 +31,7 @@ from pydantic import (
 )
 
 from smarts.core.schema import Schema, describe, load_yaml
+from smarts.core.spec import CONTROLLERS
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.env.task_rewards import RewardWeights
 
@@ -40,7 +41,6 @@ TASKS = typing.get_args(Task)
 ACTION_SPACES = {"rtp": "relative_target_pose", "continuous": "continuous"}
 """The config's action-space names -> the simulator's."""
 LIBS = ("torchrl", "sb3")
-CONTROLLERS = ("direct", "lane_relative")
 FLAGS = {"out": "--out-dir"}
 """Command-line flags whose name is not the field's (``--out`` is an alias of ``--out-dir``)."""
 
@@ -123,10 +123,10 @@ class TrainConfig(Schema):
         description="suite:scenario names (e.g. adaptive:a01_straight_free), suite:* for every scenario of a suite, "
         "or library scenario names.",
     )
-    action_space: Literal["rtp", "continuous"] = Field(
+    action_space: Literal[tuple(ACTION_SPACES)] = Field(
         "rtp", description="rtp (RelativeTargetPose) | continuous (throttle, brake, steering on the pybullet car)."
     )
-    controller: Literal["direct", "lane_relative"] = Field(
+    controller: Literal[CONTROLLERS] = Field(
         "lane_relative",
         description="lane_relative: the policy outputs (target speed, lane change) commands that the env turns into "
         "the action space's actions (smarts.dynamics.lane_relative); direct: raw actions.",
@@ -144,7 +144,7 @@ class TrainConfig(Schema):
         description="Task reward weights (smarts.env.task_rewards.RewardWeights fields); task defaults to this "
         "config's task.",
     )
-    lib: Literal["torchrl", "sb3"] = Field("torchrl", description="torchrl | sb3 (Stable-Baselines3's PPO).")
+    lib: Literal[LIBS] = Field("torchrl", description="torchrl | sb3 (Stable-Baselines3's PPO).")
     total_steps: PositiveInt = Field(60_000, description="Env steps to train for, summed over the envs.")
     envs: PositiveInt = Field(
         16, description="Scenario copies stepped together (in this process, or split over workers)."
