@@ -193,3 +193,40 @@ def test_init_from_starts_a_new_run_from_trained_networks_in_another_action_spac
     assert main([*base, "--interface", "{lead: true}", "--init-from", str(tmp_path / "rtp" / "final.pt"),
                  "--out-dir", str(tmp_path / "x")]) == 2  # fmt: skip
     assert "trained with observation interface" in capsys.readouterr().err and not (tmp_path / "x").exists()
+
+
+def test_a_budget_that_is_not_a_whole_number_of_batches_trains_without_torchrl_warnings(tmp_path):
+    import warnings
+
+    args = ["ppo", "--task", "platoon", "--scenarios", "adaptive:a01_straight_free", "--total-steps", "100",
+            "--frames-per-batch", "64", "--minibatch-size", "64", "--epochs", "1", "--envs", "1",
+            "--eval-episodes", "0", "--out-dir", str(tmp_path / "run"), "--quiet"]  # fmt: skip
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert main(args) == 0
+    assert not [w for w in caught if "divisible" in str(w.message)]
+    assert torch.load(tmp_path / "run" / "final.pt", weights_only=True)["step"] == 128  # two whole batches
+
+
+def test_ctrl_c_saves_interrupted_pt_and_exits_130_without_a_traceback(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "run"
+    command = [sys.executable, "-m", "train", "ppo", "--task", "platoon", "--scenarios", "adaptive:a01_straight_free",
+               "--total-steps", "1000000", "--frames-per-batch", "64", "--minibatch-size", "64", "--epochs", "1",
+               "--envs", "1", "--eval-episodes", "0", "--out-dir", str(out), "--quiet"]  # fmt: skip
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONWARNINGS": "ignore"})  # fmt: skip
+    deadline = time.monotonic() + 180
+    while not (out / "last.pt").is_file() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.5)
+    assert (out / "last.pt").is_file(), proc.stderr.read() if proc.poll() is not None else "no batch in 180 s"
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr
+    assert (out / "interrupted.pt").is_file() and "checkpoint saved to" in stdout

@@ -139,6 +139,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as err:  # unknown suite, agent or malformed config: say it plainly
         print(f"error: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # what was saved has been said already; no traceback
+        print("interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -305,14 +305,15 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
     # A whole number of steps of every slot per batch (torchrl rounds up to it anyway).
     slots = int(np.prod(env.batch_size)) if not cfg.ray_address else 1
     frames = -(-cfg.frames_per_batch // slots) * slots
+    remaining = -(-(cfg.total_steps - step) // frames) * frames  # whole batches (torchrl would round up too)
     if cfg.ray_address:
         env.close()
         collector = Collector(factories, actor, backend="ray", num_collectors=cfg.workers, sync=True,
-                              frames_per_batch=frames, total_frames=cfg.total_steps - step,
+                              frames_per_batch=frames, total_frames=remaining,
                               remote_configs={"num_cpus": 1})  # fmt: skip
         collector.update_policy_weights_()  # the actors start from these (possibly resumed) weights
     else:
-        collector = Collector(env, actor, frames_per_batch=frames, total_frames=cfg.total_steps - step,
+        collector = Collector(env, actor, frames_per_batch=frames, total_frames=remaining,
                               auto_register_policy_transforms=False)
     buffer = ReplayBuffer(storage=LazyTensorStorage(frames, ndim=1), sampler=SamplerWithoutReplacement(),
                           batch_size=cfg.minibatch_size)  # fmt: skip
