@@ -230,3 +230,16 @@ def test_ctrl_c_saves_interrupted_pt_and_exits_130_without_a_traceback(tmp_path)
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr
     assert (out / "interrupted.pt").is_file() and "checkpoint saved to" in stdout
+
+
+def test_the_final_evaluation_shows_progress_unless_quiet(tmp_path, capsys):
+    from pathlib import Path
+
+    suite = Path(__file__).parent / "benchmark" / "tiny_suite.yaml"
+    base = ["ppo", "--task", "drive", "--scenarios", "collaborative:c01_4way_1lane_left_free", "--total-steps", "128",
+            "--frames-per-batch", "128", "--minibatch-size", "64", "--epochs", "1", "--envs", "1",
+            "--eval-episodes", "1", "--eval-suite", str(suite), "--eval-workers", "1"]  # fmt: skip
+    assert main(base + ["--out-dir", str(tmp_path / "a")]) == 0
+    assert "episodes" in capsys.readouterr().out  # the evaluation's own bar after training's
+    assert main(base + ["--out-dir", str(tmp_path / "b"), "--quiet"]) == 0
+    assert "episodes" not in capsys.readouterr().out

@@ -266,7 +266,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
         raise ValueError("resume continues a run and init_from starts a new one from trained networks: give one")
     torch.manual_seed(cfg.seed)
     np.random.seed(cfg.seed)
-    run = Run(cfg, out, resume)  # the run folder (never another run's), config.json, TensorBoard
+    run = Run(cfg, out, resume, progress=progress)  # the run folder (never another run's), config.json, TensorBoard
     scale_out = contextlib.ExitStack()
     if cfg.ray_address:
         from smarts.ray_session import ray_session

@@ -181,7 +181,7 @@ class Run:
     The trainer calls ``end_of_batch`` after every update, ``interrupted`` on Ctrl-C and ``finish``
     at the end, each with its own ``save(path)``."""
 
-    def __init__(self, cfg: TrainConfig, out: Path, resume: Path | None = None):
+    def __init__(self, cfg: TrainConfig, out: Path, resume: Path | None = None, progress: bool = False):
         from torch.utils.tensorboard import SummaryWriter
 
         out = Path(out)
@@ -191,6 +191,7 @@ class Run:
             raise ValueError(f"{out} already holds a training run ({', '.join(held)}): give another --out-dir, "
                              f"or continue it with --resume {out / 'last.pt'}")  # fmt: skip
         self.cfg, self.out = cfg, out
+        self.progress = progress  # a bar for the final evaluation (periodic ones run under training's bar)
         out.mkdir(parents=True, exist_ok=True)
         (out / "config.json").write_text(json.dumps(cfg.model_dump(), indent=2))
         self.writer = SummaryWriter(log_dir=str(out / "tensorboard"))
@@ -228,7 +229,7 @@ class Run:
         """``final.pt``, its evaluation (best.pt if it is the best), the summary; the final path."""
         final = save(self.out / "final.pt")
         if self.cfg.eval_episodes > 0:
-            scores = evaluate_into(final, self.cfg, self.out / "eval", self.writer, step)
+            scores = evaluate_into(final, self.cfg, self.out / "eval", self.writer, step, progress=self.progress)
             metrics.update({f"eval/{k}": v for k, v in scores.items()})
             if scores.get("S_bench", -np.inf) > self.best_score:
                 self.best_score = scores["S_bench"]
@@ -251,7 +252,7 @@ def summary(step: int, wall_s: float, metrics: dict) -> dict:
 
 
 # ------------------------------------------------------------------ held-out evaluation
-def evaluate_into(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int) -> dict:
+def evaluate_into(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int, progress: bool = False) -> dict:
     """Run the task's benchmark suite on ``checkpoint`` with the held-out ``eval_seed`` (report
     under ``out``) and log its metrics and a few evaluation trajectory figures to TensorBoard.
     Training's random state is left as it was, so evaluating does not change the run."""
@@ -260,12 +261,12 @@ def evaluate_into(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: i
     numpy_state = np.random.get_state()
     with torch.random.fork_rng(devices=[]):
         try:
-            return _evaluate(checkpoint, cfg, out, writer, step)
+            return _evaluate(checkpoint, cfg, out, writer, step, progress)
         finally:
             np.random.set_state(numpy_state)
 
 
-def _evaluate(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int) -> dict:
+def _evaluate(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int, progress: bool) -> dict:
     from PIL import Image
 
     from smarts.benchmark.report import write_report
@@ -279,7 +280,7 @@ def _evaluate(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int) 
     # The reference agents' episodes (same seeds every time) are run once per training run and reused.
     cache = out.parent / "reference_cache" if out.parent.name == "evals" else out.parent / "evals" / "reference_cache"
     jobs = plan_jobs([str(frozen)], suite, cfg.eval_episodes, out, seed=cfg.eval_seed, reference_cache=cache)
-    results = run_jobs(jobs, workers=cfg.eval_workers, progress=False)
+    results = run_jobs(jobs, workers=cfg.eval_workers, progress=progress)
     write_report(out, suite, [str(frozen)], results)
     scores = json.loads((out / "results.json").read_text())["agents"][str(frozen)]["scores"]
     overall = scores["overall"] if scores else {}

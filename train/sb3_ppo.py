@@ -53,7 +53,7 @@ def train_sb3(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path |
     if cfg.ray_address:
         raise ValueError("ray_address: Ray collectors are for lib torchrl; SB3 runs step their envs in processes")
     blob = check_resume(resume, cfg) if resume is not None else None
-    run = Run(cfg, out, resume)  # the run folder (never another run's), config.json, TensorBoard
+    run = Run(cfg, out, resume, progress=progress)  # the run folder (never another run's), config.json, TensorBoard
     vec = make_vec_env(cfg)
     n_steps = max(cfg.frames_per_batch // vec.num_envs, 8)  # per slot, per rollout
     model = PPO(
