@@ -27,6 +27,12 @@ class Provider(Protocol):
         """Second phase of a reset, after every provider's ``reset``: take over vehicles that
         other providers created."""
 
+    def check_actions(self, sim: "Simulation", actions: dict, agents: "np.ndarray | None") -> None:
+        """Optional. Raise ``ActionError`` if ``actions`` (agent id -> action) cannot be applied to
+        this provider's agents (``agents``: agent indices to check; None: every active agent),
+        changing nothing. The simulation calls it for every provider before a step changes
+        anything, so a refused step leaves the whole simulation as it was."""
+
     def step(self, sim: "Simulation", dt: float) -> None:
         """Advance the rows this provider owns by ``dt`` seconds, writing the table in place."""
 
@@ -53,6 +59,9 @@ class ProviderBase:
         pass
 
     def start(self, sim: "Simulation") -> None:
+        pass
+
+    def check_actions(self, sim: "Simulation", actions: dict, agents: "np.ndarray | None") -> None:
         pass
 
     def step(self, sim: "Simulation", dt: float) -> None:

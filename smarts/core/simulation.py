@@ -17,7 +17,7 @@ import numpy as np
 
 from smarts.core.events import NUM_EVENTS, Event, NotMovingTracker, agent_events
 from smarts.core.missions import MissionArrays, ResolvedMission, stack_missions
-from smarts.core.provider import Provider
+from smarts.core.provider import Provider, ProviderBase
 from smarts.core.vehicle_table import COLUMN, Role, VehicleTable
 from smarts.maps import RoadMap, project
 from smarts.maps.drivable import raster_lookup
@@ -72,6 +72,7 @@ class Simulation:
             capacity, self.event_config.not_moving_seconds, self.event_config.not_moving_distance
         )
         self.providers: list[Provider] = []
+        self._checks: list = []  # providers' check_actions, called before every step
         for p in providers:
             self.add_provider(p)
         self.actions: dict[str, np.ndarray] = {}
@@ -87,6 +88,9 @@ class Simulation:
     def add_provider(self, provider: Provider) -> None:
         provider.provider_id = len(self.providers)
         self.providers.append(provider)
+        check = getattr(provider, "check_actions", None)  # optional part of the protocol
+        if check is not None and getattr(type(provider), "check_actions", None) is not ProviderBase.check_actions:
+            self._checks.append(check)
 
     def hand_over(self, rows: np.ndarray, to: Provider, role=None) -> None:
         """Move rows to another provider: the old owner releases them, the new one accepts them."""
@@ -137,8 +141,20 @@ class Simulation:
     def register_agent_vehicle(self, agent_id: str, row: int) -> None:
         self.agent_row[self.agent_index[agent_id]] = row
 
+    def check_actions(self, actions: dict[str, np.ndarray], agents: np.ndarray | None = None) -> None:
+        """Raise ``ActionError`` naming every agent whose action cannot be applied (missing, not
+        real numbers, wrongly shaped, not finite), changing nothing. ``agents``: the agent indices
+        to check (None: every active agent). ``step`` calls this before anything moves."""
+        for check in self._checks:
+            check(self, actions, agents)
+
     def step(self, actions: dict[str, np.ndarray]) -> None:
-        """Advance one step. ``actions`` maps active agent ids to their action arrays."""
+        """Advance one step. ``actions`` maps active agent ids to their action arrays.
+
+        Atomic: every action is checked first (``check_actions``); a refused step raises
+        ``ActionError`` and changes nothing (no vehicle, controller, traffic, clock or step count).
+        """
+        self.check_actions(actions)
         self.step_count += 1
         self.time = self.step_count * self.dt  # no drift from summing dt
         self.actions = actions

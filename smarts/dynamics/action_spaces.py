@@ -1,7 +1,7 @@
 """The action spaces an agent can drive with, their gymnasium boxes and input checking.
 
-Each action is one row of a float array ``[n_agents, k]``. A non-finite number or a wrongly shaped
-array is an error (it would corrupt the vehicle state); a finite number outside the box is not: the
+Each action is one row of a float array ``[n_agents, k]``. A non-finite number, a value that is
+not a real number (bool, complex, text) or a wrongly shaped array is an error (it would corrupt the vehicle state); a finite number outside the box is not: the
 controllers limit it to what the car can do (pose spaces, see ``pose_control``) or clip it to the
 box (continuous and lane spaces), so a policy exploring outside its box still drives a real car.
 """
@@ -103,13 +103,13 @@ def check_actions(
     Finite values outside the box pass: the controllers limit them.
     """
     kind = _as_kind(kind)
-    components = ACTION_COMPONENTS[kind] if controller == "direct" else LANE_RELATIVE_COMPONENTS
-    if controller != "direct":
-        kind_label = f"{kind.value} ({controller})"
-    else:
-        kind_label = kind.value
+    components = action_components(kind, controller)
+    kind_label = action_label(kind, controller)
     try:
-        arr = np.asarray(actions, dtype=np.float64)
+        arr = np.asarray(actions)
+        if arr.dtype.kind not in REAL_KINDS:
+            raise TypeError(f"dtype {arr.dtype}")
+        arr = arr.astype(np.float64, copy=False)
     except (TypeError, ValueError) as exc:
         raise ActionError(
             f"{kind_label} actions for agents {list(agent_ids)} are not numbers ({exc}); "
@@ -139,6 +139,53 @@ def check_actions(
     ]
     bad_agents = list(dict.fromkeys(agent_ids[r] for r in bad_rows.tolist()))
     raise ActionError("; ".join(problems) + "; expected finite numbers", bad_agents)
+
+
+REAL_KINDS = "iuf"
+"""numpy dtype kinds an action may have: integers and floats (not bool, complex, str, object)."""
+
+
+def action_components(kind: ActionSpaceType | str, controller: str = "direct") -> tuple[str, ...]:
+    """Names of the components of one action: the space's own, or the lane-relative command's."""
+    return ACTION_COMPONENTS[_as_kind(kind)] if controller == "direct" else LANE_RELATIVE_COMPONENTS
+
+
+def action_label(kind: ActionSpaceType | str, controller: str = "direct") -> str:
+    """How messages name an action space: ``continuous``, ``relative_target_pose (lane_relative)``."""
+    kind = _as_kind(kind)
+    return kind.value if controller == "direct" else f"{kind.value} ({controller})"
+
+
+def action_problem(kind: ActionSpaceType | str, value: object, agent_id: str, controller: str = "direct") -> str | None:
+    """What is wrong with one agent's action ``value`` (one row), or None when it can be applied.
+
+    The message names the agent, the space (and controller) and what was expected.
+    """
+    kind = _as_kind(kind)
+    components = action_components(kind, controller)
+    label = action_label(kind, controller)
+    expected = f"expected {len(components)} real numbers ({', '.join(components)})"
+    try:
+        arr = np.asarray(value)
+    except Exception as exc:  # an object numpy cannot even look at
+        return f"{agent_id}: {label} action of type {type(value).__name__} is not numbers ({exc}); {expected}"
+    if arr.dtype.kind not in REAL_KINDS:
+        what = {"b": "booleans", "c": "complex numbers"}.get(arr.dtype.kind, "not numbers")
+        return f"{agent_id}: {label} action {_short(value)} is {what} (dtype {arr.dtype}); {expected}"
+    if arr.shape != (len(components),):
+        if arr.ndim == 1:
+            return f"{agent_id}: {label} action has {arr.shape[0]} components; expected {len(components)} ({', '.join(components)})"
+        return f"{agent_id}: {label} action has shape {arr.shape}; expected shape ({len(components)},): ({', '.join(components)})"
+    finite = np.isfinite(arr)
+    if finite.all():
+        return None
+    bad = np.flatnonzero(~finite).tolist()
+    return "; ".join(f"{agent_id}: {label} action component {components[c]} is {arr[c]}" for c in bad) + "; expected finite numbers"
+
+
+def _short(value: object, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def lane_command(actions: np.ndarray, limits: ReachLimits) -> tuple[np.ndarray, np.ndarray]:

@@ -2,6 +2,9 @@
 
 Agents are grouped by action space once at construction, so a step runs one vectorised controller
 call per group (pose limiting, lane control) and one pybullet step for all Continuous agents.
+Every group's actions (and lane-relative commands) are checked on their stacked arrays before any
+group moves (``check_actions``, called by ``Simulation.step`` before its clock advances), so a
+refused step leaves vehicles, controllers and the physics exactly as they were.
 """
 
 from __future__ import annotations
@@ -16,9 +19,11 @@ from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import Role, VehicleType
 from smarts.dynamics.action_spaces import (
     ACTION_COMPONENTS,
-    LANE_RELATIVE_COMPONENTS,
+    REAL_KINDS,
     ActionSpaceType,
-    check_actions,
+    action_label,
+    action_components,
+    action_problem,
     lane_command,
 )
 from smarts.dynamics.bicycle import wheelbase_for_length
@@ -77,6 +82,8 @@ class AgentProvider(ProviderBase):
         self.lane_offset = np.zeros(len(vehicles), dtype=np.int64)  # lane agents: 0 route, +1 left, -1 right
         self.wheelbase = np.array([wheelbase_for_length(v.length) for v in vehicles])
         self._taking: str | None = None  # agent whose take-over is in progress
+        self._group_commanded = {kind: bool(self.commanded[m].any()) for kind, m in self.groups.items()}
+        self._planned: tuple[dict, list] | None = None  # (actions, plans) of the last full check
 
     # ------------------------------------------------------------------ episode
     def reset(self, sim: Simulation) -> None:
@@ -89,6 +96,7 @@ class AgentProvider(ProviderBase):
                 self.world.reset()
         self.handles[:] = -1
         self.lane_offset[:] = 0
+        self._planned = None
         if self.lane_relative is not None:
             self.lane_relative.reset(sim)
         for i, (vehicle, mission) in enumerate(zip(self.vehicles, sim.missions)):
@@ -161,28 +169,77 @@ class AgentProvider(ProviderBase):
             self.world = None
 
     # ------------------------------------------------------------------ step
-    def step(self, sim: Simulation, dt: float) -> None:
-        # Every action is checked before anything moves: a bad one leaves all vehicles as they were.
+    def check_actions(self, sim: Simulation, actions: dict, agents: np.ndarray | None = None) -> None:
+        """Check the actions of every active agent (or of ``agents``, agent indices) in every group
+        and controller at once; raise one ``ActionError`` naming every bad agent and what was
+        expected. Nothing changes; a full check keeps the stacked arrays for the ``step`` that
+        follows it (``Simulation.step`` checks, then steps)."""
+        plans = self._plan(sim, actions, agents)
+        if agents is None:
+            self._planned = (actions, plans)
+
+    def _plan(self, sim: Simulation, actions: dict, agents: np.ndarray | None) -> list:
+        """Per action-space group: ``(kind, members, commanded, direct, commands)``, the float64
+        arrays of its direct actions and lane-relative commands (None when it has none)."""
         plans = []
+        problems: list[str] = []
+        bad: list[str] = []
+        ids = sim.agent_ids
         for kind, members in self.groups.items():
             members = members[sim.agent_active[members]]
+            if agents is not None:
+                members = members[np.isin(members, agents)]
             if members.size == 0:
                 continue
-            commanded = self.commanded[members]
+            commanded = self.commanded[members] if self._group_commanded[kind] else None
             parts = []
-            for mask, controller in ((~commanded, "direct"), (commanded, "lane_relative")):
-                ids = [sim.agent_ids[i] for i in members[mask]]
-                parts.append(self._gather(kind, sim.actions, ids, controller) if ids else None)
+            for controller in ("direct", "lane_relative"):
+                if commanded is None:
+                    chosen = members if controller == "direct" else None
+                else:
+                    chosen = members[~commanded if controller == "direct" else commanded]
+                if chosen is None or chosen.size == 0:
+                    parts.append(None)
+                    continue
+                group_ids = [ids[i] for i in chosen.tolist()]
+                arr = _stack(kind, actions, group_ids, controller)
+                if arr is None:  # something is wrong, or unusual (tensors): look at each agent
+                    found = len(problems)
+                    for a in group_ids:
+                        problem = (
+                            action_problem(kind, actions[a], a, controller)
+                            if a in actions
+                            else f"{a}: no {action_label(kind, controller)} action given this step"
+                        )
+                        if problem is not None:
+                            problems.append(problem)
+                            bad.append(a)
+                    if len(problems) == found:  # each one is fine on its own
+                        arr = np.stack([np.asarray(actions[a], dtype=np.float64) for a in group_ids])
+                parts.append(arr)
             plans.append((kind, members, commanded, *parts))
+        if problems:
+            raise ActionError("; ".join(problems), bad)
+        return plans
+
+    def step(self, sim: Simulation, dt: float) -> None:
+        planned, self._planned = self._planned, None
+        if planned is not None and planned[0] is sim.actions:
+            plans = planned[1]
+        else:  # stepped without a check first: check now, still before anything moves
+            plans = self._plan(sim, sim.actions, None)
         for kind, members, commanded, direct, commands in plans:
             rows = sim.agent_row[members]
-            actions = np.empty((len(members), len(ACTION_COMPONENTS[kind])))
-            if direct is not None:
-                actions[~commanded] = direct
-            if commands is not None:  # lane-relative commands -> this space's own actions
-                actions[commanded] = self._from_commands(
-                    kind, sim, members[commanded], rows[commanded], commands, dt
-                )
+            if commanded is None:
+                actions = direct
+            else:
+                actions = np.empty((len(members), len(ACTION_COMPONENTS[kind])))
+                if direct is not None:
+                    actions[~commanded] = direct
+                if commands is not None:  # lane-relative commands -> this space's own actions
+                    actions[commanded] = self._from_commands(
+                        kind, sim, members[commanded], rows[commanded], commands, dt
+                    )
             self._drive(kind, sim, members, rows, actions, dt)
 
     def _from_commands(self, kind, sim, members, rows, commands, dt) -> np.ndarray:
@@ -205,22 +262,6 @@ class AgentProvider(ProviderBase):
         else:
             self._lane_step(sim, members, rows, actions, dt)
 
-    @staticmethod
-    def _gather(kind: ActionSpaceType, actions: dict, ids: list[str], controller: str = "direct") -> np.ndarray:
-        """One float64 array of the group's actions; malformed ones raise ``ActionError`` by agent."""
-        width = len(ACTION_COMPONENTS[kind]) if controller == "direct" else len(LANE_RELATIVE_COMPONENTS)
-        try:
-            arr = np.array([actions[a] for a in ids], dtype=np.float64)
-        except (KeyError, TypeError, ValueError):
-            arr = None
-        if arr is None or arr.ndim != 2 or arr.shape[1] != width or not np.isfinite(arr).all():
-            for a in ids:  # find the culprit(s) to name them
-                if a not in actions:
-                    raise ActionError(f"{a}: no action given this step", [a])
-                check_actions(kind, np.atleast_1d(np.asarray(actions[a], dtype=object))[None], [a], controller)
-            check_actions(kind, arr, ids, controller)
-        return arr
-
     def _lane_step(self, sim: Simulation, members, rows, actions, dt) -> None:
         """Follow the route path or the path one lane left/right of it (see ``MissionArrays``)."""
         target_speed, change = lane_command(actions, self.limits)
@@ -238,3 +279,18 @@ class AgentProvider(ProviderBase):
         self.lane_offset[members] = offset
         target = ma.paths[members, idx, path, :2]
         lane_control_step(sim.table, rows, target_speed, target, dt, self.limits, self.wheelbase[members])
+
+
+def _stack(kind: ActionSpaceType, actions: dict, ids: list[str], controller: str) -> np.ndarray | None:
+    """The ``[n, k]`` float64 array of the agents' actions, or None when any is missing, not real
+    numbers, wrongly shaped or not finite (checked on the stacked array: no work per agent)."""
+    try:
+        arr = np.array([actions[a] for a in ids])
+    except (KeyError, TypeError, ValueError):
+        return None
+    if arr.dtype.kind not in REAL_KINDS or arr.shape != (len(ids), len(action_components(kind, controller))):
+        return None
+    arr = arr.astype(np.float64, copy=False)
+    if not np.isfinite(arr).all():
+        return None
+    return arr

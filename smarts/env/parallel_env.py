@@ -154,19 +154,39 @@ class DrivingParallelEnv(ParallelEnv):
         obs = self._split(self._learners(batches) if self.social.any else batches)
         return obs, infos
 
-    def step(self, actions: dict[str, Any]):
+    def check_actions(self, actions: Mapping[str, Any]) -> None:
+        """Raise the ``ActionError`` that ``step(actions)`` would raise, changing nothing (a batch
+        of env copies checks every copy before stepping any)."""
+        self._checked(actions, full=True)
+
+    def _checked(self, actions: Mapping[str, Any], full: bool) -> tuple[dict, np.ndarray | None, np.ndarray | None]:
+        """The learners' driving actions, message payloads and channels; raises ``ActionError``
+        for unknown or missing agents and malformed messages. ``full`` (or social agents, whose
+        policies must not run on a step that is then refused) also checks the driving actions;
+        otherwise ``Simulation.step`` checks them, still before anything moves."""
         live = set(self.agents)
         unknown = [a for a in actions if a not in live]
         if unknown:
             raise ActionError(f"actions given for agents that are not live: {unknown}; live agents: {self.agents}", unknown)
-        missing = [a for a in self.agents if a not in actions]
-        if missing:
+        if len(actions) != len(live):
+            missing = [a for a in self.agents if a not in actions]
             raise ActionError(f"no action given for live agents {missing}", missing)
+        payloads = channels = None
+        if self.comms is not None:  # social agents send nothing
+            actions, payloads, channels = self.comms.split(actions, self.agents, self._live)
+        if full or self.social.any:
+            self.sim.check_actions(actions, self._live)
+        return actions, payloads, channels
+
+    def step(self, actions: dict[str, Any]):
+        """One step of every live agent. Atomic: a missing, unknown or malformed action raises
+        ``ActionError`` naming the agents and what was expected, and changes nothing (vehicles,
+        controllers, traffic, messages, clock, step count and the next observation are as if the
+        call had not been made)."""
         sim = self.sim
         comms = self.comms
-        if comms is not None:  # checked before anything moves; social agents send nothing
-            actions, payloads, channels = comms.split(actions, self.agents, self._live)
-            senders = self._live
+        actions, payloads, channels = self._checked(actions, full=False)
+        senders = self._live
         if self.social.any:
             actions = dict(actions)
             for members, batch in self._last:

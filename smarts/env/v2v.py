@@ -30,6 +30,7 @@ from smarts.comms import (
 )
 from smarts.core.simulation import Simulation
 from smarts.core.errors import ActionError
+from smarts.dynamics.action_spaces import REAL_KINDS
 from smarts.sensors.suite import Batch
 
 
@@ -87,11 +88,12 @@ class V2VLink:
         k0 = int(k[0])
         if (k == k0).all():  # the usual case: one stacked array for everyone
             try:
-                arr = np.asarray([actions[a] for a in ids], dtype=np.float64)
+                arr = np.asarray([actions[a] for a in ids])
             except (TypeError, ValueError):
                 arr = None
-            if arr is None or arr.shape != (n, k0 + width):
+            if arr is None or arr.dtype.kind not in REAL_KINDS or arr.shape != (n, k0 + width):
                 self._raise_malformed(actions, ids, k)
+            arr = arr.astype(np.float64, copy=False)
             control = dict(zip(ids, arr[:, :k0]))
             messages = arr[:, k0:]
         else:
@@ -133,7 +135,10 @@ class V2VLink:
     # ------------------------------------------------------------------ errors
     def _one(self, action: Any, agent: str, k: int) -> np.ndarray:
         try:
-            arr = np.asarray(action, dtype=np.float64)
+            arr = np.asarray(action)
+            if arr.dtype.kind not in REAL_KINDS:
+                raise TypeError(arr.dtype)
+            arr = arr.astype(np.float64, copy=False)
         except (TypeError, ValueError):
             raise ActionError(
                 f"{agent}: action {action!r} is not an array of numbers; expected "

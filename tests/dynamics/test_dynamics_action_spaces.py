@@ -100,6 +100,12 @@ def test_check_actions_wrong_shapes():
         check_actions("target_pose", np.zeros(3), ["ego"])
     with pytest.raises(ActionError, match="not numbers"):
         check_actions("target_pose", [["a", "b", "c"]], ["ego"])
+    with pytest.raises(ActionError, match="not numbers"):  # text that looks like numbers is still text
+        check_actions("target_pose", [["1", "2", "3"]], ["ego"])
+    with pytest.raises(ActionError, match=r"not numbers \(dtype complex128\)"):  # not cut to its real part
+        check_actions("target_pose", np.array([[1j, 0, 0]]), ["ego"])
+    with pytest.raises(ActionError, match=r"not numbers \(dtype bool\)"):
+        check_actions("continuous", np.array([[True, False, False]]), ["ego"])
 
 
 def test_finite_out_of_range_actions_are_not_errors():
