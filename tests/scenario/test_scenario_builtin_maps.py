@@ -3,13 +3,23 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
+import shutil
+import signal
+import subprocess
+import sys
+import warnings
 import xml.etree.ElementTree as ET
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 import pytest
 import sumolib
 
+from smarts import cache
+from smarts.maps import load_map
+from smarts.maps.loader import clear_memory_cache
 from smarts.scenario import BUILTIN_MAPS, NetconvertError, ScenarioError, builtin_map_path
 from smarts.scenario.builtin_maps import (
     MapRecipe,
@@ -166,8 +176,9 @@ def test_cache_reuses_a_build_and_regenerates_on_change(tmp_path):
     assert changed != first and changed.parent.parent == first.parent.parent
     assert sumolib.net.readNet(str(changed)).getEdge("main").getSpeed() == pytest.approx(20.0)
     assert sumolib.net.readNet(str(first)).getEdge("main").getSpeed() == pytest.approx(13.89)
-    # The generated inputs are kept next to the output for inspection.
+    # The generated inputs are kept next to the output for inspection, with their checksums.
     assert sorted(p.name for p in changed.parent.iterdir()) == [
+        "SHA256SUMS",
         "straight_2lane.edg.xml",
         "straight_2lane.net.xml",
         "straight_2lane.nod.xml",
@@ -229,3 +240,136 @@ def test_unknown_map_name_lists_the_known_ones(tmp_path):
     assert "straight_9lane" in message
     assert all(name in message for name in BUILTIN_MAPS)
     assert isinstance(info.value, ValueError)
+
+
+# ---------------------------------------------------------------- damaged and unwritable caches
+@pytest.fixture
+def fresh_fallback(monkeypatch):
+    """No temporary cache and no warning given yet in this process; removes what the test made."""
+    monkeypatch.setattr(cache, "_fallback", None)
+    monkeypatch.setattr(cache, "_warned", set())
+    yield
+    if cache._fallback is not None:
+        shutil.rmtree(cache._fallback, ignore_errors=True)
+
+
+def test_truncated_netconvert_output_in_the_cache_is_rebuilt(tmp_path, built_maps, caplog):
+    net = compile_map(BUILTIN_MAPS["t_junction"], tmp_path)
+    whole = net.read_bytes()
+    assert whole == built_maps["t_junction"].read_bytes()
+    net.write_bytes(whole[: len(whole) // 2])  # e.g. a copy cut short by a full disk
+    caplog.set_level(logging.WARNING)
+    for _ in range(2):  # rebuilt once, then reused
+        again = builtin_map_path("t_junction", tmp_path)
+        assert again == net and again.read_bytes() == whole
+        clear_memory_cache()
+        assert "south_in" in load_map(again, cache_dir=tmp_path / "maps").road_ids
+    rebuilt = [r for r in caplog.records if "rebuilding the cached built-in map" in r.getMessage()]
+    assert len(rebuilt) == 1 and "does not match its recorded SHA-256" in rebuilt[0].getMessage()
+    assert os.listdir(cache_root(tmp_path)) == [net.parent.name]
+
+
+def _permission_bits_bind() -> bool:
+    """Whether a 0o500 folder refuses writes here (not for root, which bypasses the bits)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        probe = Path(d) / "ro"
+        probe.mkdir()
+        probe.chmod(0o500)
+        try:
+            (probe / "x").write_text("")
+        except PermissionError:
+            return True
+        finally:
+            probe.chmod(0o700)
+        return False
+
+
+PERMISSIONS_SKIP = pytest.mark.skipif(
+    not _permission_bits_bind(),
+    reason="permission bits do not stop this user (root); the path-under-a-file tests cover the fallback",
+)
+
+
+@pytest.mark.parametrize("damage", ["manifest removed", "input removed", "entry is a file"])
+def test_incomplete_cache_entry_is_rebuilt(tmp_path, damage):
+    recipe = BUILTIN_MAPS["straight_2lane"]
+    net = compile_map(recipe, tmp_path)
+    whole = net.read_bytes()
+    if damage == "manifest removed":
+        (net.parent / "SHA256SUMS").unlink()
+    elif damage == "input removed":
+        (net.parent / "straight_2lane.edg.xml").unlink()
+    else:
+        shutil.rmtree(net.parent)
+        net.parent.write_text("")
+    assert compile_map(recipe, tmp_path) == net
+    assert net.read_bytes() == whole
+    assert (net.parent / "straight_2lane.edg.xml").is_file()
+
+
+def test_build_killed_before_it_is_in_place_leaves_no_entry(tmp_path):
+    code = (
+        "import os, signal, sys\n"
+        "from smarts.scenario.builtin_maps import BUILTIN_MAPS, compile_map\n"
+        "real = os.rename\n"
+        "def dying(src, dst):\n"
+        "    if '.tmp-build' in str(src):\n"
+        "        os.kill(os.getpid(), signal.SIGKILL)\n"
+        "    return real(src, dst)\n"
+        "os.rename = dying\n"
+        "compile_map(BUILTIN_MAPS['straight_2lane'], sys.argv[1])\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code, str(tmp_path)])
+    assert done.returncode == -signal.SIGKILL
+    (left,) = os.listdir(cache_root(tmp_path))
+    assert left.startswith(".tmp-build-straight_2lane-")  # a temporary name, never read as an entry
+    net = compile_map(BUILTIN_MAPS["straight_2lane"], tmp_path)
+    assert sumolib.net.readNet(str(net)).getEdge("main").getLaneNumber() == 2
+    assert sorted(os.listdir(cache_root(tmp_path))) == sorted([left, net.parent.name])
+
+
+def test_unwritable_cache_builds_in_a_temporary_one_with_one_warning(tmp_path, fresh_fallback):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    wanted = blocker / "cache"  # cannot be created, even by root
+    clear_memory_cache()
+    with pytest.warns(cache.UnwritableCacheWarning) as record:
+        net = builtin_map_path("straight_2lane", wanted)
+        road_map = load_map(net, cache_dir=wanted / "maps")
+        assert builtin_map_path("straight_2lane", wanted) == net  # reused, no second warning
+    assert len(record) == 1
+    message = str(record[0].message)
+    assert str(wanted / "netconvert") in message and "SMARTS_CACHE_DIR" in message
+    fallback = cache.fallback_home(create=False)
+    assert fallback.name.startswith("smarts-cache-") and net.is_relative_to(fallback)
+    assert road_map.lane_ids == ["main_0", "main_1"]
+    assert cache.check_manifest(net.parent, [net.name]) is None
+
+
+def test_unwritable_cache_from_the_environment(tmp_path, monkeypatch, fresh_fallback):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    monkeypatch.setenv("SMARTS_CACHE_DIR", str(blocker / "cache"))
+    with pytest.warns(cache.UnwritableCacheWarning, match=r"cache/netconvert.*SMARTS_CACHE_DIR"):
+        net = builtin_map_path("straight_2lane")
+    assert net.is_relative_to(cache.fallback_home(create=False))
+
+
+@PERMISSIONS_SKIP
+def test_read_only_cache_falls_back_and_still_reads_its_entries(tmp_path, fresh_fallback):
+    built = compile_map(BUILTIN_MAPS["straight_2lane"], tmp_path)
+    for folder in (tmp_path, cache_root(tmp_path)):
+        folder.chmod(0o500)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # an intact entry is read without writing anything
+            assert compile_map(BUILTIN_MAPS["straight_2lane"], tmp_path) == built
+        with pytest.warns(cache.UnwritableCacheWarning, match="SMARTS_CACHE_DIR") as record:
+            other = compile_map(BUILTIN_MAPS["t_junction"], tmp_path)
+        assert len(record) == 1 and str(cache_root(tmp_path)) in str(record[0].message)
+        assert other.is_relative_to(cache.fallback_home(create=False))
+    finally:
+        for folder in (tmp_path, cache_root(tmp_path)):
+            folder.chmod(0o700)
