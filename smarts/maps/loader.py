@@ -8,20 +8,24 @@ memory for the life of the process.
 from __future__ import annotations
 
 import hashlib
-import tempfile
+import logging
+import shutil
 from pathlib import Path
 
+from smarts import cache
 from smarts.cache import cache_home
 from smarts.maps.errors import MapError
 from smarts.maps.opendrive import convert_opendrive
 from smarts.maps.road_map import RoadMap
 from smarts.maps.sumo_net import compile_sumo_net, read_map_bytes
 
-FORMAT_VERSION = 2
-"""Version of the compiled arrays; bump it whenever compilation output changes meaning."""
+FORMAT_VERSION = 3
+"""Version of the compiled arrays; bump it whenever compilation output changes meaning
+(3: the file records the SHA-256 of its arrays)."""
 
 _SUFFIXES = (".net.xml", ".xodr")
 _loaded: dict[str, RoadMap] = {}
+_log = logging.getLogger(__name__)
 
 
 def default_cache_dir() -> Path:
@@ -30,7 +34,12 @@ def default_cache_dir() -> Path:
 
 
 def load_map(path: str | Path, cache_dir: Path | None = None) -> RoadMap:
-    """Compiled :class:`RoadMap` for a ``.net.xml`` or ``.xodr`` file (cached by content hash)."""
+    """Compiled :class:`RoadMap` for a ``.net.xml`` or ``.xodr`` file (cached by content hash).
+
+    A cached file that is unreadable, partial or fails its recorded SHA-256 is compiled again and
+    replaced; an unwritable cache folder falls back to this process's temporary cache (one warning,
+    see ``smarts.cache``).
+    """
     path = Path(path)
     name = _checked_name(path)
     content_hash = hashlib.sha256(read_map_bytes(path)).hexdigest()
@@ -39,43 +48,69 @@ def load_map(path: str | Path, cache_dir: Path | None = None) -> RoadMap:
     if road_map is not None:
         return road_map
 
-    cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    cached_file = cache / f"{key}.npz"
-    if cached_file.is_file():
+    cache_folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    for folder in cache.candidates(cache_folder):
+        cached_file = folder / f"{key}.npz"
+        if not cached_file.is_file():
+            continue
         try:
             road_map = RoadMap.load(cached_file)
-        except Exception:  # a truncated or foreign file: recompile and overwrite it
-            road_map = None
+            break
+        except MapError as err:  # a truncated or damaged entry: compile again and replace it
+            _log.warning("rebuilding the cached compiled map: %s", err)
     if road_map is None:
-        road_map = _compile(path, name, cache, content_hash)
+        road_map = _compile(path, name, cache_folder, content_hash)
+        folder = cache.writable_dir(cache_folder)
         try:
-            cache.mkdir(parents=True, exist_ok=True)
-            road_map.save(cached_file)
-        except OSError:
-            pass  # a read-only cache only costs a recompile next time
+            road_map.save(folder / f"{key}.npz")
+        except OSError as err:
+            try:
+                road_map.save(cache.fallback_for(cache_folder, err) / f"{key}.npz")
+            except OSError:
+                pass  # not even the temporary cache: the map is still kept in memory
     _loaded[key] = road_map
     return road_map
 
 
 def sumo_net_path(path: str | Path, cache_dir: Path | None = None) -> Path:
     """The SUMO network for a map file: the file itself for ``.net.xml``, or the (cached)
-    netconvert output for ``.xodr``, so SUMO traffic can run on either format."""
+    netconvert output for ``.xodr``, so SUMO traffic can run on either format.
+
+    A converted network is cached as a folder ``<sha256 of the .xodr>-net`` holding the
+    ``.net.xml`` and a ``SHA256SUMS`` manifest; it is built privately and renamed into place, and
+    rebuilt when its files no longer match the manifest.
+    """
     path = Path(path)
     if _checked_name(path).endswith(".net.xml"):
         if not path.is_file():
             raise MapError(f"{path}: map file not found")
         return path
     content_hash = hashlib.sha256(read_map_bytes(path)).hexdigest()
-    cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    out_dir = cache / f"{content_hash}-net"
-    name = path.name[: -len(".xodr")]
-    existing = out_dir / f"{name}.net.xml"
-    if existing.is_file():
-        return existing
+    cache_folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    entry_name = f"{content_hash}-net"
+    net_name = f"{path.name[: -len('.xodr')]}.net.xml"
+    for folder in cache.candidates(cache_folder):
+        problem = cache.check_manifest(folder / entry_name, [net_name])
+        if problem is None:
+            return folder / entry_name / net_name
+        if problem != "missing":
+            _log.warning("rebuilding the cached network of %s in %s: %s", path, folder, problem)
+    folder = cache.writable_dir(cache_folder)
     try:
-        return convert_opendrive(path, out_dir)
-    except OSError:
-        return convert_opendrive(path, Path(tempfile.mkdtemp(prefix="smarts-xodr-")))
+        build = cache.new_build_dir(folder, "xodr")
+    except OSError as err:
+        folder = cache.fallback_for(cache_folder, err)
+        build = cache.new_build_dir(folder, "xodr")
+    try:
+        convert_opendrive(path, build)
+        cache.write_manifest(build, [net_name])
+        final = cache.publish_dir(
+            build, folder / entry_name, lambda d: cache.check_manifest(d, [net_name]) is None
+        )
+    finally:
+        if build.exists():
+            shutil.rmtree(build, ignore_errors=True)
+    return final / net_name
 
 
 def _compile(path: Path, name: str, cache: Path, content_hash: str) -> RoadMap:

@@ -16,10 +16,29 @@ flat array ``X`` for lane ``i``.
 
 from __future__ import annotations
 
+import hashlib
+import io
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
+
+from smarts.cache import atomic_write_bytes
+from smarts.maps.errors import MapError
+
+CHECKSUM_KEY = "_sha256"
+"""Entry of a saved map holding the SHA-256 of all its other arrays (see :func:`arrays_sha256`)."""
+
+
+def arrays_sha256(arrays: Mapping[str, np.ndarray]) -> str:
+    """SHA-256 over the names, dtypes, shapes and bytes of ``arrays`` (in name order)."""
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        value = np.ascontiguousarray(arrays[name])
+        h.update(f"{name}\0{value.dtype.str}\0{value.shape}\0".encode())
+        h.update(value.tobytes())
+    return h.hexdigest()
 
 
 @dataclass
@@ -150,8 +169,8 @@ class RoadMap:
         return self.lanepoints[a:b], self.lanepoint_s[a:b], self.lanepoint_heading[a:b]
 
     # ------------------------------------------------------------------ persistence
-    def save(self, path: Path) -> None:
-        """Write every field to one ``.npz`` file (no pickles, so loading runs no code)."""
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """Every field as plain arrays (strings as unicode arrays, no objects)."""
         arrays: dict[str, np.ndarray] = {}
         for f in fields(self):
             if f.name in ("lane_index_of", "road_index_of"):
@@ -167,30 +186,58 @@ class RoadMap:
             if isinstance(value, list):
                 value = np.array(value, dtype=np.str_)
             arrays[f.name] = np.asarray(value)
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez(tmp, **arrays)
-        tmp.replace(path)
+        return arrays
+
+    @classmethod
+    def from_arrays(cls, data: Mapping[str, np.ndarray]) -> "RoadMap":
+        kwargs = {}
+        for f in fields(cls):
+            if f.name in ("lane_index_of", "road_index_of", "junction_shapes"):
+                continue
+            value = data[f.name]
+            if f.name in ("lane_ids", "road_ids", "tls_ids"):
+                value = [str(v) for v in value]
+            elif f.name in ("source", "content_hash"):
+                value = str(value)
+            elif f.name in ("grid_cell", "grid_margin", "raster_resolution"):
+                value = float(value)
+            elif f.name == "grid_shape":
+                value = (int(value[0]), int(value[1]))
+            kwargs[f.name] = value
+        offsets = data["junction_shape_offsets"]
+        pts = data["junction_shape_points"]
+        kwargs["junction_shapes"] = [
+            pts[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)
+        ]
+        return cls(**kwargs)
+
+    def save(self, path: Path) -> None:
+        """Write every field to one ``.npz`` file (no pickles, so loading runs no code).
+
+        The file records the SHA-256 of its arrays, checked by :meth:`load`, and is written
+        atomically: readers see the old file, no file, or the whole new one.
+        """
+        arrays = self.to_arrays()
+        arrays[CHECKSUM_KEY] = np.array(arrays_sha256(arrays))
+        buffer = io.BytesIO()
+        np.savez(buffer, **arrays)
+        atomic_write_bytes(Path(path), buffer.getvalue())
 
     @classmethod
     def load(cls, path: Path) -> "RoadMap":
-        with np.load(path, allow_pickle=False) as data:
-            kwargs = {}
-            for f in fields(cls):
-                if f.name in ("lane_index_of", "road_index_of", "junction_shapes"):
-                    continue
-                value = data[f.name]
-                if f.name in ("lane_ids", "road_ids", "tls_ids"):
-                    value = [str(v) for v in value]
-                elif f.name in ("source", "content_hash"):
-                    value = str(value)
-                elif f.name in ("grid_cell", "grid_margin", "raster_resolution"):
-                    value = float(value)
-                elif f.name == "grid_shape":
-                    value = (int(value[0]), int(value[1]))
-                kwargs[f.name] = value
-            offsets = data["junction_shape_offsets"]
-            pts = data["junction_shape_points"]
-            kwargs["junction_shapes"] = [
-                pts[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)
-            ]
-        return cls(**kwargs)
+        """Read a file written by :meth:`save`; a :class:`MapError` when it is unreadable, partial
+        or does not match its recorded SHA-256."""
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                arrays = {name: data[name] for name in data.files}
+        except Exception as err:  # zip, npy and OS errors alike: the file is unusable
+            raise MapError(f"{path}: unreadable compiled map ({type(err).__name__}: {err})") from None
+        recorded = arrays.pop(CHECKSUM_KEY, None)
+        if recorded is None:
+            raise MapError(f"{path}: compiled map without a recorded checksum")
+        if str(recorded) != arrays_sha256(arrays):
+            raise MapError(f"{path}: compiled map does not match its recorded SHA-256")
+        try:
+            return cls.from_arrays(arrays)
+        except (KeyError, IndexError, TypeError, ValueError) as err:
+            raise MapError(f"{path}: compiled map is missing or has a malformed field ({err})") from None

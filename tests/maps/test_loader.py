@@ -4,12 +4,17 @@ from __future__ import annotations
 
 import hashlib
 import shutil
+import signal
+import subprocess
+import sys
+import warnings
 from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from smarts import cache
 from smarts.maps import FORMAT_VERSION, MapError, load_map, project, sumo_net_path
 from smarts.maps.loader import clear_memory_cache
 from smarts.maps.road_map import RoadMap
@@ -109,3 +114,144 @@ def test_xodr_through_the_loader(tmp_path: Path, straight_xodr: Path) -> None:
     assert net.name == "straight.net.xml" and net.parent.parent == tmp_path / "cache"
     assert "<lane " in net.read_text()
     assert sumo_net_path(net) == net
+
+
+# ---------------------------------------------------------------- damaged and unwritable caches
+@pytest.fixture
+def fresh_fallback(monkeypatch: pytest.MonkeyPatch):
+    """No temporary cache and no warning given yet in this process; removes what the test made."""
+    monkeypatch.setattr(cache, "_fallback", None)
+    monkeypatch.setattr(cache, "_warned", set())
+    yield
+    if cache._fallback is not None:
+        shutil.rmtree(cache._fallback, ignore_errors=True)
+
+
+def cached_npz(cache_dir: Path, source: Path) -> Path:
+    digest = hashlib.sha256(source.read_bytes()).hexdigest()
+    return cache_dir / f"{digest}-v{FORMAT_VERSION}.npz"
+
+
+def test_truncated_compiled_map_is_rebuilt(tmp_path: Path, straight_net: Path) -> None:
+    cache_dir = tmp_path / "cache"
+    clear_memory_cache()
+    first = load_map(straight_net, cache_dir=cache_dir)
+    entry = cached_npz(cache_dir, straight_net)
+    whole = entry.read_bytes()
+    for cut in (len(whole) // 2, len(whole) - 30):  # a cut inside the arrays and one in the index
+        entry.write_bytes(whole[:cut])
+        clear_memory_cache()
+        again = load_map(straight_net, cache_dir=cache_dir)
+        assert_same_map(first, again)
+        assert_same_map(first, RoadMap.load(entry))  # the entry itself was replaced
+    assert sorted(p.name for p in cache_dir.iterdir()) == [entry.name]
+
+
+def test_compiled_map_with_a_changed_array_is_rebuilt(tmp_path: Path, straight_net: Path) -> None:
+    cache_dir = tmp_path / "cache"
+    clear_memory_cache()
+    first = load_map(straight_net, cache_dir=cache_dir)
+    entry = cached_npz(cache_dir, straight_net)
+    with np.load(entry) as data:
+        arrays = {name: data[name] for name in data.files}
+    arrays["lane_speed_limit"] = arrays["lane_speed_limit"] * 2  # a well-formed file, wrong content
+    np.savez(entry, **arrays)
+    with pytest.raises(MapError, match="does not match its recorded SHA-256"):
+        RoadMap.load(entry)
+    clear_memory_cache()
+    assert_same_map(first, load_map(straight_net, cache_dir=cache_dir))
+    assert_same_map(first, RoadMap.load(entry))
+
+
+def test_writer_killed_before_the_rename_leaves_no_entry(tmp_path: Path, straight_net: Path) -> None:
+    cache_dir = tmp_path / "cache"
+    code = (
+        "import os, signal, sys\n"
+        "from pathlib import Path\n"
+        "from smarts.maps import load_map\n"
+        "real = os.replace\n"
+        "def dying(src, dst):\n"
+        "    if str(dst).endswith('.npz'):\n"
+        "        os.kill(os.getpid(), signal.SIGKILL)\n"
+        "    return real(src, dst)\n"
+        "os.replace = dying\n"
+        "load_map(Path(sys.argv[1]), cache_dir=Path(sys.argv[2]))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code, str(straight_net), str(cache_dir)])
+    assert done.returncode == -signal.SIGKILL
+    entry = cached_npz(cache_dir, straight_net)
+    assert not entry.exists()
+    assert [p.name.startswith(".tmp-") for p in cache_dir.iterdir()] == [True]  # written, unused
+    clear_memory_cache()
+    m = load_map(straight_net, cache_dir=cache_dir)
+    assert m.lane_ids == ["AB_1", "AB_2"] and RoadMap.load(entry).lane_ids == m.lane_ids
+
+
+def test_damaged_converted_network_of_an_xodr_is_rebuilt(
+    tmp_path: Path, straight_xodr: Path
+) -> None:
+    cache_dir = tmp_path / "cache"
+    net = sumo_net_path(straight_xodr, cache_dir)
+    whole = net.read_bytes()
+    assert (net.parent / "SHA256SUMS").is_file()
+    net.write_bytes(whole[: len(whole) // 2])
+    assert sumo_net_path(straight_xodr, cache_dir) == net
+    rebuilt = net.read_bytes()  # the same network (only the header's build time may differ)
+    assert len(rebuilt) == len(whole) and rebuilt.rstrip().endswith(b"</net>")
+    clear_memory_cache()
+    assert load_map(straight_xodr, cache_dir=cache_dir).num_lanes == 2
+
+
+def test_corrupt_user_map_is_an_error_naming_the_file(
+    tmp_path: Path, straight_net: Path, straight_xodr: Path
+) -> None:
+    cache_dir = tmp_path / "cache"
+    net = tmp_path / "half.net.xml"
+    whole = straight_net.read_bytes()
+    net.write_bytes(whole[: len(whole) // 2])
+    with pytest.raises(MapError, match=r"half\.net\.xml: not a valid XML file"):
+        load_map(net, cache_dir=cache_dir)
+    xodr = tmp_path / "half.xodr"
+    text = straight_xodr.read_bytes()
+    xodr.write_bytes(text[: len(text) // 2])
+    with pytest.raises(MapError, match=r"half\.xodr: netconvert could not convert"):
+        load_map(xodr, cache_dir=cache_dir)
+    with pytest.raises(MapError, match=r"half\.xodr"):
+        sumo_net_path(xodr, cache_dir)
+    # Nothing was cached for either file; no temporary left behind.
+    assert not cache_dir.exists() or list(cache_dir.iterdir()) == []
+
+
+def test_unwritable_cache_falls_back_to_a_temporary_one_with_one_warning(
+    tmp_path: Path, straight_net: Path, straight_xodr: Path, fresh_fallback: None
+) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    cache_dir = blocker / "maps"
+    clear_memory_cache()
+    with pytest.warns(cache.UnwritableCacheWarning) as record:
+        m = load_map(straight_net, cache_dir=cache_dir)
+        assert load_map(straight_xodr, cache_dir=cache_dir).num_lanes == 2
+    assert len(record) == 1
+    assert str(cache_dir) in str(record[0].message)
+    assert "SMARTS_CACHE_DIR" in str(record[0].message)
+    fallback = cache.fallback_home(create=False)
+    assert fallback is not None and fallback.name.startswith("smarts-cache-")
+    assert cached_npz(fallback / "maps", straight_net).is_file()
+
+    clear_memory_cache()  # the next load in this process reads the temporary cache
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert_same_map(m, load_map(straight_net, cache_dir=cache_dir))
+        assert sumo_net_path(straight_xodr, cache_dir).is_relative_to(fallback)
+
+
+def test_unwritable_cache_from_the_environment(
+    tmp_path: Path, straight_net: Path, monkeypatch: pytest.MonkeyPatch, fresh_fallback: None
+) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    monkeypatch.setenv("SMARTS_CACHE_DIR", str(blocker / "cache"))
+    clear_memory_cache()
+    with pytest.warns(cache.UnwritableCacheWarning, match="SMARTS_CACHE_DIR"):
+        assert load_map(straight_net).lane_ids == ["AB_1", "AB_2"]
