@@ -8,6 +8,8 @@ import contextlib
 from collections.abc import Iterator
 
 LOCAL = "local"
+LOOPBACK = "127.0.0.1"
+"""Address a private (``local``) Ray instance listens on: reachable from this machine only."""
 
 
 def import_ray():
@@ -23,7 +25,8 @@ def import_ray():
 def ray_session(address: str, num_cpus: int = 2) -> Iterator[object]:
     """Connect to Ray at ``address`` for the block and yield the ``ray`` module.
 
-    ``local`` starts a private Ray instance on this machine with ``num_cpus`` CPUs; ``auto`` joins
+    ``local`` starts a private Ray instance on this machine with ``num_cpus`` CPUs, listening on
+    127.0.0.1 only (no dashboard), so nothing outside the machine can reach it; ``auto`` joins
     the cluster running here (``ray start --head``); ``HOST:PORT`` (or ``ray://HOST:PORT``) joins
     that cluster. A connection made here is closed at the end (a local instance is stopped); one
     that already existed is left open for its owner.
@@ -34,8 +37,9 @@ def ray_session(address: str, num_cpus: int = 2) -> Iterator[object]:
     connected_here = not ray.is_initialized()
     if connected_here:
         if address == LOCAL:
-            ray.init(address="local", num_cpus=num_cpus, include_dashboard=False, log_to_driver=False,
-                     configure_logging=False)  # fmt: skip
+            with _loopback_node():
+                ray.init(address="local", num_cpus=num_cpus, include_dashboard=False, log_to_driver=False,
+                         configure_logging=False, _node_ip_address=LOOPBACK)  # fmt: skip
         else:
             ray.init(address=address, log_to_driver=False, configure_logging=False)
     try:
@@ -43,3 +47,29 @@ def ray_session(address: str, num_cpus: int = 2) -> Iterator[object]:
     finally:
         if connected_here:
             ray.shutdown()
+
+
+@contextlib.contextmanager
+def _loopback_node() -> Iterator[None]:
+    """Let ``ray.init(_node_ip_address="127.0.0.1")`` keep the loopback address.
+
+    On Linux, Ray replaces a loopback node address with the machine's network address (so that
+    other machines could join), and its servers then listen on that interface. Ray keeps loopback
+    where clusters are disabled (its Windows/macOS default, ``ENABLE_RAY_CLUSTER``), so that switch
+    is turned off while a private instance starts. Were the switch ever to move, the instance still
+    starts; ``tests/test_ray.py`` checks the address it listens on.
+    """
+    try:
+        from ray._private import ray_constants
+    except ImportError:
+        yield
+        return
+    if not hasattr(ray_constants, "ENABLE_RAY_CLUSTER"):
+        yield
+        return
+    before = ray_constants.ENABLE_RAY_CLUSTER
+    ray_constants.ENABLE_RAY_CLUSTER = False
+    try:
+        yield
+    finally:
+        ray_constants.ENABLE_RAY_CLUSTER = before

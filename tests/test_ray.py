@@ -1,7 +1,10 @@
 """Ray scale-out: benchmark episodes as Ray tasks and PPO collectors as Ray actors, on a local
 Ray instance, give the same results as the process-pool path and a usable checkpoint."""
 
+import contextlib
+import ipaddress
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -43,3 +46,55 @@ def test_ray_collectors_need_envs_divisible_by_workers(tmp_path, capsys):
             "--out-dir", str(tmp_path), "--quiet"]  # fmt: skip
     assert main(args) == 2
     assert "must be multiples of workers" in capsys.readouterr().err
+
+
+def _listening_addresses(pids: set[int]) -> list[ipaddress.IPv4Address | ipaddress.IPv6Address]:
+    """Local addresses of the TCP sockets the processes ``pids`` listen on (Linux /proc)."""
+    inodes = set()
+    for pid in pids:
+        with contextlib.suppress(OSError):
+            for fd in os.listdir(f"/proc/{pid}/fd"):
+                with contextlib.suppress(OSError):
+                    link = os.readlink(f"/proc/{pid}/fd/{fd}")
+                    if link.startswith("socket:["):
+                        inodes.add(link[len("socket:[") : -1])
+    found = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        with contextlib.suppress(OSError), open(table) as f:
+            for row in f.read().splitlines()[1:]:
+                cols = row.split()
+                if cols[3] != "0A" or cols[9] not in inodes:  # 0A: LISTEN
+                    continue
+                raw = bytes.fromhex(cols[1].split(":")[0])  # 32-bit words in host (little) order
+                found.append(ipaddress.ip_address(b"".join(raw[i : i + 4][::-1] for i in range(0, len(raw), 4))))
+    return found
+
+
+def _descendants(pid: int) -> set[int]:
+    children: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            with contextlib.suppress(OSError):
+                stat = Path(f"/proc/{entry}/stat").read_text()
+                children.setdefault(int(stat.rpartition(")")[2].split()[1]), []).append(int(entry))
+    found, todo = set(), [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            if child not in found:
+                found.add(child)
+                todo.append(child)
+    return found
+
+
+def test_local_ray_listens_on_loopback_only():
+    from smarts.ray_session import ray_session
+
+    with ray_session("local", num_cpus=1) as ray:
+        assert [n["NodeManagerAddress"] for n in ray.nodes()] == ["127.0.0.1"]
+        assert ray.get_runtime_context().gcs_address.startswith("127.0.0.1:")
+        assert ray.get(ray.remote(lambda: ray.util.get_node_ip_address()).remote()) == "127.0.0.1"
+        if Path("/proc/net/tcp").exists():
+            addresses = _listening_addresses(_descendants(os.getpid()) | {os.getpid()})
+            assert addresses, "found none of Ray's listening sockets"
+            mapped = [getattr(a, "ipv4_mapped", None) or a for a in addresses]
+            assert all(a.is_loopback for a in mapped), addresses
