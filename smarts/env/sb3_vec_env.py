@@ -45,7 +45,8 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
-from smarts.core.errors import WorkerError
+from smarts.core.errors import ActionError, WorkerError
+from smarts.dynamics.action_spaces import REAL_KINDS
 from smarts.env.assembly import as_spec
 from smarts.env.parallel_env import DrivingParallelEnv
 from smarts.scenario import ScenarioSpec
@@ -90,6 +91,17 @@ class _EnvCopy:
         self.lengths = [0] * len(self.agents)
         self._write(obs, set(self.env.agents), out, offset)
         return [dict(infos.get(a, {})) for a in self.agents]
+
+    def check(self, actions: np.ndarray) -> None:
+        """Raise the ``ActionError`` that stepping ``actions`` would raise (naming this copy and
+        the agents), changing nothing."""
+        check = getattr(self.env, "check_actions", None)
+        if check is None or not self.env.agents:
+            return
+        try:
+            check({a: actions[self.slot_of[a]] for a in self.env.agents})
+        except ActionError as err:
+            raise ActionError(f"{self.name}: {err}", err.agent_ids) from None
 
     def step(
         self, actions: np.ndarray, out: dict, rewards: np.ndarray, dones: np.ndarray, offset: int
@@ -190,6 +202,8 @@ def _worker(remote: Any, parent_remote: Any, factory_bytes: bytes, name: str) ->
                 rewards, dones = np.zeros(n, np.float32), np.zeros(n, bool)
                 infos, reset_infos = copy.step(data, out, rewards, dones, 0)
                 reply = (out, rewards, dones, infos, reset_infos)
+            elif command == "check":
+                reply = copy.check(data)
             elif command == "reset":
                 out = _zeros(copy.keys, copy.env.observation_space(copy.agents[0]), len(copy.agents))
                 reply = (out, copy.reset(data[0], data[1], out, 0))
@@ -403,13 +417,28 @@ class SmartsVecEnv(VecEnv):
         return self._as_obs(out)
 
     def step_async(self, actions: np.ndarray) -> None:
+        """Atomic over the copies: when any number is not finite (or not a real number), every
+        copy checks its live agents' actions before any copy steps, so a refused step (an
+        ``ActionError`` naming the copy and agents; a ``WorkerError`` carrying it with
+        ``processes=True``) changes no copy. Actions of slots whose agent is not live are ignored."""
         actions = np.asarray(actions)
-        if actions.shape[0] != self.num_envs:
-            raise ValueError(f"actions: expected one row per slot ({self.num_envs}), got shape {actions.shape}")
+        expected = (self.num_envs, *self._agent_action_space.shape)
+        if actions.shape != expected:
+            raise ValueError(
+                f"actions: expected one row per slot ({self.num_envs}) of the agents' action shape "
+                f"{self._agent_action_space.shape}, i.e. shape {expected}; got shape {actions.shape}"
+            )
         if self.normalize_actions:
             actions = (self._act_low + (np.clip(actions, -1.0, 1.0) + 1.0) * self._act_half_range).astype(
                 self._agent_action_space.dtype
             )
+        if actions.dtype.kind not in REAL_KINDS or not np.isfinite(actions).all():
+            # Only now can a copy refuse its actions: ask all of them before any steps.
+            if self.processes:
+                self._ask_all([("check", actions[lo:hi]) for lo, hi in zip(self.offsets, self.offsets[1:])])
+            else:
+                for copy, lo, hi in zip(self._copies, self.offsets, self.offsets[1:]):
+                    copy.check(actions[lo:hi])
         if self.processes:
             for remote, lo, hi in zip(self._remotes, self.offsets, self.offsets[1:]):
                 remote.send(("step", actions[lo:hi]))

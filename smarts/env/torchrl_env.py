@@ -25,6 +25,8 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, TensorSpec, Unbounded
 from torchrl.envs import EnvBase, ParallelEnv, SerialEnv
 
+from smarts.core.errors import ActionError
+from smarts.dynamics.action_spaces import REAL_KINDS
 from smarts.env.assembly import as_spec
 from smarts.env.parallel_env import DrivingParallelEnv
 from smarts.scenario import ScenarioSpec
@@ -469,10 +471,19 @@ class SmartsBatchedEnv(EnvBase):
         reward = np.zeros((k, 1), dtype=np.float32)
         term = np.zeros((k, 1), dtype=bool)
         trunc = np.zeros((k, 1), dtype=bool)
-        for e, env in enumerate(self.envs):
-            if not env.agents:
-                continue
-            acting = {agent: actions[self._slot_of[(e, agent)]] for agent in env.agents}
+        steps = [
+            (e, env, {agent: actions[self._slot_of[(e, agent)]] for agent in env.agents})
+            for e, env in enumerate(self.envs)
+            if env.agents
+        ]
+        if actions.dtype.kind not in REAL_KINDS or not np.isfinite(actions).all():
+            # A copy may refuse its actions: every copy checks before any steps (atomic).
+            for e, env, acting in steps:
+                try:
+                    env.check_actions(acting)
+                except ActionError as err:
+                    raise ActionError(f"env copy {e} ({env.scenario.source}): {err}", err.agent_ids) from None
+        for e, env, acting in steps:
             obs, rewards, terms, truncs, _ = env.step(acting)
             for agent in acting:
                 j = self._slot_of[(e, agent)]

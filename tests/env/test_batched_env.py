@@ -5,6 +5,7 @@ import pytest
 import torch
 from torchrl.envs.utils import check_env_specs
 
+from smarts.core.errors import ActionError
 from smarts.env.task_rewards import RewardWeights, reward_factory
 from smarts.env.torchrl_env import SmartsBatchedEnv
 from tests.builders import agent, make_spec
@@ -73,3 +74,17 @@ def test_scenarios_must_share_spaces():
     other = make_spec([agent(offset=10.0, speed=10.0, action_space="continuous")])
     with pytest.raises(ValueError, match="observation or action space differs"):
         SmartsBatchedEnv([_specs()[0], other])
+
+
+def test_a_bad_action_in_one_copy_steps_no_copy():
+    env = SmartsBatchedEnv(_specs())
+    env.set_seed(0)
+    td = env.reset()
+    td = _one_metre_per_step(td)
+    td["action"][2, 1] = float("nan")  # copy 1, agent_1
+    with pytest.raises(ActionError, match=r"env copy 1 \(test-scenario\): agent_1: relative_target_pose action component dy is nan"):
+        env.step(td)
+    assert [e.sim.step_count for e in env.envs] == [0, 0]
+    td = _one_metre_per_step(env.reset())
+    env.step(td)
+    assert [e.sim.step_count for e in env.envs] == [1, 1]

@@ -8,6 +8,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.env_checker import check_env
 
 import smarts.env  # noqa: F401  (registers smarts/Driving-v0)
+from smarts.core.errors import ActionError
 from smarts.env import DrivingParallelEnv
 from smarts.env.sb3_vec_env import SmartsVecEnv, WorkerError
 from tests.builders import agent, make_spec
@@ -167,3 +168,38 @@ def test_spaces_must_be_shared_and_sumo_copies_need_processes():
         SmartsVecEnv([lambda: DrivingParallelEnv(mixed)])
     with pytest.raises(ValueError, match="SUMO traffic.*processes=True"):
         SmartsVecEnv.from_scenario("intersection_pedestrians", n_envs=2)
+
+
+@pytest.mark.parametrize("processes", [False, True], ids=["in_process", "workers"])
+def test_a_bad_action_in_one_copy_steps_no_copy(processes):
+    """The copies check before any steps: after a refused step the VecEnv goes on exactly like one
+    that never saw it."""
+    def factory():
+        return DrivingParallelEnv(short_two_agent_spec(30))
+
+    vec = SmartsVecEnv([factory] * 2, processes=processes, seed=5)
+    fresh = SmartsVecEnv([factory] * 2, seed=5)
+    try:
+        vec.reset(), fresh.reset()
+        good = np.stack([CRUISE, CRUISE * 0.5, CRUISE * 0.7, CRUISE])
+        for v in (vec, fresh):
+            v.step(good)
+        bad = good.copy()
+        bad[3, 2] = np.nan  # copy 1, agent_1
+        error = WorkerError if processes else ActionError
+        with pytest.raises(error, match=r"env copy 1: agent_1: relative_target_pose action component dheading is nan"):
+            vec.step(bad)
+        if not processes:
+            assert [c.env.sim.step_count for c in vec._copies] == [1, 1]
+        with pytest.raises(ValueError, match=r"expected one row per slot \(4\) of the agents' action shape \(3,\)"):
+            vec.step(good[:, :2])
+        for _ in range(3):
+            a, ra, da, _ = vec.step(good)
+            b, rb, db, _ = fresh.step(good)
+            for key in a:
+                np.testing.assert_array_equal(a[key], b[key])
+            np.testing.assert_array_equal(ra, rb)
+            np.testing.assert_array_equal(da, db)
+    finally:
+        vec.close()
+        fresh.close()
