@@ -13,12 +13,13 @@ from __future__ import annotations
 import difflib
 import os
 import typing
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
 import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic_core import InitErrorDetails, PydanticCustomError
 
 M = TypeVar("M", bound=BaseModel)
 
@@ -58,16 +59,26 @@ def load_yaml(path: str | os.PathLike, what: str, error: type[Exception] = Value
 
 def describe(model: type[BaseModel], problem: Mapping[str, Any], source: str) -> str:
     """One pydantic problem as ``source: a.b[2].c: message``."""
+    where, message = locate(model, problem)
+    return f"{source}: {where or '<top>'}: {message}"
+
+
+def locate(model: type[BaseModel], problem: Mapping[str, Any]) -> tuple[str, str]:
+    """One pydantic problem as (dotted field path, message); the path is ``""`` at the top level."""
     loc = [part for part in problem["loc"] if not _is_validator_tag(part)]
-    where = _dotted(loc) or "<top>"
+    where = _dotted(loc)
     kind = problem["type"]
     if kind == "extra_forbidden":
         known = sorted(_fields_at(model, loc[:-1]))
         guess = difflib.get_close_matches(str(loc[-1]), known, n=1)
         hint = f"; did you mean {guess[0]!r}?" if guess else ""
-        return f"{source}: {where}: unknown field{hint} (known: {', '.join(known)})"
+        return where, f"unknown field{hint} (known: {', '.join(known)})"
     if kind == "missing":
-        return f"{source}: {where}: required field missing"
+        return where, "required field missing"
+    if kind == CHECK:
+        return where, problem["msg"]
+    if kind in ("model_type", "model_attributes_type", "dict_type"):  # never name a model class
+        return where, f"input should be a valid dictionary, got {_short(problem.get('input'))}"
     message = problem["msg"]
     if message.startswith("Value error, "):
         message = message[len("Value error, ") :]
@@ -75,7 +86,29 @@ def describe(model: type[BaseModel], problem: Mapping[str, Any], source: str) ->
         message = message[len("Assertion failed, ") :]
     else:
         message = message[:1].lower() + message[1:]
-    return f"{source}: {where}: {message}, got {problem.get('input')!r}"
+    return where, f"{message}, got {_short(problem.get('input'))}"
+
+
+CHECK = "check"
+"""Error type of the problems a model's own checks report (:func:`field_errors`); their message is
+complete as written."""
+
+
+def field_errors(model: type[BaseModel] | BaseModel, problems: list[tuple[Any, str]]) -> ValidationError:
+    """A ``ValidationError`` to raise from a model validator, with one problem per (location,
+    message): the location (a field name, or a tuple of names and list indices; ``()`` for the
+    model itself) is relative to the model, and pydantic prefixes it with the model's own place in
+    the file, so every problem names its field exactly."""
+    title = model.__name__ if isinstance(model, type) else type(model).__name__
+    details = [
+        InitErrorDetails(
+            type=PydanticCustomError(CHECK, "{message}", {"message": message}),
+            loc=loc if isinstance(loc, tuple) else (loc,),
+            input=None,
+        )
+        for loc, message in problems
+    ]
+    return ValidationError.from_exception_data(title, details)
 
 
 def cli_options(model: type[BaseModel]) -> list[tuple[str, Any, str]]:
@@ -104,29 +137,52 @@ def _dotted(loc: list[Any]) -> str:
     return text
 
 
+def _short(value: Any) -> str:
+    """A value for a message: its repr, or what it is when that is long (a whole mapping)."""
+    text = repr(value)
+    if len(text) > 80 and isinstance(value, (Mapping, list, tuple)):
+        return f"a {'mapping' if isinstance(value, Mapping) else 'list'} of {len(value)} items"
+    return text
+
+
 def _fields_at(model: Any, loc: list[Any]) -> list[str]:
-    """Field names of the model reached by following ``loc`` from ``model``."""
-    current: Any = model
+    """Field names of the model reached by following ``loc`` (fields, list indices, mapping keys)
+    from ``model``."""
+    annotation: Any = model
     for part in loc:
-        if isinstance(part, int):
-            current = _item_type(current)
+        annotation = _step(annotation, part)
+        if annotation is None:
+            return []
+    found = _model_in(annotation)
+    return list(found.model_fields) if found is not None else []
+
+
+def _step(annotation: Any, part: Any) -> Any:
+    """The annotation one location part below ``annotation``: a model's field, a list's item or a
+    mapping's value (through optional, union and annotated wrappers)."""
+    for member in _members(annotation):
+        if isinstance(member, type) and issubclass(member, BaseModel):
+            if isinstance(part, str) and part in member.model_fields:
+                return member.model_fields[part].annotation
             continue
-        fields = getattr(current, "model_fields", None)
-        if not fields or part not in fields:
-            current = _item_type(current) if not fields else None
-            if current is None or not hasattr(current, "model_fields") or part not in current.model_fields:
-                return []
-            fields = current.model_fields
-        current = _model_in(fields[part].annotation)
-    return list(getattr(current, "model_fields", {}) or {})
+        origin, args = typing.get_origin(member), typing.get_args(member)
+        if origin is None or not args:
+            continue
+        if isinstance(origin, type) and issubclass(origin, Mapping):
+            return args[-1]
+        if isinstance(part, int) and origin in (list, tuple, set, frozenset, Sequence):
+            return args[0]
+    return None
 
 
-def _item_type(annotation: Any) -> Any:
-    for arg in typing.get_args(annotation) or ():
-        found = _model_in(arg)
-        if found is not None:
-            return found
-    return _model_in(annotation)
+def _members(annotation: Any) -> list[Any]:
+    """``annotation`` itself, or the members of a union / the type of an ``Annotated``."""
+    origin = typing.get_origin(annotation)
+    if origin is typing.Annotated:
+        return _members(typing.get_args(annotation)[0])
+    if origin is typing.Union or type(annotation).__name__ == "UnionType":
+        return [m for arg in typing.get_args(annotation) for m in _members(arg)]
+    return [annotation]
 
 
 def _model_in(annotation: Any) -> Any:
