@@ -22,6 +22,35 @@ from smarts.core.vehicle_table import COLUMN, Role, VehicleTable
 from smarts.maps import RoadMap, project
 from smarts.maps.drivable import raster_lookup
 
+SEED_MAX = 2**64 - 1
+"""The largest seed: numpy seeds with 64-bit words and ``torch.manual_seed`` takes at most this."""
+
+
+def check_seed(seed: object, what: str = "seed") -> int:
+    """``seed`` as a Python int, or ``ValueError`` naming ``what`` (the argument) and the value.
+
+    A seed is an integer (Python or numpy, not bool) from 0 to ``SEED_MAX``. A float is refused
+    even when whole (``1.0``), as numpy and gymnasium refuse it, so a computed seed is not silently
+    truncated."""
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        kind = "a bool" if isinstance(seed, (bool, np.bool_)) else f"of type {type(seed).__name__}"
+        raise ValueError(f"{what}: expected an integer from 0 to 2**64 - 1, got {seed!r} ({kind})")
+    value = int(seed)
+    if value < 0:
+        raise ValueError(f"{what}: expected an integer from 0 to 2**64 - 1, got {value} (negative)")
+    if value > SEED_MAX:
+        raise ValueError(
+            f"{what}: expected an integer from 0 to 2**64 - 1, got {value} (too large for numpy's "
+            "seed words and torch.manual_seed)"
+        )
+    return value
+
+
+def derived_seed(seed: int, offset: int) -> int:
+    """``seed + offset`` wrapped into the seed range (episode ``k`` of a seeded run, copy ``i``...)."""
+    return (int(seed) + int(offset)) % (SEED_MAX + 1)
+
+
 ROUTE_WINDOW_BACK = 2  # route points searched behind the last match
 ROUTE_WINDOW_AHEAD = 10  # ... and ahead of it (more than the farthest one-step move at ~1 m spacing)
 
@@ -51,7 +80,7 @@ class Simulation:
         self.road_map = road_map
         self.dt = float(dt)
         self.episode_steps = int(episode_steps)
-        self.seed = int(seed)
+        self.seed = check_seed(seed, "Simulation(seed=...)")
         self.event_config = events or EventConfig(terminate_on=_default_terminations())
         self.table = VehicleTable(capacity)
         self.missions = missions
@@ -110,7 +139,7 @@ class Simulation:
     # ------------------------------------------------------------------ episode
     def reset(self, seed: int | None = None) -> None:
         if seed is not None:
-            self.seed = int(seed)
+            self.seed = check_seed(seed, "Simulation.reset(seed=...)")
         self.rng = np.random.default_rng(self.seed)
         self.table.clear()
         self.time = 0.0

@@ -15,7 +15,7 @@ from smarts.core.errors import ScenarioError
 from smarts.core.events import NUM_EVENTS, event_from_name
 from smarts.core.missions import resolve_mission
 from smarts.core.spec import ScenarioSpec as PlainScenarioSpec
-from smarts.core.simulation import EventConfig, Simulation
+from smarts.core.simulation import EventConfig, Simulation, check_seed
 from smarts.core.vehicle_table import Role, VehicleType
 from smarts.dynamics.action_spaces import ActionSpaceType
 from smarts.dynamics.agent_provider import AgentProvider, AgentVehicle
@@ -92,7 +92,7 @@ def build_simulation(
         episode_steps=spec.episode_steps,
         events=events,
         capacity=spec.vehicle_capacity,
-        seed=spec.seed,
+        seed=check_seed(spec.seed, f"{spec.source}: seed"),
     )
     sim.signals = signals
     return sim

@@ -14,6 +14,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from smarts.core.simulation import check_seed
 from smarts.dynamics.limits import ReachLimits
 from smarts.env.assembly import as_spec
 from smarts.env.parallel_env import DrivingParallelEnv
@@ -60,6 +61,10 @@ class DrivingEnv(gym.Env):
         return self.env.sim
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """``seed``: an integer from 0 to 2**64 - 1 (numpy integers too), else ``ValueError``
+        naming it; None keeps the last one (first the scenario's)."""
+        if seed is not None:
+            seed = check_seed(seed, "DrivingEnv.reset(seed=...)")
         super().reset(seed=seed)
         obs, infos = self.env.reset(seed=seed, options=options)
         return obs[self.agent], infos[self.agent]

@@ -22,6 +22,7 @@ from pettingzoo import ParallelEnv
 from smarts.core.errors import ActionError
 from smarts.core.events import EVENT_NAMES, Event
 from smarts.core.policies import PolicyResolver
+from smarts.core.simulation import check_seed
 from smarts.dynamics.action_spaces import agent_action_space
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
@@ -139,8 +140,10 @@ class DrivingParallelEnv(ParallelEnv):
 
     # ------------------------------------------------------------------ episode
     def reset(self, seed: int | None = None, options: dict | None = None):
+        """Start an episode with ``seed`` (None: the last one, first the scenario's): an integer
+        from 0 to 2**64 - 1, else ``ValueError`` naming it."""
         sim = self.sim
-        sim.reset(seed if seed is not None else sim.seed)
+        sim.reset(sim.seed if seed is None else check_seed(seed, "DrivingParallelEnv.reset(seed=...)"))
         self.agents = list(self.possible_agents)
         self._live = np.array([sim.agent_index[a] for a in self.agents], dtype=np.int64)
         agents = sim.active_agents

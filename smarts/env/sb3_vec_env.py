@@ -26,7 +26,8 @@ flagged as an episode start.
 
 Seeding: ``seed(s)`` (and the constructor's ``seed``) seeds copy ``k``'s next reset with
 ``s + first slot of k``; each later episode of a copy takes the next number of a stream seeded
-by that value, so copies and episodes differ but a run is reproducible.
+by that value, so copies and episodes differ but a run is reproducible. A seed is an integer
+from 0 to 2**64 - 1; anything else is a ``ValueError`` naming it.
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
 from smarts.core.errors import ActionError, WorkerError
+from smarts.core.simulation import check_seed, derived_seed
 from smarts.dynamics.action_spaces import REAL_KINDS
 from smarts.env.assembly import as_spec
 from smarts.env.parallel_env import DrivingParallelEnv
@@ -286,7 +288,7 @@ class SmartsVecEnv(VecEnv):
             act_space = spaces.Box(-1.0, 1.0, act_space.shape, dtype=act_space.dtype)
         super().__init__(int(self.offsets[-1]), obs_space, act_space)
         if seed is not None:
-            self.seed(seed)
+            self.seed(check_seed(seed, "SmartsVecEnv(seed=...)"))
 
     @classmethod
     def from_scenario(
@@ -415,6 +417,16 @@ class SmartsVecEnv(VecEnv):
         self._reset_seeds()
         self._reset_options()
         return self._as_obs(out)
+
+    def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        """Seed the next reset: slot ``i``'s seed is ``seed + i`` (modulo 2**64; copy ``k`` uses
+        that of its first slot). ``seed`` is an integer from 0 to 2**64 - 1, else ``ValueError``
+        naming it; None draws one at random. Returns the slots' seeds."""
+        if seed is None:
+            seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
+        seed = check_seed(seed, "SmartsVecEnv.seed(seed)")
+        self._seeds = [derived_seed(seed, i) for i in range(self.num_envs)]
+        return self._seeds
 
     def step_async(self, actions: np.ndarray) -> None:
         """Atomic over the copies: when any number is not finite (or not a real number), every

@@ -26,6 +26,7 @@ from torchrl.data import Bounded, Categorical, Composite, TensorSpec, Unbounded
 from torchrl.envs import EnvBase, ParallelEnv, SerialEnv
 
 from smarts.core.errors import ActionError
+from smarts.core.simulation import check_seed, derived_seed
 from smarts.dynamics.action_spaces import REAL_KINDS
 from smarts.env.assembly import as_spec
 from smarts.env.parallel_env import DrivingParallelEnv
@@ -78,7 +79,8 @@ class SmartsTorchRLEnv(EnvBase):
     ``"reward"`` [1], ``"done"``/``"terminated"``/``"truncated"`` [1].
 
     Seeding: ``set_seed(s)`` makes the following episodes use scenario seeds ``s, s + 1, ...``, so
-    the same seed gives the same rollout; without it every episode uses the scenario's seed.
+    the same seed gives the same rollout; without it every episode uses the scenario's seed. ``s``
+    is an integer from 0 to 2**64 - 1 (else ``ValueError`` naming it); the count wraps past the top.
     """
 
     def __init__(
@@ -199,14 +201,12 @@ class SmartsTorchRLEnv(EnvBase):
 
     # ------------------------------------------------------------------ seeding
     def _set_seed(self, seed: int | None) -> None:
-        if seed is not None and int(seed) < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {seed}")
-        self._next_seed = None if seed is None else int(seed)
+        self._next_seed = None if seed is None else check_seed(seed, "SmartsTorchRLEnv.set_seed(seed)")
 
     def _take_seed(self) -> int | None:
         seed = self._next_seed
         if seed is not None:
-            self._next_seed = seed + 1
+            self._next_seed = derived_seed(seed, 1)
         return seed
 
     # ------------------------------------------------------------------ episode
@@ -361,7 +361,8 @@ class SmartsBatchedEnv(EnvBase):
     steps of the slot's current episode (the episode length when ``done``).
 
     Seeding: ``set_seed(s)`` makes copy ``i`` start at seed ``s + i * 100_003`` and count up by one
-    per episode, so the same seed gives the same rollout. Built-in traffic only (libsumo allows one
+    per episode (modulo 2**64), so the same seed gives the same rollout; ``s`` is an integer from 0
+    to 2**64 - 1, else ``ValueError`` naming it. Built-in traffic only (libsumo allows one
     SUMO per process: SUMO scenarios need ``make_parallel_env`` or one copy per worker process).
     ``reward_factory`` builds one reward function per copy (``smarts.env.task_rewards``);
     ``slots`` pads the batch with slots that never act (always invalid) up to that many, so that
@@ -428,15 +429,15 @@ class SmartsBatchedEnv(EnvBase):
         self._next_seed: list[int | None] = [None] * len(self.envs)
 
     def _set_seed(self, seed: int | None) -> None:
-        if seed is not None and int(seed) < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {seed}")
-        self._next_seed = [None if seed is None else int(seed) + i * 100_003 for i in range(len(self.envs))]
+        if seed is not None:
+            seed = check_seed(seed, "SmartsBatchedEnv.set_seed(seed)")
+        self._next_seed = [None if seed is None else derived_seed(seed, i * 100_003) for i in range(len(self.envs))]
 
     def _reset_copy(self, e: int) -> dict[int, dict[str, np.ndarray]]:
         """Reset copy ``e``; returns the first observation of each of its slots."""
         seed = self._next_seed[e]
         if seed is not None:
-            self._next_seed[e] = seed + 1
+            self._next_seed[e] = derived_seed(seed, 1)
         obs, _ = self.envs[e].reset(seed=seed)
         return {self._slot_of[(e, agent)]: {key: np.array(v) for key, v in o.items()} for agent, o in obs.items()}
 
