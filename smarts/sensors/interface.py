@@ -5,18 +5,22 @@ interfaces share one space and are observed in one batched pass. The default int
 basic observation (``smarts.sensors.observation``) with its historical keys and shapes; every
 optional sensor adds keys or trailing feature columns, never changes the default ones.
 
-Plain data only (no simulator imports): the scenario reader builds these from YAML with
-``interface_from_dict`` and writes them back with ``interface_to_dict``.
+Plain data only (no simulator imports). What an ``interface:`` section may say is the schema model
+``InterfaceFile`` (``smarts.core.schema``): the scenario reader composes it into an agent's section,
+``interface_from_dict`` validates a section on its own, ``interface_to_dict`` writes one back, and
+the dataclasses check values built in code against the same models.
 """
 
 from __future__ import annotations
 
-import difflib
-import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Annotated, Any, Literal
+
+from pydantic import BeforeValidator, Field, ValidationError, model_validator
 
 from smarts.core.errors import InterfaceError
+from smarts.core.schema import Schema, field_errors, locate
 
 RASTER_LAYERS = ("drivable", "lanes", "route", "occupancy", "occlusion")
 """Raster layers an interface may ask for, drawn in the order the interface lists them."""
@@ -24,31 +28,160 @@ OCCLUSION_MODES = ("hide", "flag")
 """hide: fully hidden road users are left out of ``neighbours``; flag: they stay, with visible
 fraction 0."""
 
-
-def _positive_int(where: str, value: Any) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise InterfaceError(where, f"expected a positive integer, got {value!r}")
-
-
-def _number(where: str, value: Any, *, positive: bool = False) -> None:
-    ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
-    if not ok or (positive and value <= 0) or (not positive and value < 0):
-        kind = "a positive number" if positive else "a non-negative number"
-        raise InterfaceError(where, f"expected {kind}, got {value!r}")
+# ----------------------------------------------------------------------------- file layout
+Count = Annotated[int, Field(ge=1)]
+Metres = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
 
-def _flag(where: str, value: Any) -> None:
-    if not isinstance(value, bool):
-        raise InterfaceError(where, f"expected true or false, got {value!r}")
+class EgoFile(Schema):
+    """The ego block (``ego``)."""
+
+    extended: bool = Field(
+        False, description="Append the angular acceleration (rad/s^2) to ``ego`` (13 features instead of 12)."
+    )
 
 
+class NeighboursFile(Schema):
+    """The nearest road users (``neighbours``)."""
+
+    count: Count = Field(8, description="Road users in the block (its fixed size).")
+    radius: Metres = Field(50.0, description="Metres from the ego's centre to a road user's centre.")
+    extended: bool = Field(
+        False,
+        description="Append speed, acceleration, yaw rate, lane index, same-road flag and a type one-hot.",
+    )
+
+
+class WaypointsFile(Schema):
+    """Points along the route's lanes (``waypoints``)."""
+
+    count: Count = Field(20, description="Waypoints per lane.")
+    spacing: Count = Field(2, description="Route points (about 1 m apart) between two waypoints.")
+
+
+class OcclusionFile(Schema):
+    """What the ego cannot see behind other road users."""
+
+    enabled: bool = False
+    mode: Literal["hide", "flag"] = Field(
+        "hide",
+        description="hide: fully hidden road users are left out of ``neighbours``; flag: they stay, "
+        "with visible fraction 0.",
+    )
+    range: Metres = Field(50.0, description="Sensor range (m): nothing farther from the ego's centre is visible.")
+
+
+class RastersFile(Schema):
+    """Top-down rasters around the ego (``rasters``, and ``rgb`` with ``rgb: true``)."""
+
+    size: Annotated[int, Field(ge=1, le=1024)] = Field(
+        64, description="Pixels per side (square, ego at the centre, heading up)."
+    )
+    resolution: Metres = Field(0.5, description="Metres per pixel.")
+    layers: list[Literal["drivable", "lanes", "route", "occupancy", "occlusion"]] = Field(
+        default_factory=lambda: list(RASTER_LAYERS), description="Layers drawn, in this order."
+    )
+    rgb: bool = Field(False, description="Also give a composed uint8 [size, size, 3] top-down image.")
+
+    @model_validator(mode="after")
+    def _layers(self) -> RastersFile:
+        problems: list[tuple[Any, str]] = [
+            (("layers", i), f"{name!r} is listed twice")
+            for i, name in enumerate(self.layers)
+            if name in self.layers[:i]
+        ]
+        if not self.layers and not self.rgb:
+            problems.append(((), "expected at least one layer or rgb: true"))
+        if problems:
+            raise field_errors(self, problems)
+        return self
+
+
+class LidarFile(Schema):
+    """Simulated lidar (``lidar`` and ``lidar_hit``)."""
+
+    rays: Count = Field(64, description="Evenly spaced over 360 degrees, ray 0 straight ahead, counter-clockwise.")
+    range: Metres = 30.0
+    noise: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(
+        0.0, description="Standard deviation (m) of Gaussian noise on hit distances, seeded from the scenario seed."
+    )
+
+
+def _switch(value: Any) -> Any:
+    """An optional sensor: ``true`` turns it on with its defaults, ``false`` (or null) leaves it off."""
+    if value is True:
+        return {}
+    if value is False:
+        return None
+    return value
+
+
+class InterfaceFile(Schema):
+    """An agent's ``interface:`` section: which sensors are on and their sizes (every field optional)."""
+
+    ego: EgoFile = EgoFile()
+    neighbours: NeighboursFile = NeighboursFile()
+    waypoints: WaypointsFile = WaypointsFile()
+    occlusion: OcclusionFile = OcclusionFile()
+    rasters: Annotated[RastersFile | None, BeforeValidator(_switch)] = Field(
+        None, description="Off unless given; true: on with the defaults."
+    )
+    lidar: Annotated[LidarFile | None, BeforeValidator(_switch)] = Field(
+        None, description="Off unless given; true: on with the defaults."
+    )
+    signals: bool = Field(True, description="The next traffic signal on the route (``signal``).")
+    lead: bool = Field(
+        False, description="The vehicle the agent follows (``mission.follow``) as its own block (``lead``)."
+    )
+    ahead: bool = Field(False, description="The nearest road user ahead on the agent's lane (``ahead``).")
+
+    def to_interface(self) -> AgentInterface:
+        """The validated section as the simulator's dataclass."""
+        rasters = self.rasters
+        return AgentInterface(
+            ego=EgoInterface(**self.ego.model_dump()),
+            neighbours=NeighboursInterface(**self.neighbours.model_dump()),
+            waypoints=WaypointsInterface(**self.waypoints.model_dump()),
+            occlusion=OcclusionInterface(**self.occlusion.model_dump()),
+            rasters=None if rasters is None else RasterInterface(**{**rasters.model_dump(), "layers": tuple(rasters.layers)}),
+            lidar=None if self.lidar is None else LidarInterface(**self.lidar.model_dump()),
+            signals=self.signals,
+            lead=self.lead,
+            ahead=self.ahead,
+        )
+
+
+def _plain(value: Any) -> Any:
+    """A numpy scalar as the Python number it holds (values built in code may be either)."""
+    return value.item() if type(value).__module__ == "numpy" and hasattr(value, "item") else value
+
+
+def _problem(exc: ValidationError, model: type[Schema], path: str) -> InterfaceError:
+    """Every problem of ``exc`` under ``path``: the error names the first field, its message lists
+    the others on their own lines (each ``path: problem``)."""
+    found = [locate(model, p) for p in exc.errors()]
+    lines = [(f"{path}.{where}" if where else path, message) for where, message in found]
+    (first_path, first), rest = lines[0], lines[1:]
+    return InterfaceError(first_path, "\n".join([first, *(f"{where}: {message}" for where, message in rest)]))
+
+
+def _check(model: type[Schema], part: Any, path: str) -> None:
+    """Validate a dataclass built in code against its file model (the same rules as YAML)."""
+    values = {f.name: _plain(getattr(part, f.name)) for f in fields(part) if f.name in model.model_fields}
+    try:
+        model.model_validate(values)
+    except ValidationError as exc:
+        raise _problem(exc, model, path) from None
+
+
+# ----------------------------------------------------------------------------- dataclasses
 @dataclass(frozen=True)
 class EgoInterface:
     extended: bool = False
     """Append the angular acceleration (rad/s^2) to ``ego`` (13 features instead of 12)."""
 
     def __post_init__(self) -> None:
-        _flag("interface.ego.extended", self.extended)
+        _check(EgoFile, self, "interface.ego")
 
 
 @dataclass(frozen=True)
@@ -60,9 +193,7 @@ class NeighboursInterface:
     """Append speed, acceleration, yaw rate, lane index, same-road flag and a type one-hot."""
 
     def __post_init__(self) -> None:
-        _positive_int("interface.neighbours.count", self.count)
-        _number("interface.neighbours.radius", self.radius, positive=True)
-        _flag("interface.neighbours.extended", self.extended)
+        _check(NeighboursFile, self, "interface.neighbours")
 
 
 @dataclass(frozen=True)
@@ -72,8 +203,7 @@ class WaypointsInterface:
     """Route points (about 1 m apart) between two waypoints."""
 
     def __post_init__(self) -> None:
-        _positive_int("interface.waypoints.count", self.count)
-        _positive_int("interface.waypoints.spacing", self.spacing)
+        _check(WaypointsFile, self, "interface.waypoints")
 
 
 @dataclass(frozen=True)
@@ -84,12 +214,7 @@ class OcclusionInterface:
     """Sensor range (m): nothing farther from the ego's centre is visible."""
 
     def __post_init__(self) -> None:
-        _flag("interface.occlusion.enabled", self.enabled)
-        if self.mode not in OCCLUSION_MODES:
-            raise InterfaceError(
-                "interface.occlusion.mode", f"expected one of {', '.join(OCCLUSION_MODES)}, got {self.mode!r}"
-            )
-        _number("interface.occlusion.range", self.range, positive=True)
+        _check(OcclusionFile, self, "interface.occlusion")
 
 
 @dataclass(frozen=True)
@@ -103,22 +228,13 @@ class RasterInterface:
     """Also give a composed uint8 [size, size, 3] top-down image."""
 
     def __post_init__(self) -> None:
-        _positive_int("interface.rasters.size", self.size)
-        if self.size > 1024:
-            raise InterfaceError("interface.rasters.size", f"expected at most 1024 pixels, got {self.size}")
-        _number("interface.rasters.resolution", self.resolution, positive=True)
-        if not isinstance(self.layers, tuple):
-            raise InterfaceError("interface.rasters.layers", f"expected a list of layer names, got {self.layers!r}")
-        for i, name in enumerate(self.layers):
-            if name not in RASTER_LAYERS:
-                raise InterfaceError(
-                    f"interface.rasters.layers[{i}]", f"expected one of {', '.join(RASTER_LAYERS)}, got {name!r}"
-                )
-            if name in self.layers[:i]:
-                raise InterfaceError(f"interface.rasters.layers[{i}]", f"{name!r} is listed twice")
-        _flag("interface.rasters.rgb", self.rgb)
-        if not self.layers and not self.rgb:
-            raise InterfaceError("interface.rasters", "expected at least one layer or rgb: true")
+        if not isinstance(self.layers, tuple):  # a tuple keeps the interface hashable
+            raise InterfaceError("interface.rasters.layers", f"expected a tuple of layer names, got {self.layers!r}")
+        values = {f.name: _plain(getattr(self, f.name)) for f in fields(self)}
+        try:
+            RastersFile.model_validate({**values, "layers": list(self.layers)})
+        except ValidationError as exc:
+            raise _problem(exc, RastersFile, "interface.rasters") from None
 
 
 @dataclass(frozen=True)
@@ -130,9 +246,7 @@ class LidarInterface:
     """Standard deviation (m) of Gaussian noise on hit distances, seeded from the scenario seed."""
 
     def __post_init__(self) -> None:
-        _positive_int("interface.lidar.rays", self.rays)
-        _number("interface.lidar.range", self.range, positive=True)
-        _number("interface.lidar.noise", self.noise)
+        _check(LidarFile, self, "interface.lidar")
 
 
 @dataclass(frozen=True)
@@ -155,9 +269,11 @@ class AgentInterface:
     along the lane, relative speed, speed, acceleration."""
 
     def __post_init__(self) -> None:
-        _flag("interface.signals", self.signals)
-        _flag("interface.lead", self.lead)
-        _flag("interface.ahead", self.ahead)
+        values = {name: _plain(getattr(self, name)) for name in _FLAGS}
+        try:
+            InterfaceFile.model_validate(values)
+        except ValidationError as exc:
+            raise _problem(exc, InterfaceFile, "interface") from None
 
     @property
     def needs_shadows(self) -> bool:
@@ -179,52 +295,15 @@ _FLAGS = ("signals", "lead", "ahead")
 
 
 def interface_from_dict(data: Any, path: str = "interface") -> AgentInterface:
-    """Validate plain data (as loaded from YAML) into an interface; errors name ``path.field``."""
-    if not isinstance(data, dict):
+    """Validate plain data (as loaded from YAML) into an interface (``InterfaceFile``); problems
+    raise ``InterfaceError`` naming ``path.field`` (every problem, one per line)."""
+    if not isinstance(data, Mapping):
         raise InterfaceError(path, f"expected a mapping of sensors, got {data!r}")
-    _known(data, path, (*_PARTS, *_FLAGS))
-    kwargs: dict[str, Any] = {}
     try:
-        for name, cls in _PARTS.items():
-            if name not in data:
-                continue
-            value = data[name]
-            if name in _OPTIONAL_PARTS and (value is None or value is False):
-                kwargs[name] = None
-                continue
-            if name in _OPTIONAL_PARTS and value is True:
-                value = {}
-            kwargs[name] = _part(cls, value, f"interface.{name}")
-        for name in _FLAGS:
-            if name in data:
-                kwargs[name] = data[name]
-        return AgentInterface(**kwargs)
-    except InterfaceError as err:
-        raise InterfaceError(path + err.path[len("interface") :], err.problem) from None
-
-
-def _known(data: dict, path: str, allowed: tuple[str, ...]) -> None:
-    for key in data:
-        if key not in allowed:
-            hint = difflib.get_close_matches(str(key), allowed, n=1)
-            suggestion = f" (did you mean {hint[0]!r}?)" if hint else ""
-            raise InterfaceError(f"{path}.{key}", f"unknown field{suggestion}; allowed fields: {', '.join(allowed)}")
-
-
-def _part(cls: type, value: Any, path: str) -> Any:
-    if not isinstance(value, dict):
-        raise InterfaceError(path, f"expected a mapping, got {value!r}")
-    names = tuple(f.name for f in fields(cls))
-    _known(value, path, names)
-    kwargs = dict(value)
-    if "layers" in kwargs:
-        if not isinstance(kwargs["layers"], list):
-            raise InterfaceError(f"{path}.layers", f"expected a list of layer names, got {kwargs['layers']!r}")
-        kwargs["layers"] = tuple(kwargs["layers"])
-    for f in fields(cls):  # YAML integers are fine where metres are expected
-        if f.type == "float" and isinstance(kwargs.get(f.name), int) and not isinstance(kwargs[f.name], bool):
-            kwargs[f.name] = float(kwargs[f.name])
-    return cls(**kwargs)
+        section = InterfaceFile.model_validate(dict(data))
+    except ValidationError as exc:
+        raise _problem(exc, InterfaceFile, path) from None
+    return section.to_interface()
 
 
 def interface_to_dict(interface: AgentInterface) -> dict[str, Any]:

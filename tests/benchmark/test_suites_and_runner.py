@@ -234,7 +234,7 @@ def test_a_checkpoint_evaluates_like_train_ppo_does(tmp_path):
 @pytest.mark.parametrize(
     "section, value, problem",
     [
-        ("interface", {"lidar": {"rays": 0}}, "recorded observation interface is invalid (interface.lidar.rays: expected"),
+        ("interface", {"lidar": {"rays": 0}}, "recorded observation interface is invalid (interface.lidar.rays: input should be greater than or equal to 1"),
         ("interface", ["lead"], "recorded observation interface is invalid (interface: expected a mapping"),
         ("lane_relative", {"max_jerk": -1.0}, "recorded lane-relative settings are invalid (LaneRelativeParams.max_jerk:"),
         ("lane_relative", {"max_jerks": 1.0}, "recorded lane-relative settings are invalid (lane_relative.max_jerks: unknown"),

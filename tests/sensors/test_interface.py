@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import yaml
 
+from smarts.core.errors import InterfaceError
 from smarts.scenario import ScenarioError, ScenarioSpec
 from smarts.sensors.interface import (
     RASTER_LAYERS,
@@ -78,25 +79,25 @@ def test_every_sensor_adds_keys_or_trailing_columns():
 @pytest.mark.parametrize(
     ("interface", "message"),
     [
-        ({"lidar": {"rays": 0}}, "agents[1].interface.lidar.rays: expected a positive integer, got 0"),
-        ({"lidar": {"rays": 8.5}}, "agents[1].interface.lidar.rays: expected a positive integer"),
-        ({"lidar": {"range": -1}}, "agents[1].interface.lidar.range: expected a positive number"),
-        ({"lidar": {"noise": -0.1}}, "agents[1].interface.lidar.noise: expected a non-negative number"),
-        ({"lidar": {"rayz": 3}}, "agents[1].interface.lidar.rayz: unknown field (did you mean 'rays'?)"),
-        ({"rasters": {"layers": ["drivable", "roads"]}}, "agents[1].interface.rasters.layers[1]: expected one of"),
+        ({"lidar": {"rays": 0}}, "agents[1].interface.lidar.rays: input should be greater than or equal to 1, got 0"),
+        ({"lidar": {"rays": 8.5}}, "agents[1].interface.lidar.rays: input should be a valid integer"),
+        ({"lidar": {"range": -1}}, "agents[1].interface.lidar.range: input should be greater than 0"),
+        ({"lidar": {"noise": -0.1}}, "agents[1].interface.lidar.noise: input should be greater than or equal to 0"),
+        ({"lidar": {"rayz": 3}}, "agents[1].interface.lidar.rayz: unknown field; did you mean 'rays'?"),
+        ({"rasters": {"layers": ["drivable", "roads"]}}, "agents[1].interface.rasters.layers[1]: input should be 'drivable', 'lanes'"),
         ({"rasters": {"layers": ["route", "route"]}}, "agents[1].interface.rasters.layers[1]: 'route' is listed twice"),
-        ({"rasters": {"layers": "route"}}, "agents[1].interface.rasters.layers: expected a list"),
+        ({"rasters": {"layers": "route"}}, "agents[1].interface.rasters.layers: input should be a valid list"),
         ({"rasters": {"layers": []}}, "agents[1].interface.rasters: expected at least one layer or rgb: true"),
-        ({"rasters": {"size": 0}}, "agents[1].interface.rasters.size: expected a positive integer"),
-        ({"rasters": {"resolution": 0}}, "agents[1].interface.rasters.resolution: expected a positive number"),
-        ({"rasters": {"rgb": "yes"}}, "agents[1].interface.rasters.rgb: expected true or false"),
-        ({"occlusion": {"mode": "ghost"}}, "agents[1].interface.occlusion.mode: expected one of hide, flag"),
-        ({"occlusion": []}, "agents[1].interface.occlusion: expected a mapping"),
-        ({"neighbours": {"count": -2}}, "agents[1].interface.neighbours.count: expected a positive integer"),
-        ({"neighbours": {"radius": True}}, "agents[1].interface.neighbours.radius: expected a positive number"),
-        ({"waypoints": {"spacing": 0}}, "agents[1].interface.waypoints.spacing: expected a positive integer"),
-        ({"signals": 1}, "agents[1].interface.signals: expected true or false"),
-        ({"lidars": {}}, "agents[1].interface.lidars: unknown field (did you mean 'lidar'?)"),
+        ({"rasters": {"size": 0}}, "agents[1].interface.rasters.size: input should be greater than or equal to 1"),
+        ({"rasters": {"resolution": 0}}, "agents[1].interface.rasters.resolution: input should be greater than 0"),
+        ({"rasters": {"rgb": "yes"}}, "agents[1].interface.rasters.rgb: input should be a valid boolean"),
+        ({"occlusion": {"mode": "ghost"}}, "agents[1].interface.occlusion.mode: input should be 'hide' or 'flag'"),
+        ({"occlusion": []}, "agents[1].interface.occlusion: input should be a valid dictionary"),
+        ({"neighbours": {"count": -2}}, "agents[1].interface.neighbours.count: input should be greater than or equal to 1"),
+        ({"neighbours": {"radius": True}}, "agents[1].interface.neighbours.radius: input should be a valid number, got True"),
+        ({"waypoints": {"spacing": 0}}, "agents[1].interface.waypoints.spacing: input should be greater than or equal to 1"),
+        ({"signals": 1}, "agents[1].interface.signals: input should be a valid boolean, got 1"),
+        ({"lidars": {}}, "agents[1].interface.lidars: unknown field; did you mean 'lidar'?"),
         ([1, 2], "agents[1].interface: expected a mapping of sensors"),
     ],
 )
@@ -107,7 +108,7 @@ def test_invalid_fields_are_named(interface, message):
 
 
 def test_interfaces_built_in_code_are_validated_too():
-    with pytest.raises(ValueError, match=r"interface\.lidar\.rays: expected a positive integer"):
+    with pytest.raises(ValueError, match=r"interface\.lidar\.rays: input should be greater than or equal to 1"):
         LidarInterface(rays=0)
     with pytest.raises(ValueError, match=r"interface\.rasters\.layers\[0\]"):
         RasterInterface(layers=("sky",))
@@ -132,3 +133,13 @@ def test_equal_interfaces_compare_equal_so_they_share_a_group():
     a = interface_from_dict({"rasters": {"layers": list(RASTER_LAYERS)}})
     b = AgentInterface(rasters=RasterInterface())
     assert a == b and hash(a) == hash(b)
+
+
+def test_interface_from_dict_reports_every_problem_naming_the_first_field():
+    with pytest.raises(InterfaceError) as err:
+        interface_from_dict({"lidar": {"rays": 0, "rayz": 3}, "signals": "yes"}, "agents[0].interface")
+    assert err.value.path == "agents[0].interface.lidar.rays"
+    lines = str(err.value).splitlines()
+    assert lines[0] == "agents[0].interface.lidar.rays: input should be greater than or equal to 1, got 0"
+    assert lines[1].startswith("agents[0].interface.lidar.rayz: unknown field; did you mean 'rays'?")
+    assert lines[2] == "agents[0].interface.signals: input should be a valid boolean, got 'yes'"
