@@ -6,14 +6,15 @@ observation have fixed shapes.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import Field, ValidationError, model_validator
 
 from smarts.core.errors import ScenarioError
+from smarts.core.schema import Schema, field_errors, locate
 
 HEADER_BYTES = 16
 """Bytes of a message besides its payload: sender id (4) and sender x, y, heading as float32 (12)."""
@@ -25,14 +26,91 @@ def _fail(message: str) -> None:
     raise ScenarioError(message)
 
 
-def _is_int(value: Any) -> bool:
-    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+class CommsFile(Schema):
+    """A scenario's ``comms:`` section as written (every field optional; see :class:`CommsConfig`)."""
 
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
-        value, (bool, np.bool_)
+    channels: Annotated[int, Field(ge=1)] = Field(
+        1, description="Radio channels; a receiver hears only the channel it is tuned to."
     )
+    range: Annotated[float, Field(gt=0, allow_inf_nan=False)] = Field(
+        100.0, description="m, greatest distance between the sender (when it sent) and the receiver (at delivery)."
+    )
+    latency: Annotated[int, Field(ge=0)] = Field(
+        0, description="Steps between sending and delivery (0: delivered in the step it was sent)."
+    )
+    loss: Annotated[float, Field(ge=0, lt=1)] = Field(
+        0.0, description="Probability that a message is lost on its way to one receiver."
+    )
+    bandwidth: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="Most messages one receiver takes per step (null: no limit besides max_messages)."
+    )
+    bandwidth_bytes: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="Most bytes one receiver takes per step (null: no byte limit)."
+    )
+    message_size: Annotated[int, Field(ge=1)] = Field(8, description="Floats of payload per message.")
+    penetration: Annotated[float, Field(ge=0, le=1)] = Field(
+        0.0, description="Fraction of traffic vehicles that are connected and broadcast their state every step."
+    )
+    max_messages: Annotated[int, Field(ge=1)] = Field(
+        8, description="Messages per receiver per step in the observation (its fixed size)."
+    )
+    traffic_channel: int = Field(0, description="The channel traffic broadcasts on; -1: heard on every channel.")
+    channel_action: bool = Field(
+        False, description="true: the message action picks the channel each step; false: agent_channels."
+    )
+    agent_channels: dict[str, int] = Field(
+        default_factory=dict, description="Fixed channel per agent id when channel_action is false (default 0)."
+    )
+    payload_bound: Annotated[float, Field(gt=0, allow_inf_nan=False)] = Field(
+        1.0, description="The message action box is [-payload_bound, payload_bound] per payload float."
+    )
+
+    @model_validator(mode="after")
+    def _fits_the_channels(self) -> CommsFile:
+        problems: list[tuple[Any, str]] = []
+        last = self.channels - 1
+        if not -1 <= self.traffic_channel <= last:
+            problems.append(
+                ("traffic_channel", f"expected -1 (every channel) or a channel in [0, {last}], got {self.traffic_channel!r}")
+            )
+        for agent, channel in self.agent_channels.items():
+            if not 0 <= channel <= last:
+                problems.append((("agent_channels", agent), f"expected a channel in [0, {last}], got {channel!r}"))
+        message_bytes = HEADER_BYTES + PAYLOAD_BYTES_PER_FLOAT * self.message_size
+        if self.bandwidth_bytes is not None and self.bandwidth_bytes < message_bytes:
+            problems.append((
+                "bandwidth_bytes",
+                f"{self.bandwidth_bytes} bytes cannot hold one message of {message_bytes} bytes ({HEADER_BYTES} "
+                f"header + {PAYLOAD_BYTES_PER_FLOAT} x {self.message_size} payload floats)",
+            ))  # fmt: skip
+        if problems:
+            raise field_errors(self, problems)
+        return self
+
+    def to_config(self) -> CommsConfig:
+        """The validated section as the simulator's dataclass."""
+        return CommsConfig(**{f.name: getattr(self, f.name) for f in fields(CommsConfig)})
+
+
+def _check(values: Mapping[str, Any], where: str) -> CommsFile:
+    """``values`` validated as a comms section; every problem raises at once, each ``where.field``."""
+    try:
+        return CommsFile.model_validate(dict(values))
+    except ValidationError as exc:
+        lines = []
+        for problem in exc.errors():
+            path, message = locate(CommsFile, problem)
+            lines.append(f"{where}.{path}: {message}" if path else f"{where}: {message}")
+        raise ScenarioError("\n".join(lines)) from None
+
+
+def _plain(value: Any) -> Any:
+    """Numpy scalars as the Python numbers they hold, mappings as dicts (values built in code)."""
+    if isinstance(value, (np.generic,)):
+        return value.item()
+    if isinstance(value, Mapping):
+        return {k: _plain(v) for k, v in value.items()}
+    return value
 
 
 @dataclass(frozen=True)
@@ -76,61 +154,9 @@ class CommsConfig:
     payload_bound: float = 1.0
 
     def __post_init__(self) -> None:
-        self._validate("comms")
-
-    def _validate(self, where: str) -> None:
-        def positive_int(name: str, minimum: int, optional: bool = False) -> None:
-            value = getattr(self, name)
-            if optional and value is None:
-                return
-            if not _is_int(value) or value < minimum:
-                extra = " or null" if optional else ""
-                _fail(f"{where}.{name}: expected an integer >= {minimum}{extra}, got {value!r}")
-
-        positive_int("channels", 1)
-        positive_int("latency", 0)
-        positive_int("message_size", 1)
-        positive_int("max_messages", 1)
-        positive_int("bandwidth", 1, optional=True)
-        positive_int("bandwidth_bytes", 1, optional=True)
-        if not (_is_number(self.range) and math.isfinite(self.range) and self.range > 0):
-            _fail(f"{where}.range: expected a positive number of metres, got {self.range!r}")
-        if not (_is_number(self.loss) and 0.0 <= self.loss < 1.0):
-            _fail(f"{where}.loss: expected a probability in [0, 1), got {self.loss!r}")
-        if not (_is_number(self.penetration) and 0.0 <= self.penetration <= 1.0):
-            _fail(f"{where}.penetration: expected a fraction in [0, 1], got {self.penetration!r}")
-        if not (
-            _is_number(self.payload_bound)
-            and math.isfinite(self.payload_bound)
-            and self.payload_bound > 0
-        ):
-            _fail(f"{where}.payload_bound: expected a positive number, got {self.payload_bound!r}")
-        if not _is_int(self.traffic_channel) or not -1 <= self.traffic_channel < self.channels:
-            _fail(
-                f"{where}.traffic_channel: expected -1 (every channel) or a channel in "
-                f"[0, {self.channels - 1}], got {self.traffic_channel!r}"
-            )
-        if not isinstance(self.channel_action, (bool, np.bool_)):
-            _fail(f"{where}.channel_action: expected true or false, got {self.channel_action!r}")
-        if self.bandwidth_bytes is not None and self.bandwidth_bytes < self.message_bytes:
-            _fail(
-                f"{where}.bandwidth_bytes: {self.bandwidth_bytes} bytes cannot hold one message of "
-                f"{self.message_bytes} bytes ({HEADER_BYTES} header + {PAYLOAD_BYTES_PER_FLOAT} x "
-                f"{self.message_size} payload floats)"
-            )
         if not isinstance(self.agent_channels, Mapping):
-            _fail(
-                f"{where}.agent_channels: expected a mapping of agent id to channel, "
-                f"got {self.agent_channels!r}"
-            )
-        for agent, channel in self.agent_channels.items():
-            if not isinstance(agent, str):
-                _fail(f"{where}.agent_channels: agent ids must be strings, got {agent!r}")
-            if not _is_int(channel) or not 0 <= channel < self.channels:
-                _fail(
-                    f"{where}.agent_channels.{agent}: expected a channel in "
-                    f"[0, {self.channels - 1}], got {channel!r}"
-                )
+            _fail(f"comms.agent_channels: expected a mapping of agent id to channel, got {self.agent_channels!r}")
+        _check({f.name: _plain(getattr(self, f.name)) for f in fields(self)}, "comms")
 
     # ------------------------------------------------------------------ derived sizes
     @property
@@ -164,21 +190,10 @@ class CommsConfig:
     # ------------------------------------------------------------------ reading
     @classmethod
     def from_dict(cls, data: Mapping[str, Any] | None, where: str = "comms") -> CommsConfig:
-        """Build from a scenario's ``comms`` mapping; unknown keys and bad values name the field."""
+        """Build from a scenario's ``comms`` mapping (``CommsFile``); unknown keys and bad values
+        raise, every problem at once, each naming ``where.field``."""
         if data is None:
             return cls()
         if not isinstance(data, Mapping):
             _fail(f"{where}: expected a mapping of settings, got {type(data).__name__}")
-        known = [f.name for f in fields(cls)]
-        unknown = [k for k in data if k not in known]
-        if unknown:
-            _fail(f"{where}: unknown keys {unknown}; expected some of {known}")
-        values = dict(data)
-        if isinstance(values.get("agent_channels"), Mapping):
-            values["agent_channels"] = dict(values["agent_channels"])
-        config = object.__new__(cls)
-        for f in fields(cls):
-            default = f.default_factory() if callable(f.default_factory) else f.default
-            object.__setattr__(config, f.name, values.get(f.name, default))
-        config._validate(where)
-        return config
+        return _check(data, where).to_config()

@@ -7,19 +7,19 @@ from smarts.core.errors import ScenarioError
 @pytest.mark.parametrize(
     "field, value, message",
     [
-        ("range", -5.0, r"comms\.range: expected a positive number"),
-        ("range", float("inf"), r"comms\.range"),
-        ("loss", 1.0, r"comms\.loss: expected a probability in \[0, 1\)"),
-        ("penetration", 1.5, r"comms\.penetration"),
-        ("latency", -1, r"comms\.latency: expected an integer >= 0"),
-        ("latency", 1.5, r"comms\.latency"),
+        ("range", -5.0, r"comms\.range: input should be greater than 0"),
+        ("range", float("inf"), r"comms\.range: input should be a finite number"),
+        ("loss", 1.0, r"comms\.loss: input should be less than 1"),
+        ("penetration", 1.5, r"comms\.penetration: input should be less than or equal to 1"),
+        ("latency", -1, r"comms\.latency: input should be greater than or equal to 0"),
+        ("latency", 1.5, r"comms\.latency: input should be a valid integer"),
         ("channels", 0, r"comms\.channels"),
-        ("max_messages", True, r"comms\.max_messages"),
+        ("max_messages", True, r"comms\.max_messages: input should be a valid integer, got True"),
         ("message_size", 0, r"comms\.message_size"),
-        ("bandwidth", 0, r"comms\.bandwidth: expected an integer >= 1 or null"),
+        ("bandwidth", 0, r"comms\.bandwidth: input should be greater than or equal to 1"),
         ("traffic_channel", 1, r"comms\.traffic_channel: .* \[0, 0\], got 1"),
         ("payload_bound", 0.0, r"comms\.payload_bound"),
-        ("channel_action", "yes", r"comms\.channel_action"),
+        ("channel_action", "yes", r"comms\.channel_action: input should be a valid boolean"),
     ],
 )
 def test_bad_values_name_the_field(field, value, message):
@@ -53,9 +53,22 @@ def test_from_dict_reads_values_and_rejects_unknown_keys():
     config = CommsConfig.from_dict({"range": 50, "latency": 2, "loss": 0.1, "penetration": 0.5})
     assert (config.range, config.latency, config.loss, config.penetration) == (50, 2, 0.1, 0.5)
     assert CommsConfig.from_dict(None) == CommsConfig()
-    with pytest.raises(ScenarioError, match=r"comms: unknown keys \['rang'\]"):
+    with pytest.raises(ScenarioError, match=r"^comms\.rang: unknown field; did you mean 'range'\?"):
         CommsConfig.from_dict({"rang": 50})
     with pytest.raises(ScenarioError, match=r"scenario\.comms\.loss"):
         CommsConfig.from_dict({"loss": -0.1}, where="scenario.comms")
     with pytest.raises(ScenarioError, match=r"comms: expected a mapping"):
         CommsConfig.from_dict([1, 2])
+
+
+def test_every_problem_is_reported_at_once():
+    with pytest.raises(ScenarioError) as err:
+        CommsConfig.from_dict({"loss": 1.5, "channels": True, "latncy": 1}, where="f.yaml: comms")
+    lines = str(err.value).splitlines()
+    assert lines == [
+        "f.yaml: comms.channels: input should be a valid integer, got True",
+        "f.yaml: comms.loss: input should be less than 1, got 1.5",
+        "f.yaml: comms.latncy: unknown field; did you mean 'latency'? (known: agent_channels, bandwidth, "
+        "bandwidth_bytes, channel_action, channels, latency, loss, max_messages, message_size, payload_bound, "
+        "penetration, range, traffic_channel)",
+    ]
