@@ -16,7 +16,7 @@ from pathlib import Path
 
 def _benchmark(args: argparse.Namespace) -> int:
     from smarts.benchmark.report import write_report
-    from smarts.benchmark.runner import REFERENCE_AGENTS, plan_jobs, run_jobs
+    from smarts.benchmark.runner import REFERENCE_AGENTS, BenchmarkInterrupted, plan_jobs, run_jobs
     from smarts.benchmark.suites import load_suite
 
     suite = load_suite(args.suite)
@@ -28,7 +28,14 @@ def _benchmark(args: argparse.Namespace) -> int:
     shown = agents + [a for a in REFERENCE_AGENTS if a not in agents]
     print(f"{suite.name}: {len(suite.scenarios)} scenarios x {episodes} episodes x {len(shown)} agent(s) "
           f"({', '.join(shown)}; references always included) -> {out}")  # fmt: skip
-    results = run_jobs(jobs, workers=args.workers, progress=not args.quiet, ray_address=args.ray_address)
+    try:
+        results = run_jobs(jobs, workers=args.workers, progress=not args.quiet, ray_address=args.ray_address,
+                           resume=args.resume)  # fmt: skip
+    except BenchmarkInterrupted as stop:  # Ctrl-C: report what finished, no traceback
+        write_report(out, suite, agents, stop.finished, not_run=stop.not_run)
+        print(f"interrupted: {len(stop.finished)} of {len(jobs)} episodes finished, reported in {out}; "
+              "the same command with --resume runs the rest", file=sys.stderr)  # fmt: skip
+        return 130
     report = write_report(out, suite, agents, results)
     print(report.read_text())
     failed = [r for r in results if r.get("failure")]
@@ -107,6 +114,9 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     bench.add_argument("--quiet", action="store_true", help="no progress bar")
     bench.add_argument("--ray-address", default=None,
                        help="run episodes as Ray tasks: auto | local | HOST:PORT (needs the ray extra)")  # fmt: skip
+    bench.add_argument("--resume", action="store_true",
+                       help="finish an interrupted run in --out: episodes whose logs are there and valid are "
+                            "not run again")  # fmt: skip
     bench.set_defaults(run=_benchmark)
 
     evaluate = sub.add_parser("eval", help="benchmark a checkpoint or zoo agent on a suite (same as benchmark)")

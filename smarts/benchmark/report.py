@@ -5,12 +5,20 @@ report can be rebuilt from a run folder alone. Every report lists the episodes w
 (per scenario: episode index -> seed, and the failures), gives each agent's mean and confidence
 interval for every metric, overall and per scenario (``score_suite``: stratified bootstrap), says
 how the intervals were made, and shows the reference agents beside the requested ones.
+
+Failed episodes (the agent raised, its worker process died twice, ...) are scored as the metrics
+config's ``failed_episodes`` says and listed with their reasons; episodes that ran again after a
+dead worker are listed too. A report of an interrupted run says how many episodes did not run.
+``results.json``, ``results.csv`` and ``report.md`` are each replaced atomically.
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import json
+import os
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +37,19 @@ def _seed_list(seeds: dict) -> str:
     return ", ".join(f"{e}={s}" for e, s in sorted(seeds.items()))
 
 
+def _write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file and ``os.replace``: a reader (or a
+    run killed meanwhile) sees the old file or the new one, never half of one."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", newline="") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 def write_report(
     out: Path,
     suite: Suite,
@@ -38,13 +59,15 @@ def write_report(
     ci_level: float = CI_LEVEL,
     resamples: int = CI_RESAMPLES,
     ci_seed: int = CI_SEED,
+    not_run: int = 0,
 ) -> Path:
     """Score each agent's logs and write ``results.json``, ``results.csv``, ``report.md``,
     ``plots/`` and TensorBoard events under ``out``; returns the report path.
 
     ``agents`` are the requested agents; the reference agents found in ``results`` (added by
     ``plan_jobs``) are reported beside them. Intervals: ``score_suite``'s stratified bootstrap
-    with ``ci_level``, ``resamples`` and ``ci_seed``."""
+    with ``ci_level``, ``resamples`` and ``ci_seed``. ``not_run``: planned episodes that did not
+    run (an interrupted run); the report says so and ``results.json`` has ``complete: false``."""
     from smarts.benchmark.runner import REFERENCE_AGENTS, agent_label
 
     out = Path(out)
@@ -62,6 +85,9 @@ def write_report(
         mine = [r for r in results if r["agent"] == agent]
         logs = [read_episode(r["log"]) for r in mine if r.get("log")]
         crashed[agent] = [r for r in mine if not r.get("log")]
+        if logs and params.failed_episodes == "exclude" and all(log.failed for log in logs):
+            crashed[agent] = [r for r in mine if r.get("failure")]  # nothing to score: list them all
+            logs = []
         scores[agent] = (
             score_suite(logs, params, ci_level=ci_level, resamples=resamples, ci_seed=ci_seed) if logs else None
         )
@@ -85,15 +111,23 @@ def write_report(
          "failure": f.get("failure")}
         for a in shown for f in ([*(scores[a].failed if scores[a] is not None else []), *crashed[a]])
     ]  # fmt: skip
+    retried = [
+        {"agent": r["agent"], "scenario": r.get("scenario"), "episode": r.get("episode"), "seed": r.get("seed"),
+         "reasons": list(r["retried"])}
+        for r in results if r.get("retried") and r["agent"] in shown
+    ]  # fmt: skip
     method = ci_method(ci_level, resamples, ci_seed)
 
     doc = {
         "suite": suite.name,
         "task": suite.task,
+        "complete": not_run == 0,
+        "episodes_not_run": int(not_run),
         "action_spaces": list(suite.action_spaces),
         "scenarios": [{"name": s.name, "difficulty": s.difficulty, "time_limit": s.time_limit} for s in suite.scenarios],
         "seeds": {name: {str(e): sd for e, sd in eps.items()} for name, eps in seeds.items()},
         "failures": failures,
+        "retried": retried,
         "ci": {"level": ci_level, "resamples": resamples, "seed": ci_seed, "method": method},
         "references": references,
         "agents": {
@@ -106,9 +140,9 @@ def write_report(
             for agent in shown
         },
     }
-    (out / "results.json").write_text(json.dumps(doc, indent=2, default=float))
+    _write_atomic(out / "results.json", json.dumps(doc, indent=2, default=float))
     difficulty = {s.name: s.difficulty for s in suite.scenarios}
-    with open(out / "results.csv", "w", newline="") as f:
+    with io.StringIO(newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["agent", "reference", "action_space", "controller", "scenario", "difficulty", "episodes",
                          "seeds", "failed", *(c for n in names for c in (n, f"{n}_ci_low", f"{n}_ci_high"))])  # fmt: skip
@@ -128,6 +162,7 @@ def write_report(
                                  *(f"{v:.4f}" for n in names for v in (row[n], *ci[n]))])  # fmt: skip
             writer.writerow([*head, "overall", "", sum(s.episodes.values()), "", sum(n_failed.values()),
                              *(f"{v:.4f}" for n in names for v in (s.overall[n], *s.overall_ci[n]))])  # fmt: skip
+        _write_atomic(out / "results.csv", f.getvalue())
 
     plots = out / "plots"
     plots.mkdir(parents=True, exist_ok=True)
@@ -141,6 +176,9 @@ def write_report(
     episodes = sorted({n for eps in seeds.values() for n in [len(eps)]})
     first = sorted({min(eps.values()) for eps in seeds.values() if eps})
     lines = [f"# Benchmark: {suite.name} ({suite.task})", ""]
+    if not_run:
+        lines += [f"**Incomplete:** {not_run} planned episode(s) did not run (the run was interrupted); the "
+                  "same command with `--resume` runs only those and rewrites this report.", ""]  # fmt: skip
     lines += [
         f"{len(suite.scenarios)} scenarios x {'/'.join(map(str, episodes)) or '0'} episodes; episode e of every "
         f"scenario runs with seed {first[0] if len(first) == 1 else 'see below'} + e (list below). Means over a "
@@ -178,9 +216,13 @@ def write_report(
     if failures:
         lines += ["", "## Failed episodes", ""]
         lines += [f"- {f['agent']}: {f['scenario'] or '?'} #{f['episode']} (seed {f['seed']}): {f['failure']}" for f in failures]
+    if retried:
+        lines += ["", "## Episodes run again after their worker process died", ""]
+        lines += [f"- {r['agent']}: {r['scenario'] or '?'} #{r['episode']} (seed {r['seed']}): {'; '.join(r['reasons'])}"
+                  for r in retried]  # fmt: skip
     lines += ["", "Plots: `plots/`; TensorBoard: `tensorboard --logdir " + str(out / "tensorboard") + "`."]
     report = out / "report.md"
-    report.write_text("\n".join(lines) + "\n")
+    _write_atomic(report, "\n".join(lines) + "\n")
     return report
 
 
@@ -206,7 +248,8 @@ def _metric_plots(plots: Path, suite: Suite, scores: dict, names: tuple[str, ...
         ax.set_ylim(0, 1)
         ax.set_ylabel(name)
         ax.set_title(f"{suite.name}: {name} per scenario")
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:  # none when no agent has a finished episode
+            ax.legend(fontsize=7)
         fig.tight_layout()
         fig.savefig(plots / f"metric_{name}.png", dpi=90)
         plt.close(fig)
@@ -246,7 +289,8 @@ def _trajectory_plots(plots: Path, suite: Suite, agents: list[str], results: lis
             ax.set_ylim(lo[1], hi[1])
         ax.set_aspect("equal")
         ax.set_title(entry.name, fontsize=8)
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:  # none when nothing of this scenario finished
+            ax.legend(fontsize=7)
         fig.tight_layout()
         fig.savefig(plots / f"trajectories_{entry.name}.png", dpi=80)
         plt.close(fig)

@@ -12,6 +12,15 @@ system). Results are scored by ``smarts.benchmark.metrics`` from the written log
 that raises or returns a malformed action fails its episode with the reason recorded; the suite
 goes on.
 
+A worker process that dies (killed, out of memory, a crash in native code) loses only the episode
+it was running: that episode runs once more in a fresh worker (:data:`RETRIES`), and if its worker
+dies again it is recorded as a failed episode whose reason says how the process ended; the other
+episodes go on. On Ray, Ray runs a task whose worker died once more, and a task that still fails
+becomes a failed episode the same way. Logs are written atomically (a temporary file, then
+``os.replace``), so a killed run never leaves a partial log. ``run_jobs(..., resume=True)`` skips
+the episodes whose logs are already there and read back valid for the same job; Ctrl-C raises
+:class:`BenchmarkInterrupted` carrying the episodes that finished.
+
 Reference agents (:data:`REFERENCE_AGENTS`) are benchmarked beside the requested ones with the
 same suite, seeds and episode count, so every report has its floor and its simple baseline.
 
@@ -25,12 +34,18 @@ episode runs, with errors naming the agent, its file and the field.
 
 from __future__ import annotations
 
-import concurrent.futures as cf
+import contextlib
 import dataclasses
+import functools
 import hashlib
 import multiprocessing
+import multiprocessing.connection
 import re
+import signal
+import threading
 import traceback
+from collections import deque
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -46,6 +61,29 @@ from smarts.sensors.interface import AgentInterface, interface_from_dict, interf
 
 REFERENCE_AGENTS = ("zoo:keep-lane", "zoo:random", "zoo:stand-still")
 """Benchmarked with every suite run unless asked not to: a simple baseline, chance, doing nothing."""
+
+RETRIES = 1
+"""How many times an episode whose worker process died runs again, in a fresh worker, before it is
+recorded as failed (on Ray: the task's ``max_retries``)."""
+
+
+class BenchmarkInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`run_jobs`. ``results`` is in job order with None for every episode
+    that did not finish; ``finished`` lists the others (their logs are on disk, so a run with
+    ``resume=True`` does only the rest). A ``KeyboardInterrupt``, so code that does not look for
+    it stops as before."""
+
+    def __init__(self, results: list[dict | None]):
+        super().__init__(f"interrupted: {sum(r is not None for r in results)} of {len(results)} episodes finished")
+        self.results = results
+
+    @property
+    def finished(self) -> list[dict]:
+        return [r for r in self.results if r is not None]
+
+    @property
+    def not_run(self) -> int:
+        return sum(r is None for r in self.results)
 
 
 @dataclass(frozen=True)
@@ -194,26 +232,62 @@ def _summary(job: Job, scenario: str, failure: str | None, info: dict) -> dict:
             "failure": failure, "log": job.log_path, **{k: info.get(k) for k in ("action_space", "controller")}}  # fmt: skip
 
 
+@functools.lru_cache(maxsize=256)
+def _file_digest(path: str, mtime_ns: int, size: int) -> bytes:
+    return hashlib.sha256(Path(path).read_bytes()).digest()
+
+
+def _digest_of(path: str) -> bytes:
+    """The content hash of a file (cached while it is unchanged), or nothing for a non-file."""
+    try:
+        stat = Path(path).stat()
+    except (OSError, ValueError):
+        return b""
+    return _file_digest(str(Path(path).resolve()), stat.st_mtime_ns, stat.st_size) if Path(path).is_file() else b""
+
+
+def job_inputs(job: Job) -> str:
+    """A digest of what an episode depends on besides its seed: the suite file's contents, the
+    scenario's place in it, the agent locator and, when it names a file (a checkpoint), that
+    file's contents. Every log records it (``info["inputs"]``); ``resume`` reuses a log only when
+    it matches, so a changed suite or retrained checkpoint is run again."""
+    h = hashlib.sha256()
+    for part in (str(job.scenario_index).encode(), job.agent.encode(), _digest_of(job.suite_source), _digest_of(job.agent)):
+        h.update(part + b"\0")
+    return h.hexdigest()[:16]
+
+
+def write_failed_episode(job: Job, reason: str, info: dict[str, Any] | None = None) -> dict:
+    """Write a log that records job's episode as failed with ``reason`` (scored as the metrics
+    config's ``failed_episodes`` says) and return its summary."""
+    from smarts.benchmark.metrics import EpisodeLog, write_episode
+
+    suite = load_suite(job.suite_source)
+    entry = suite.scenarios[job.scenario_index]
+    info = {"agent": job.agent, "inputs": job_inputs(job), **(info or {})}
+    log = EpisodeLog(
+        scenario=entry.name, task=suite.task, episode=job.episode, seed=job.seed,
+        dt=entry.spec.step_length, time_limit=entry.time_limit, goal_radius=0.0, agents={},
+        initial_route_distance={}, failure=reason, info=info,
+    )  # fmt: skip
+    write_episode(log, Path(job.log_path))
+    return _summary(job, entry.name, log.failure, info)
+
+
 def run_episode(job: Job, policy_resolver: PolicyResolver | None = None) -> dict:
     """Run one episode and write its log; returns a short summary (never raises for agent faults)."""
-    from smarts.benchmark.metrics import EpisodeLog, write_episode
+    from smarts.benchmark.metrics import write_episode
     from smarts.benchmark.recorder import EpisodeRecorder
 
     suite = load_suite(job.suite_source)
     entry = suite.scenarios[job.scenario_index]
-    info: dict[str, Any] = {"agent": job.agent}
+    info: dict[str, Any] = {"agent": job.agent, "inputs": job_inputs(job)}
     try:
         policy = load_policy(job.agent, job.seed, policy_resolver)
         setup = policy_setup(policy, job.agent)
         check_hosted(job.agent, setup, suite)
     except Exception as err:  # an unknown, broken or misdeclared agent fails every episode, visibly
-        log = EpisodeLog(
-            scenario=entry.name, task=suite.task, episode=job.episode, seed=job.seed,
-            dt=entry.spec.step_length, time_limit=entry.time_limit, goal_radius=0.0, agents={},
-            initial_route_distance={}, failure=f"could not load agent {job.agent!r}: {err}", info=info,
-        )  # fmt: skip
-        write_episode(log, Path(job.log_path))
-        return _summary(job, entry.name, log.failure, info)
+        return write_failed_episode(job, f"could not load agent {job.agent!r}: {err}")
     info.update(setup.to_dict())
     env = build_env(entry, setup)
     try:
@@ -321,54 +395,279 @@ def run_jobs(
     progress: bool = True,
     ray_address: str | None = None,
     policy_resolver: PolicyResolver | None = None,
+    *,
+    resume: bool = False,
 ) -> list[dict]:
     """Run jobs in ``workers`` processes (inline when 1), or as Ray tasks when ``ray_address`` is
     given (``auto``, ``local`` or ``HOST:PORT``); results in job order either way.
     ``policy_resolver`` (None: the installed default) goes to every worker, so it must pickle:
-    a module-level function or an instance of a module-level class."""
+    a module-level function or an instance of a module-level class.
+
+    A worker process that dies costs only its episode: it runs again in a fresh worker
+    (:data:`RETRIES` times), then is recorded as failed with how the process ended (its summary
+    has ``attempts``; one that succeeded on a later attempt has ``retried``, the reasons).
+    ``resume``: an episode whose log is already at its path, reads back valid and is of this job
+    (same agent, scenario, episode, seed and :func:`job_inputs`) is not run again; logs of
+    episodes lost to dead workers are. Ctrl-C stops the workers and raises
+    :class:`BenchmarkInterrupted` with the episodes that finished."""
     from rich.progress import Progress
 
     results: list[dict | None] = [None] * len(jobs)
     with Progress(disable=not progress, transient=False) as bar:
         task = bar.add_task("episodes", total=len(jobs))
-        if ray_address:
-            from smarts.ray_session import ray_session
 
-            with ray_session(ray_address, num_cpus=max(2, workers)) as ray:
-                remote = ray.remote(run_episode_guarded)
-                pending = {remote.remote(job, policy_resolver): k for k, job in enumerate(jobs)}
-                while pending:
-                    done, _ = ray.wait(list(pending), num_returns=1)
-                    for ref in done:
-                        results[pending.pop(ref)] = ray.get(ref)
-                        bar.advance(task)
-        elif workers <= 1:
-            for k, job in enumerate(jobs):
-                results[k] = run_episode_guarded(job, policy_resolver)
-                bar.advance(task)
-        else:
-            ctx = multiprocessing.get_context("spawn")
-            with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-                futures = {pool.submit(run_episode_guarded, job, policy_resolver): k for k, job in enumerate(jobs)}
-                for future in cf.as_completed(futures):
-                    results[futures[future]] = future.result()
-                    bar.advance(task)
+        def done(k: int, result: dict) -> None:
+            results[k] = result
+            bar.advance(task)
+
+        todo = []
+        for k, job in enumerate(jobs):
+            if resume and not job.reuse:  # (a shared reference cache may be being written by another run)
+                _remove_partial_writes(job)
+            kept = finished_episode(job) if resume or job.reuse else None
+            if kept is not None:
+                done(k, kept)
+            else:
+                todo.append(k)
+        try:
+            if not todo:
+                pass
+            elif ray_address:
+                _run_on_ray(jobs, todo, ray_address, workers, policy_resolver, done)
+            elif workers <= 1:
+                for k in todo:
+                    done(k, run_episode_guarded(jobs[k], policy_resolver))
+            else:
+                _run_in_processes(jobs, todo, workers, policy_resolver, done)
+        except KeyboardInterrupt:
+            raise BenchmarkInterrupted(results) from None
     return results  # type: ignore[return-value]
+
+
+def finished_episode(job: Job) -> dict | None:
+    """The summary of job's episode when its log is already on disk, reads back valid and was
+    written for this job (agent, episode, seed, :func:`job_inputs`); None when it must run (no
+    log, a corrupt or partial one, another job's, or an episode lost to a dead worker)."""
+    from smarts.benchmark.metrics import read_episode
+
+    path = Path(job.log_path)
+    if not path.is_file():
+        return None
+    try:
+        log = read_episode(path)
+    except Exception:
+        return None  # unreadable or invalid: run it again
+    info = log.info or {}
+    if log.seed != job.seed or log.episode != job.episode or info.get("agent", job.agent) != job.agent:
+        return None
+    if "inputs" in info and info["inputs"] != job_inputs(job):
+        return None  # the suite or the checkpoint changed since
+    if info.get("worker_died"):
+        return None  # lost to the machinery, not the agent: give it another chance
+    return _summary(job, log.scenario, log.failure, info)
+
+
+def _remove_partial_writes(job: Job) -> None:
+    """Delete the temporary files of this job's log that a killed writer left behind."""
+    path = Path(job.log_path)
+    if path.parent.is_dir():
+        for stale in path.parent.glob(f".{path.name}.*"):
+            stale.unlink(missing_ok=True)
+
+
+def _death(code: int | None) -> str:
+    if code is None:
+        return "worker process stopped answering"
+    if code < 0:
+        try:
+            return f"worker process died (exit code {code}, killed by {signal.Signals(-code).name})"
+        except ValueError:
+            return f"worker process died (exit code {code}, killed by signal {-code})"
+    return f"worker process died (exit code {code})"
+
+
+def _lost(job: Job, reasons: list[str]) -> dict:
+    """The failed episode of a job whose every attempt lost its worker: a log saying why (so the
+    report scores and lists it like any failed episode), or just the summary if even that fails."""
+    n = len(reasons)
+    reason = reasons[-1] + ("" if n == 1 else f" on all {n} attempts, each in its own worker")
+    try:
+        summary = write_failed_episode(job, reason, {"worker_died": True})
+    except Exception as err:
+        summary = {"agent": job.agent, "scenario": None, "episode": job.episode, "seed": job.seed,
+                   "failure": reason, "log": None, "traceback": f"{type(err).__name__}: {err}"}  # fmt: skip
+    return {**summary, "attempts": n}
+
+
+@contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """Ignore Ctrl-C while starting a worker: the child inherits it, so only the parent handles
+    Ctrl-C (and stops the workers) instead of every worker printing a traceback."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
+def _worker_loop(conn, policy_resolver: PolicyResolver | None) -> None:
+    """A worker process: run the jobs it is sent, one at a time, until told to stop."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    while True:
+        try:
+            message = conn.recv()
+        except (EOFError, OSError):
+            return  # the parent is gone
+        if message is None:
+            return
+        k, job = message
+        conn.send((k, run_episode_guarded(job, policy_resolver)))
+
+
+class _Worker:
+    """One worker process and the pipe to it; ``job`` is the index of the job it is running."""
+
+    def __init__(self, ctx, policy_resolver: PolicyResolver | None):
+        self.conn, child = ctx.Pipe()
+        self.process = ctx.Process(target=_worker_loop, args=(child, policy_resolver), name="smarts-benchmark-worker")
+        with _sigint_ignored():
+            self.process.start()
+        child.close()
+        self.job: int | None = None
+
+    def give(self, k: int, job: Job) -> bool:
+        try:
+            self.conn.send((k, job))
+        except OSError:  # it died while idle
+            return False
+        self.job = k
+        return True
+
+    def receive(self) -> tuple[int, dict] | None:
+        """The finished job's (index, summary), or None when the process died instead."""
+        try:
+            if self.conn.poll():
+                return self.conn.recv()
+        except Exception:  # EOF, or a message cut short by the process dying
+            pass
+        return None
+
+    def exit_code(self) -> int | None:
+        self.process.join(timeout=10)
+        return self.process.exitcode
+
+    def stop(self, graceful: bool) -> None:
+        if graceful and self.process.is_alive():
+            with contextlib.suppress(OSError):
+                self.conn.send(None)
+            self.process.join(timeout=10)
+        if self.process.is_alive():
+            self.process.terminate()
+            self.process.join(timeout=5)
+        if self.process.is_alive():
+            self.process.kill()
+            self.process.join()
+        self.conn.close()
+
+
+def _run_in_processes(
+    jobs: list[Job],
+    todo: list[int],
+    workers: int,
+    policy_resolver: PolicyResolver | None,
+    done: Callable[[int, dict], None],
+) -> None:
+    """Run ``todo`` on ``workers`` spawned processes. A process that dies is replaced; the job
+    it was running runs again in the replacement (:data:`RETRIES` times), then fails."""
+    ctx = multiprocessing.get_context("spawn")
+    queue = deque(todo)
+    reasons: dict[int, list[str]] = {}
+    pool: list[_Worker] = []
+    graceful = False
+    try:
+        pool = [_Worker(ctx, policy_resolver) for _ in range(min(workers, len(queue)))]
+
+        def assign(i: int, k: int) -> None:
+            if not pool[i].give(k, jobs[k]):  # it died while idle: its job never started
+                pool[i].stop(graceful=False)
+                pool[i] = _Worker(ctx, policy_resolver)
+                if not pool[i].give(k, jobs[k]):
+                    raise RuntimeError(f"a new benchmark worker process died at once ({_death(pool[i].exit_code())})")
+
+        while queue or any(w.job is not None for w in pool):
+            for i, w in enumerate(pool):
+                if w.job is None and queue:
+                    assign(i, queue.popleft())
+            busy = [w for w in pool if w.job is not None]
+            ready = set(multiprocessing.connection.wait([w.conn for w in busy] + [w.process.sentinel for w in busy]))
+            for i, w in enumerate(pool):
+                if w.job is None or (w.conn not in ready and w.process.sentinel not in ready):
+                    continue
+                message = w.receive()
+                if message is not None:
+                    k, result = message
+                    w.job = None
+                    done(k, {**result, "retried": reasons[k]} if k in reasons else result)
+                    continue
+                k = w.job
+                reasons.setdefault(k, []).append(_death(w.exit_code()))
+                w.stop(graceful=False)
+                pool[i] = _Worker(ctx, policy_resolver)
+                if len(reasons[k]) <= RETRIES:
+                    assign(i, k)  # again, in the fresh worker
+                else:
+                    done(k, _lost(jobs[k], reasons[k]))
+        graceful = True
+    finally:
+        for w in pool:
+            w.stop(graceful)
+
+
+def _run_on_ray(
+    jobs: list[Job],
+    todo: list[int],
+    ray_address: str,
+    workers: int,
+    policy_resolver: PolicyResolver | None,
+    done: Callable[[int, dict], None],
+) -> None:
+    """Run ``todo`` as Ray tasks. Ray runs a task whose worker died again (``max_retries``); a
+    task that still fails becomes a failed episode with Ray's reason."""
+    from smarts.ray_session import ray_session
+
+    with ray_session(ray_address, num_cpus=max(2, workers)) as ray:
+        remote = ray.remote(max_retries=RETRIES)(run_episode_guarded)
+        pending = {remote.remote(jobs[k], policy_resolver): k for k in todo}
+        try:
+            while pending:
+                ready, _ = ray.wait(list(pending), num_returns=1)
+                for ref in ready:
+                    k = pending.pop(ref)
+                    try:
+                        result = ray.get(ref)
+                    except ray.exceptions.RayError as err:  # its worker died (Ray's retries used up) or Ray failed
+                        text = str(err).strip().splitlines()
+                        reason = f"Ray task failed ({type(err).__name__}: {text[0] if text else 'no message'})"
+                        result = _lost(jobs[k], [reason])
+                        result["attempts"] = RETRIES + 1
+                    done(k, result)
+        except KeyboardInterrupt:
+            for ref in pending:
+                with contextlib.suppress(Exception):
+                    ray.cancel(ref, force=True)
+            raise
 
 
 def run_episode_guarded(job: Job, policy_resolver: PolicyResolver | None = None) -> dict:
     """``run_episode`` that turns a crash of the episode itself into a recorded failure (and
     reuses a cached log for a job marked ``reuse``)."""
-    if job.reuse and Path(job.log_path).is_file():
-        from smarts.benchmark.metrics import read_episode
-
-        try:
-            log = read_episode(job.log_path)
-        except Exception:
-            pass  # unreadable: run it again
-        else:
-            if log.seed == job.seed and log.episode == job.episode:
-                return _summary(job, log.scenario, log.failure, log.info)
+    if job.reuse:
+        kept = finished_episode(job)
+        if kept is not None:
+            return kept
     try:
         return run_episode(job, policy_resolver)
     except Exception as err:

@@ -11,7 +11,7 @@ from smarts.benchmark.metrics import read_episode, score_episode
 from smarts.benchmark.metrics.params import MetricParams
 from smarts.benchmark.metrics.scores import time_gap_to_margin
 from smarts.benchmark.recorder import EpisodeRecorder
-from smarts.benchmark.runner import Job, PolicySetup, build_env, run_episode
+from smarts.benchmark.runner import Job, PolicySetup, build_env, job_inputs, run_episode
 from smarts.benchmark.suites import load_suite
 
 CONTINUITY = """
@@ -107,7 +107,8 @@ def test_rows_start_after_the_first_step_and_end_at_the_time_limit(tmp_path):
     path = tmp_path / "short.yaml"
     path.write_text(SHORT)
     suite = load_suite(path)
-    result = run_episode(Job("zoo:keep-lane", suite.source, 0, 0, 3, str(tmp_path / "log.npz")))
+    job = Job("zoo:keep-lane", suite.source, 0, 0, 3, str(tmp_path / "log.npz"))
+    result = run_episode(job)
     assert result["failure"] is None
     log = read_episode(tmp_path / "log.npz")
     trace = log.agents["agent_0"]
@@ -120,7 +121,7 @@ def test_rows_start_after_the_first_step_and_end_at_the_time_limit(tmp_path):
     assert log.initial_route_distance["agent_0"] == pytest.approx(140.0, abs=0.01)
     driven = trace.x - 10.0
     np.testing.assert_allclose(trace.route_distance_to_goal, 140.0 - driven, atol=0.01)
-    assert log.info == {"agent": "zoo:keep-lane", "action_space": "relative_target_pose",
+    assert log.info == {"agent": "zoo:keep-lane", "inputs": job_inputs(job), "action_space": "relative_target_pose",
                         "controller": "direct", "interface": None, "lane_relative": None}  # fmt: skip
     assert log.end_time == pytest.approx(2.0)
 

@@ -1,0 +1,163 @@
+"""Runs users can rely on: a dead worker process costs one episode at most, an interrupted run
+reports what finished and ``--resume`` finishes it without redoing work."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from smarts.benchmark.metrics import read_episode
+from smarts.benchmark.report import write_report
+from smarts.benchmark.runner import finished_episode, plan_jobs, run_jobs
+from smarts.benchmark.suites import load_suite
+from tests.benchmark.dying_agent import MARKER_DIR, resolve
+from train.__main__ import main
+
+ROOT = Path(__file__).resolve().parents[2]
+TINY = str(Path(__file__).with_name("tiny_suite.yaml"))
+SIGKILLED = "worker process died (exit code -9, killed by SIGKILL)"
+
+
+@pytest.fixture
+def marker_dir(tmp_path, monkeypatch):
+    folder = tmp_path / "markers"
+    folder.mkdir()
+    monkeypatch.setenv(MARKER_DIR, str(folder))  # spawned workers (and Ray's) inherit it
+    return folder
+
+
+def _by_agent(results, agent):
+    return [r for r in results if r["agent"] == agent]
+
+
+def test_a_worker_that_dies_is_replaced_and_its_episode_runs_again(tmp_path, marker_dir):
+    suite = load_suite(TINY)
+    jobs = plan_jobs(["test:die-once"], suite, 1, tmp_path, policy_resolver=resolve)
+    results = run_jobs(jobs, workers=2, progress=False, policy_resolver=resolve)
+    assert (marker_dir / "died").exists()  # a worker really was killed
+    assert len(results) == 4 * 2 and all(r["failure"] is None for r in results)
+    retried = [r for r in results if r.get("retried")]
+    assert len(retried) == 1 and retried[0]["agent"] == "test:die-once"
+    assert retried[0]["retried"] == [SIGKILLED]
+    assert all(read_episode(r["log"]).agents for r in results)  # every episode has its full log
+    write_report(tmp_path, suite, ["test:die-once"], results)
+    doc = json.loads((tmp_path / "results.json").read_text())
+    assert doc["complete"] and doc["failures"] == []
+    assert doc["retried"] == [{k: retried[0][k] for k in ("agent", "scenario", "episode", "seed")} | {"reasons": [SIGKILLED]}]
+    assert "## Episodes run again after their worker process died" in (tmp_path / "report.md").read_text()
+
+
+def test_an_episode_whose_worker_always_dies_fails_with_the_reason_and_the_rest_goes_on(tmp_path, marker_dir):
+    suite = load_suite(TINY)
+    jobs = plan_jobs(["test:die-always", "zoo:keep-lane"], suite, 1, tmp_path, references=False, policy_resolver=resolve)
+    results = run_jobs(jobs, workers=2, progress=False, policy_resolver=resolve)
+    dead = _by_agent(results, "test:die-always")
+    reason = f"{SIGKILLED} on all 2 attempts, each in its own worker"
+    assert [(r["failure"], r["attempts"]) for r in dead] == [(reason, 2)] * 2
+    log = read_episode(dead[0]["log"])  # a failed log, scored like any failed episode
+    assert log.failure == reason and log.info["worker_died"]
+    keep = _by_agent(results, "zoo:keep-lane")
+    assert [r["failure"] for r in keep] == [None, None] and all(read_episode(r["log"]).agents for r in keep)
+    write_report(tmp_path, suite, ["test:die-always", "zoo:keep-lane"], results)
+    doc = json.loads((tmp_path / "results.json").read_text())
+    assert [(f["agent"], f["scenario"], f["failure"]) for f in doc["failures"]] == [
+        ("test:die-always", "t1_left", reason), ("test:die-always", "t2_straight_traffic", reason)]  # fmt: skip
+    assert doc["agents"]["test:die-always"]["scores"]["overall"]["S_bench"] == 0.0
+    assert doc["agents"]["zoo:keep-lane"]["scores"]["overall"]["S_bench"] > 0.3
+    assert f"test:die-always: t1_left #0 (seed 7): {reason}" in (tmp_path / "report.md").read_text()
+    # A resumed run gives episodes lost to dead workers another chance (and keeps the others).
+    assert finished_episode(jobs[0]) is None and finished_episode(jobs[-1]) is not None
+
+
+def test_on_ray_a_task_whose_worker_dies_is_run_again_or_becomes_a_failed_episode(tmp_path, marker_dir):
+    pytest.importorskip("ray", reason="ray is not installed: pip install 'smarts[ray]'")
+    suite = load_suite(TINY)
+    jobs = plan_jobs(["test:die-once", "test:die-always"], suite, 1, tmp_path, references=False, policy_resolver=resolve)
+    results = run_jobs(jobs, progress=False, ray_address="local", policy_resolver=resolve)
+    assert (marker_dir / "died").exists()
+    once, always = _by_agent(results, "test:die-once"), _by_agent(results, "test:die-always")
+    assert [r["failure"] for r in once] == [None, None]  # Ray ran the killed task again
+    assert all(r["failure"].startswith("Ray task failed (WorkerCrashedError: ") for r in always)
+    assert all(read_episode(r["log"]).info["worker_died"] for r in always)
+    write_report(tmp_path, suite, ["test:die-once", "test:die-always"], results)
+    doc = json.loads((tmp_path / "results.json").read_text())
+    assert [f["agent"] for f in doc["failures"]] == ["test:die-always"] * 2
+
+
+def _bench(out, *extra):
+    return main(["benchmark", "--suite", TINY, "--agent", "zoo:keep-lane", "--quiet", "--out", str(out), *extra])
+
+
+def test_resume_runs_only_missing_or_broken_episodes(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert _bench(out, "--episodes", "1", "--workers", "1") == 0
+    first = json.loads((out / "results.json").read_text())
+    logs = sorted((out / "logs").rglob("*.npz"))
+    assert len(logs) == 3 * 2
+    missing, cut, stale = logs[0], logs[3], logs[5]
+    missing.unlink()
+    cut.write_bytes(cut.read_bytes()[:500])  # a partial file (what a non-atomic writer could leave)
+    leftover = stale.with_name(f".{stale.name}.tmp123")  # a killed writer's temporary file
+    leftover.write_bytes(b"half")
+    before = {p: p.stat().st_mtime_ns for p in logs if p not in (missing, cut)}
+    assert _bench(out, "--episodes", "1", "--workers", "1", "--resume") == 0
+    assert {p: p.stat().st_mtime_ns for p in before} == before  # valid logs are not redone
+    assert missing.is_file() and read_episode(cut).agents  # the others are run again
+    assert not leftover.exists()
+    again = json.loads((out / "results.json").read_text())
+    assert again["complete"] and _overall(again) == _overall(first)
+
+
+def test_resume_runs_again_what_a_changed_suite_invalidates(tmp_path):
+    suite_file = tmp_path / "suite.yaml"
+    suite_file.write_text(Path(TINY).read_text())
+    jobs = plan_jobs(["zoo:stand-still"], load_suite(suite_file), 1, tmp_path, references=False)
+    run_jobs(jobs, progress=False)
+    assert all(finished_episode(j) for j in jobs)
+    suite_file.write_text(Path(TINY).read_text().replace("time_limit: 3", "time_limit: 2"))
+    jobs = plan_jobs(["zoo:stand-still"], load_suite(suite_file), 1, tmp_path, references=False)
+    assert not any(finished_episode(j) for j in jobs)
+    results = run_jobs(jobs, progress=False, resume=True)
+    assert read_episode(results[1]["log"]).time_limit == 2
+
+
+def _overall(doc):
+    return {a: v["scores"]["overall"] for a, v in doc["agents"].items()}
+
+
+def test_ctrl_c_writes_what_finished_and_resume_finishes_the_run(tmp_path):
+    out = tmp_path / "run"
+    command = [sys.executable, "-m", "train", "benchmark", "--suite", TINY, "--agent", "zoo:keep-lane",
+               "--episodes", "12", "--workers", "2", "--out", str(out)]  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(command, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)  # fmt: skip
+    try:
+        deadline = time.monotonic() + 120
+        while len(list((out / "logs").rglob("*.npz"))) < 4 and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C in a terminal: the whole process group
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("interrupted: ") and "--resume" in lines[0]
+    doc = json.loads((out / "results.json").read_text())
+    done = sorted((out / "logs").rglob("*.npz"))
+    finished = 3 * 2 * 12 - doc["episodes_not_run"]
+    assert not doc["complete"] and 0 < finished <= len(done) <= finished + 2  # + the 2 workers' last logs
+    assert "**Incomplete:**" in (out / "report.md").read_text()
+    stamps = {p: p.stat().st_mtime_ns for p in done}
+    assert _bench(out, "--episodes", "12", "--workers", "1", "--resume") == 0
+    assert {p: p.stat().st_mtime_ns for p in done} == stamps
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["complete"] and doc["episodes_not_run"] == 0
+    assert sum(doc["agents"]["zoo:keep-lane"]["scores"]["episodes"].values()) == 2 * 12
