@@ -1,24 +1,29 @@
 """Reading a scenario: YAML or a plain mapping into the spec dataclasses (``smarts.core.spec``),
-strictly validated.
+strictly validated through the project's config schema (``smarts.core.schema``).
 
-Validation happens once, when the file is read, so the simulator can trust every field. Each error
-names the file and the dotted field path (``agents[1].mission.goal.radius``) and says what was
-expected, because a scenario author should never have to guess which line is wrong.
+The file layout is a set of schema models: :class:`ScenarioFile` and its sections (agents with their
+mission, vehicle and interface, events, reward, traffic, comms). The interface and comms sections are
+owned by their packages (``smarts.sensors.interface.InterfaceFile``, ``smarts.comms.config.CommsFile``)
+and composed here. Types, ranges and choices are the fields' own; checks that span fields or sections
+(a mission's start and goal, unique ids, the trip an agent takes over, a followed vehicle, the agents
+comms names) are model validators that name the exact field. Every problem is reported at once, one
+line each: ``file: agents[1].mission.goal.radius: what was expected``, with a did-you-mean for a
+misspelt key. The validated models are then turned into the plain dataclasses the simulator reads.
 """
 
 from __future__ import annotations
 
 import difflib
-import math
 import os
-from collections.abc import Mapping
-from dataclasses import fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Annotated, Any, Literal
 
 import yaml
+from pydantic import AfterValidator, Field, PlainValidator, model_validator
 
-from smarts.core.errors import InterfaceError, ScenarioError
+from smarts.comms.config import CommsFile
+from smarts.core.errors import ScenarioError
+from smarts.core.schema import Schema, field_errors, validate
 from smarts.core.spec.scenario import (
     ACTION_SPACES,
     BUILTIN_PREFIX,
@@ -51,10 +56,7 @@ from smarts.core.spec.traffic import (
     VehicleTypeSpec,
 )
 from smarts.scenario.builtin_maps import BUILTIN_MAPS
-from smarts.sensors.interface import AgentInterface, interface_from_dict
-
-if TYPE_CHECKING:  # the reader imports it only for scenarios with a comms section
-    from smarts.comms.config import CommsConfig
+from smarts.sensors.interface import InterfaceFile
 
 MAP_FILE_SUFFIXES = (".net.xml", ".xodr")
 ZOO_PREFIX = "zoo:"
@@ -71,7 +73,13 @@ def read_scenario(
     ``source`` prefixes error messages; a relative map path is resolved against ``base_dir``
     (the current directory when None).
     """
-    return _Reader(source, None if base_dir is None else Path(base_dir), spec_class).scenario(data)
+    folder = None if base_dir is None else Path(base_dir)
+    scenario = validate(ScenarioFile, data, source, ScenarioError)
+    if not scenario.map.startswith(BUILTIN_PREFIX):
+        path = resolve_map_file(scenario.map, folder)
+        if not path.is_file():
+            raise ScenarioError(f"{source}: map: map file {str(path)!r} does not exist")
+    return scenario.to_spec(spec_class, source, folder)
 
 
 def read_scenario_file(
@@ -107,724 +115,572 @@ def resolve_map_file(map_value: str, base_dir: Path | None) -> Path:
     return path
 
 
-# ---------------------------------------------------------------------------- validation
-_REQUIRED = object()
+# ---------------------------------------------------------------------------- value types
+def _non_blank(value: str) -> str:
+    if not value.strip():
+        raise ValueError("expected a non-empty string")
+    return value
 
 
-def _describe(value: Any) -> str:
-    if isinstance(value, (dict, list)):
-        text = repr(value)
-        if len(text) <= 60:
-            return text
-        return f"a {'mapping' if isinstance(value, dict) else 'list'} of {len(value)} items"
-    if value is None:
-        return "nothing (null)"
-    return repr(value)
+def _map_name(value: str) -> str:
+    if value.startswith(BUILTIN_PREFIX):
+        name = value[len(BUILTIN_PREFIX) :]
+        if name not in BUILTIN_MAPS:
+            hint = difflib.get_close_matches(name, BUILTIN_MAPS, n=1)
+            suggestion = f" (did you mean {hint[0]!r}?)" if hint else ""
+            raise ValueError(f"unknown built-in map {name!r}{suggestion}; known: {', '.join(sorted(BUILTIN_MAPS))}")
+    elif not value.endswith(MAP_FILE_SUFFIXES):
+        raise ValueError(f"expected 'builtin:<name>' or a path ending in {' or '.join(MAP_FILE_SUFFIXES)}")
+    return value
 
 
-def _join(path: str, key: str) -> str:
-    return f"{path}.{key}" if path else key
+def _locator(value: str) -> str:
+    """A zoo locator; only its form is checked here, the zoo resolves it when the env starts."""
+    if not value.removeprefix(ZOO_PREFIX) or any(c.isspace() for c in value):
+        raise ValueError("expected a zoo locator such as 'zoo:keep-lane' or 'keep-lane'")
+    return value
 
 
-class _Reader:
-    """Turns loaded YAML data into spec dataclasses, raising on the first invalid field."""
-
-    def __init__(self, source: str, base_dir: Path | None, spec_class: type[ScenarioSpec]) -> None:
-        self.source = source
-        self.base_dir = base_dir
-        self.spec_class = spec_class
-
-    def error(self, path: str, message: str) -> ScenarioError:
-        return ScenarioError(
-            f"{self.source}: {path}: {message}" if path else f"{self.source}: {message}"
-        )
-
-    # ---------------------------------------------------------------- primitives
-    def mapping(self, value: Any, path: str, allowed: tuple[str, ...]) -> dict[str, Any]:
-        if not isinstance(value, dict):
-            what = "a mapping of scenario fields" if not path else "a mapping"
-            raise self.error(path, f"expected {what}, got {_describe(value)}")
-        for key in value:
-            if not isinstance(key, str) or key not in allowed:
-                hint = difflib.get_close_matches(str(key), allowed, n=1)
-                suggestion = f" (did you mean {hint[0]!r}?)" if hint else ""
-                raise self.error(
-                    _join(path, str(key)),
-                    f"unknown field{suggestion}; allowed fields: {', '.join(allowed)}",
-                )
+def _depart_lane(value: Any) -> str | int:
+    if (isinstance(value, str) and value in DEPART_LANES) or (
+        isinstance(value, int) and not isinstance(value, bool) and value >= 0
+    ):
         return value
+    raise ValueError(f"expected one of {', '.join(DEPART_LANES)} or a lane index (an integer >= 0)")
 
-    def string(self, d: dict, key: str, path: str, default: Any = _REQUIRED) -> Any:
-        p = _join(path, key)
-        if key not in d:
-            if default is _REQUIRED:
-                raise self.error(p, "missing required field (a string)")
-            return default
-        value = d[key]
-        if not isinstance(value, str) or not value.strip():
-            raise self.error(p, f"expected a non-empty string, got {_describe(value)}")
+
+def _depart_speed(value: Any) -> str | float:
+    if isinstance(value, str) and value in DEPART_SPEEDS:
         return value
-
-    def number(
-        self,
-        d: dict,
-        key: str,
-        path: str,
-        default: Any = _REQUIRED,
-        *,
-        positive: bool = False,
-        non_negative: bool = False,
-        maximum: float | None = None,
-        optional: bool = False,
-    ) -> Any:
-        p = _join(path, key)
-        if key not in d:
-            if default is _REQUIRED:
-                raise self.error(p, "missing required field (a number)")
-            return default
-        value = d[key]
-        if optional and value is None:
-            return None
-        return self.check_number(
-            value, p, positive=positive, non_negative=non_negative, maximum=maximum
-        )
-
-    def check_number(
-        self,
-        value: Any,
-        path: str,
-        *,
-        positive: bool = False,
-        non_negative: bool = False,
-        maximum: float | None = None,
-    ) -> float:
-        kind = (
-            "a positive number"
-            if positive
-            else "a non-negative number"
-            if non_negative
-            else "a number"
-        )
-        if maximum is not None:
-            kind += f" <= {maximum:g}"
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, (int, float))
-            or not math.isfinite(value)
-        ):
-            raise self.error(path, f"expected {kind}, got {_describe(value)}")
-        if (
-            (positive and value <= 0)
-            or (non_negative and value < 0)
-            or (maximum is not None and value > maximum)
-        ):
-            raise self.error(path, f"expected {kind}, got {value:g}")
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value < float("inf"):
         return float(value)
+    raise ValueError(f"expected one of {', '.join(DEPART_SPEEDS)} or a speed in m/s (a number >= 0)")
 
-    def integer(
-        self,
-        d: dict,
-        key: str,
-        path: str,
-        default: Any = _REQUIRED,
-        *,
-        minimum: int | None = None,
-        optional: bool = False,
-    ) -> Any:
-        p = _join(path, key)
-        if key not in d:
-            if default is _REQUIRED:
-                raise self.error(p, "missing required field (an integer)")
-            return default
-        value = d[key]
-        if optional and value is None:
-            return None
-        kind = "an integer" if minimum is None else f"an integer >= {minimum}"
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.error(p, f"expected {kind}, got {_describe(value)}")
-        if minimum is not None and value < minimum:
-            raise self.error(p, f"expected {kind}, got {value}")
-        return value
 
-    def choice(self, d: dict, key: str, path: str, choices: tuple[str, ...], default: str) -> str:
-        value = d.get(key, default)
-        if value not in choices or not isinstance(value, str):
-            raise self.error(
-                _join(path, key), f"expected one of {', '.join(choices)}; got {_describe(value)}"
-            )
-        return value
+Text = Annotated[str, AfterValidator(_non_blank)]
+"""A non-empty string (an id, a road)."""
+Number = Annotated[float, Field(allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Index = Annotated[int, Field(ge=0)]
+DepartLane = Annotated[str | int, PlainValidator(_depart_lane, json_schema_input_type=str | int)]
+DepartSpeed = Annotated[str | float, PlainValidator(_depart_speed, json_schema_input_type=str | float)]
 
-    def string_list(self, d: dict, key: str, path: str, default: list[str]) -> list[str]:
-        p = _join(path, key)
-        value = d.get(key, default)
-        if not isinstance(value, list):
-            raise self.error(p, f"expected a list of strings, got {_describe(value)}")
-        for i, item in enumerate(value):
-            if not isinstance(item, str) or not item.strip():
-                raise self.error(f"{p}[{i}]", f"expected a non-empty string, got {_describe(item)}")
-        return list(value)
+_VTYPE = VehicleTypeSpec("")
+_REWARD = RewardSpec()
+_EVENTS = EventsSpec()
 
-    # ---------------------------------------------------------------- spec parts
-    def scenario(self, data: Any) -> ScenarioSpec:
-        allowed = (
-            "name", "map", "step_length", "episode_steps", "seed", "vehicle_capacity",
-            "agents", "events", "reward", "traffic", "comms",
-        )  # fmt: skip
-        d = self.mapping(data, "", allowed)
-        name = self.string(d, "name", "")
-        map_value = self.map_field(d)
-        step_length = self.number(d, "step_length", "", 0.1, positive=True, maximum=1.0)
-        episode_steps = self.integer(d, "episode_steps", "", 1000, minimum=1)
-        seed = self.integer(d, "seed", "", 42, minimum=0)
-        capacity = self.integer(d, "vehicle_capacity", "", 256, minimum=1)
-        agents = self.agents(d.get("agents", _REQUIRED))
-        if capacity < len(agents):
-            raise self.error(
-                "vehicle_capacity",
-                f"expected at least the number of agents ({len(agents)}), got {capacity}",
-            )
-        events = self.events(d.get("events", {}))
-        reward = self.reward(d.get("reward", {}))
-        traffic = None if d.get("traffic") is None else self.traffic(d["traffic"])
-        self.agents_and_traffic(agents, traffic)
-        comms = None if d.get("comms") is None else self.comms(d["comms"], agents)
-        return self.spec_class(
-            name=name,
-            map=map_value,
-            agents=agents,
-            step_length=step_length,
-            episode_steps=episode_steps,
-            seed=seed,
-            vehicle_capacity=capacity,
-            events=events,
-            reward=reward,
-            traffic=traffic,
-            comms=comms,
-            source=self.source,
-            base_dir=self.base_dir,
-        )
 
-    def map_field(self, d: dict) -> str:
-        value = self.string(d, "map", "")
-        if value.startswith(BUILTIN_PREFIX):
-            name = value[len(BUILTIN_PREFIX) :]
-            if name not in BUILTIN_MAPS:
-                hint = difflib.get_close_matches(name, BUILTIN_MAPS, n=1)
-                suggestion = f" (did you mean {hint[0]!r}?)" if hint else ""
-                raise self.error(
-                    "map",
-                    f"unknown built-in map {name!r}{suggestion}; "
-                    f"known: {', '.join(sorted(BUILTIN_MAPS))}",
-                )
-            return value
-        if not value.endswith(MAP_FILE_SUFFIXES):
-            raise self.error(
-                "map",
-                f"expected 'builtin:<name>' or a path ending in {' or '.join(MAP_FILE_SUFFIXES)}, "
-                f"got {value!r}",
-            )
-        path = resolve_map_file(value, self.base_dir)
-        if not path.is_file():
-            raise self.error("map", f"map file {str(path)!r} does not exist")
-        return value
+def _given(model: Schema, *names: str) -> list[str]:
+    """Which of ``names`` the file gave (explicitly, null included)."""
+    return [name for name in names if name in model.model_fields_set]
 
-    def agents(self, value: Any) -> list[AgentSpec]:
-        if value is _REQUIRED:
-            raise self.error("agents", "missing required field (a list of at least one agent)")
-        if not isinstance(value, list) or not value:
-            raise self.error(
-                "agents", f"expected a list of at least one agent, got {_describe(value)}"
-            )
-        agents = [self.agent(item, f"agents[{i}]", i) for i, item in enumerate(value)]
-        seen: dict[str, int] = {}
-        for i, agent in enumerate(agents):
-            if agent.id in seen:
-                raise self.error(
-                    f"agents[{i}].id",
-                    f"duplicate agent id {agent.id!r} (also agents[{seen[agent.id]}])",
-                )
-            seen[agent.id] = i
-        return agents
 
-    def agent(self, value: Any, path: str, index: int) -> AgentSpec:
-        d = self.mapping(
-            value, path, ("id", "action_space", "controller", "policy", "vehicle", "mission", "interface")
-        )
-        agent_id = self.string(d, "id", path, f"agent_{index}")
-        action_space = self.choice(d, "action_space", path, ACTION_SPACES, "relative_target_pose")
-        controller = self.choice(d, "controller", path, CONTROLLERS, "direct")
-        if controller == "lane_relative" and action_space not in LANE_RELATIVE_SPACES:
-            raise self.error(
-                _join(path, "controller"),
-                f"lane_relative drives {', '.join(LANE_RELATIVE_SPACES)}; got action_space {action_space!r}",
-            )
-        policy = self.policy(d, path)
-        vehicle = self.vehicle(d.get("vehicle", {}), _join(path, "vehicle"))
-        if "mission" not in d:
-            raise self.error(_join(path, "mission"), "missing required field (start and goal)")
-        mission = self.mission(d["mission"], _join(path, "mission"))
-        return AgentSpec(
-            id=agent_id,
-            mission=mission,
-            action_space=action_space,
-            controller=controller,
-            vehicle=vehicle,
-            policy=policy,
-            interface=self.interface(d, path),
-        )
+# ---------------------------------------------------------------------------- agents
+class VehicleFile(Schema):
+    """An agent's vehicle: a type's typical dimensions, each one overridable."""
 
-    def interface(self, d: dict, path: str) -> AgentInterface | None:
-        """The agent's sensors; validated by ``smarts.sensors.interface`` with this field's path."""
-        if d.get("interface") is None:
-            return None
-        try:
-            return interface_from_dict(d["interface"], _join(path, "interface"))
-        except InterfaceError as err:
-            raise self.error(err.path, err.problem) from None
+    type: Literal[tuple(VEHICLE_TYPES)] = "passenger"  # type: ignore[valid-type]
+    length: Positive | None = Field(None, description="m; null: the type's.")
+    width: Positive | None = Field(None, description="m; null: the type's.")
+    height: Positive | None = Field(None, description="m; null: the type's.")
+    mass: Positive | None = Field(None, description="kg; null: the type's.")
 
-    def policy(self, d: dict, path: str) -> str | None:
-        """A zoo locator; only its form is checked here, the zoo resolves it when the env starts."""
-        if d.get("policy") is None:
-            return None
-        locator = self.string(d, "policy", path)
-        name = locator.removeprefix(ZOO_PREFIX)
-        if not name or any(c.isspace() for c in locator):
-            raise self.error(
-                _join(path, "policy"),
-                f"expected a zoo locator such as 'zoo:keep-lane' or 'keep-lane', got {locator!r}",
-            )
-        return locator
+    def to_spec(self) -> VehicleSpec:
+        return VehicleSpec(**self.model_dump())
 
-    def vehicle(self, value: Any, path: str) -> VehicleSpec:
-        d = self.mapping(value, path, ("type", "length", "width", "height", "mass"))
-        return VehicleSpec(
-            type=self.choice(d, "type", path, tuple(VEHICLE_TYPES), "passenger"),
-            **{
-                key: self.number(d, key, path, None, positive=True, optional=True)
-                for key in ("length", "width", "height", "mass")
-            },
-        )
 
-    def mission(self, value: Any, path: str) -> MissionSpec:
-        d = self.mapping(value, path, ("start", "goal", "route_via", "on_end", "follow"))
-        if "start" not in d:
-            raise self.error(
-                _join(path, "start"),
-                "missing required field (road, lane, offset, ... or take_over: <trip id>)",
-            )
-        start = self.start(d["start"], _join(path, "start"))
-        if "goal" not in d:
-            raise self.error(
-                _join(path, "goal"), "missing required field (position, road or endless: true)"
-            )
-        goal = self.goal(d["goal"], _join(path, "goal"))
-        route_via = self.string_list(d, "route_via", path, [])
-        on_end = self.choice(d, "on_end", path, MISSION_END_ACTIONS, "remove")
-        follow = self.string(d, "follow", path, None)
-        return MissionSpec(start=start, goal=goal, route_via=route_via, on_end=on_end, follow=follow)
+_POSE = ("road", "lane", "offset", "speed", "heading")
 
-    def start(self, value: Any, path: str) -> StartSpec:
-        pose = ("road", "lane", "offset", "speed", "heading")
-        d = self.mapping(value, path, (*pose, "take_over"))
-        if d.get("take_over") is not None:
-            trip = self.string(d, "take_over", path)
-            for key in pose:
-                if key in d:
-                    raise self.error(
-                        _join(path, key),
-                        f"not allowed with take_over: the agent starts as trip {trip!r}'s vehicle, "
-                        "where it is and as fast as it goes",
-                    )
-            return StartSpec(take_over=trip)
-        if "road" not in d:
-            raise self.error(
-                _join(path, "road"), "missing required field (a road id, or give take_over instead)"
-            )
-        return StartSpec(
-            road=self.string(d, "road", path),
-            lane=self.integer(d, "lane", path, 0, minimum=0),
-            offset=self.number(d, "offset", path, 0.0, non_negative=True),
-            speed=self.number(d, "speed", path, 0.0, non_negative=True),
-            heading=self.number(d, "heading", path, None, optional=True),
-        )
 
-    def goal(self, value: Any, path: str) -> GoalSpec:
-        d = self.mapping(value, path, ("position", "radius", "road", "lane", "offset", "endless"))
-        kinds = [k for k in ("position", "road", "endless") if k in d]
+class StartFile(Schema):
+    """Where the agent starts: a pose on a lane, or ``take_over: <trip id>`` (a traffic vehicle)."""
+
+    road: Text | None = Field(None, description="Road id; required unless take_over is given.")
+    lane: Index = 0
+    offset: NonNegative = Field(0.0, description="Metres along the lane from its start.")
+    speed: NonNegative = Field(0.0, description="m/s.")
+    heading: Number | None = Field(None, description="Radians; null: along the lane.")
+    take_over: Text | None = Field(
+        None,
+        description="Id of a traffic trip departing at 0 whose vehicle the agent drives from reset "
+        "on (its pose is that vehicle's, so no road, lane, offset, speed or heading).",
+    )
+
+    @model_validator(mode="after")
+    def _pose_or_take_over(self) -> StartFile:
+        if self.take_over is not None:
+            problems = [
+                (key, f"not allowed with take_over: the agent starts as trip {self.take_over!r}'s vehicle, "
+                 "where it is and as fast as it goes")
+                for key in _given(self, *_POSE)
+            ]  # fmt: skip
+        elif self.road is None:
+            problems = [("road", "required field missing (a road id, or give take_over instead)")]
+        else:
+            problems = []
+        if problems:
+            raise field_errors(self, problems)
+        return self
+
+    def to_spec(self) -> StartSpec:
+        if self.take_over is not None:
+            return StartSpec(take_over=self.take_over)
+        return StartSpec(road=self.road, lane=self.lane, offset=self.offset, speed=self.speed, heading=self.heading)
+
+
+class GoalFile(Schema):
+    """Exactly one kind of goal: a position with a radius, a road (and lane, offset), or endless."""
+
+    position: Annotated[list[Number], Field(min_length=2, max_length=2)] | None = Field(
+        None, description="[x, y] in metres."
+    )
+    radius: Positive = Field(3.0, description="m around position; only with a position goal.")
+    road: Text | None = None
+    lane: Index | None = Field(None, description="Only with a road goal; null: any lane of the road.")
+    offset: NonNegative | None = Field(
+        None, description="Metres along the goal lane that must be reached; null: entering the road is enough."
+    )
+    endless: bool | None = Field(None, description="true: drive on with no goal.")
+
+    @property
+    def kinds(self) -> list[str]:
+        """The goal kinds given (exactly one in a valid goal)."""
+        return [k for k in ("position", "road", "endless") if getattr(self, k) is not None]
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> GoalFile:
+        kinds = self.kinds
+        problems: list[tuple[Any, str]] = []
         if len(kinds) != 1:
             got = " and ".join(kinds) if kinds else "none"
-            raise self.error(
-                path, f"expected exactly one goal kind (position, road or endless: true), got {got}"
-            )
-        kind = kinds[0]
-        for key, needs in (("radius", "position"), ("lane", "road"), ("offset", "road")):
-            if key in d and kind != needs:
-                raise self.error(
-                    _join(path, key), f"only allowed with a {needs} goal, not a {kind} goal"
-                )
-        if kind == "endless":
-            if d["endless"] is not True:
-                raise self.error(
-                    _join(path, "endless"),
-                    "expected true (or give a position or road goal instead), "
-                    f"got {_describe(d['endless'])}",
-                )
-            return GoalSpec(endless=True)
-        if kind == "position":
-            p = _join(path, "position")
-            pos = d["position"]
-            if not isinstance(pos, list) or len(pos) != 2:
-                raise self.error(p, f"expected [x, y] in metres, got {_describe(pos)}")
-            xy = tuple(self.check_number(v, f"{p}[{i}]") for i, v in enumerate(pos))
-            radius = self.number(d, "radius", path, 3.0, positive=True)
-            return GoalSpec(position=xy, radius=radius)
-        return GoalSpec(
-            road=self.string(d, "road", path),
-            lane=self.integer(d, "lane", path, None, minimum=0, optional=True),
-            offset=self.number(d, "offset", path, None, non_negative=True, optional=True),
-        )
-
-    # ---------------------------------------------------------------- traffic
-    def traffic(self, value: Any) -> TrafficSpec:
-        path = "traffic"
-        allowed = ("engine", "density", "vehicle_types", "flows", "trips", "pedestrians")
-        d = self.mapping(value, path, allowed)
-        engine = self.choice(d, "engine", path, TRAFFIC_ENGINES, "builtin")
-        density = self.choice(d, "density", path, DENSITY_LEVELS, "none")
-        vehicle_types = self.vehicle_types(d.get("vehicle_types", {}), "traffic.vehicle_types")
-        flows = [
-            self.flow(item, f"{path}.flows[{i}]", vehicle_types)
-            for i, item in enumerate(self.item_list(d, "flows", path))
-        ]
-        trips = [
-            self.trip(item, f"{path}.trips[{i}]", vehicle_types)
-            for i, item in enumerate(self.item_list(d, "trips", path))
-        ]
-        self.unique_ids(
-            [(f"{path}.flows[{i}].id", f.id) for i, f in enumerate(flows)]
-            + [(f"{path}.trips[{i}].id", t.id) for i, t in enumerate(trips)],
-            "flows and trips",
-        )
-        pedestrians = [
-            self.pedestrian(item, f"{path}.pedestrians[{i}]")
-            for i, item in enumerate(self.item_list(d, "pedestrians", path))
-        ]
-        self.unique_ids(
-            [(f"{path}.pedestrians[{i}].id", p.id) for i, p in enumerate(pedestrians)],
-            "pedestrian flows",
-        )
-        if pedestrians and engine != "sumo":
-            raise self.error(
-                f"{path}.pedestrians",
-                f"pedestrians need engine: sumo (the {engine} engine has none), "
-                f"got engine {engine!r}",
-            )
-        return TrafficSpec(
-            engine=engine,
-            density=density,
-            vehicle_types=vehicle_types,
-            flows=flows,
-            trips=trips,
-            pedestrians=pedestrians,
-        )
-
-    def item_list(self, d: dict, key: str, path: str) -> list:
-        value = d.get(key, [])
-        if not isinstance(value, list):
-            raise self.error(_join(path, key), f"expected a list, got {_describe(value)}")
-        return value
-
-    def unique_ids(self, ids: list[tuple[str, str]], among: str) -> None:
-        seen: dict[str, str] = {}
-        for path, item_id in ids:
-            if item_id in seen:
-                raise self.error(
-                    path, f"duplicate id {item_id!r} among {among} (also {seen[item_id]})"
-                )
-            seen[item_id] = path
-
-    def vehicle_types(self, value: Any, path: str) -> dict[str, VehicleTypeSpec]:
-        if not isinstance(value, dict):
-            raise self.error(
-                path, f"expected a mapping of type name -> parameters, got {_describe(value)}"
-            )
-        types = {}
-        for name, params in value.items():
-            if not isinstance(name, str) or not name.strip():
-                raise self.error(path, f"expected non-empty type names, got {_describe(name)}")
-            types[name] = self.vehicle_type(name, params, _join(path, name))
-        return types
-
-    def vehicle_type(self, name: str, value: Any, path: str) -> VehicleTypeSpec:
-        defaults = VehicleTypeSpec(name)
-        keys = tuple(f.name for f in fields(VehicleTypeSpec) if f.name != "id")
-        d = self.mapping(value, path, keys)
-        params: dict[str, Any] = {
-            "base": self.choice(d, "base", path, TRAFFIC_VEHICLE_BASES, "passenger")
-        }
-        for key in ("length", "width", "height"):
-            params[key] = self.number(d, key, path, None, positive=True, optional=True)
-        for key in ("max_speed", "accel", "decel", "emergency_decel", "tau", "speed_factor"):
-            params[key] = self.number(d, key, path, getattr(defaults, key), positive=True)
-        params["sigma"] = self.number(
-            d, "sigma", path, defaults.sigma, non_negative=True, maximum=1.0
-        )
-        for key in keys:
-            if key not in params:
-                params[key] = self.number(d, key, path, getattr(defaults, key), non_negative=True)
-        return VehicleTypeSpec(name, **params)
-
-    def route_fields(self, d: dict, path: str) -> tuple[list[str] | None, str | None, str | None]:
-        """Exactly one way to give the path: ``route`` (>= 1 roads) or origin and destination."""
-        ends = [k for k in ("origin", "destination") if k in d]
-        if "route" in d:
-            if ends:
-                raise self.error(
-                    _join(path, ends[0]),
-                    "not allowed with route: give either route or origin and destination",
-                )
-            route = self.string_list(d, "route", path, [])
-            if not route:
-                raise self.error(
-                    _join(path, "route"), "expected a list of at least one road, got []"
-                )
-            return route, None, None
-        if not ends:
-            raise self.error(
-                path, "expected a route (a list of roads) or origin and destination, got neither"
-            )
-        origin, destination = (self.road_id(d, key, path) for key in ("origin", "destination"))
-        return None, origin, destination
-
-    def road_id(self, d: dict, key: str, path: str) -> str:
-        if key not in d:
-            raise self.error(_join(path, key), "missing required field (a road id)")
-        return self.string(d, key, path)
-
-    def rate_fields(self, d: dict, path: str) -> tuple[float | None, float | None]:
-        given = [k for k in ("rate", "probability") if k in d]
-        if len(given) != 1:
-            raise self.error(
-                path,
-                "expected exactly one of rate (vehicles per hour) or probability (departures per "
-                f"second), got {'both' if given else 'neither'}",
-            )
-        rate = self.number(d, "rate", path, None, positive=True)
-        probability = self.number(d, "probability", path, None, positive=True, maximum=1.0)
-        return rate, probability
-
-    def time_window(self, d: dict, path: str) -> tuple[float, float]:
-        begin = self.number(d, "begin", path, 0.0, non_negative=True)
-        end = self.number(d, "end", path, 3600.0)
-        if end <= begin:
-            raise self.error(
-                _join(path, "end"), f"expected a time after begin ({begin:g} s), got {end:g}"
-            )
-        return begin, end
-
-    def vehicle_type_ref(self, d: dict, path: str, declared: Mapping[str, Any]) -> str:
-        name = self.string(d, "vehicle_type", path, "car")
-        if name not in declared and name not in DEFAULT_VEHICLE_TYPES:
-            known = ", ".join(declared) or "none"
-            raise self.error(
-                _join(path, "vehicle_type"),
-                f"unknown vehicle type {name!r}; declared in traffic.vehicle_types: {known}; "
-                f"always available: {', '.join(DEFAULT_VEHICLE_TYPES)}",
-            )
-        return name
-
-    def depart_fields(self, d: dict, path: str) -> dict[str, Any]:
-        lane = d.get("depart_lane", "best")
-        lane_ok = (isinstance(lane, str) and lane in DEPART_LANES) or (
-            isinstance(lane, int) and not isinstance(lane, bool) and lane >= 0
-        )
-        if not lane_ok:
-            raise self.error(
-                _join(path, "depart_lane"),
-                f"expected one of {', '.join(DEPART_LANES)} or a lane index (an integer >= 0), "
-                f"got {_describe(lane)}",
-            )
-        speed = d.get("depart_speed", "desired")
-        if isinstance(speed, str) and speed in DEPART_SPEEDS:
-            pass
-        elif (
-            isinstance(speed, (int, float))
-            and not isinstance(speed, bool)
-            and math.isfinite(speed)
-            and speed >= 0
-        ):
-            speed = float(speed)
+            problems.append(((), f"expected exactly one goal kind (position, road or endless: true), got {got}"))
         else:
-            raise self.error(
-                _join(path, "depart_speed"),
-                f"expected one of {', '.join(DEPART_SPEEDS)} or a speed in m/s (a number >= 0), "
-                f"got {_describe(speed)}",
-            )
-        pos = self.number(d, "depart_pos", path, 0.0, non_negative=True)
-        return {"depart_lane": lane, "depart_speed": speed, "depart_pos": pos}
+            for key, needs in (("radius", "position"), ("lane", "road"), ("offset", "road")):
+                if getattr(self, key) is not None and _given(self, key) and kinds[0] != needs:
+                    problems.append((key, f"only allowed with a {needs} goal, not a {kinds[0]} goal"))
+            if self.endless is False:
+                problems.append(("endless", "expected true (or give a position or road goal instead), got False"))
+        if problems:
+            raise field_errors(self, problems)
+        return self
 
-    def flow(self, value: Any, path: str, declared: Mapping[str, Any]) -> FlowSpec:
-        keys = (
-            "id", "route", "origin", "destination", "rate", "probability", "begin", "end",
-            "vehicle_type", "depart_lane", "depart_speed", "depart_pos",
-        )  # fmt: skip
-        d = self.mapping(value, path, keys)
-        flow_id = self.string(d, "id", path)
-        route, origin, destination = self.route_fields(d, path)
-        rate, probability = self.rate_fields(d, path)
-        begin, end = self.time_window(d, path)
-        return FlowSpec(
-            id=flow_id,
-            route=route,
-            origin=origin,
-            destination=destination,
-            rate=rate,
-            probability=probability,
-            begin=begin,
-            end=end,
-            vehicle_type=self.vehicle_type_ref(d, path, declared),
-            **self.depart_fields(d, path),
+    def to_spec(self) -> GoalSpec:
+        if self.endless:
+            return GoalSpec(endless=True)
+        if self.position is not None:
+            return GoalSpec(position=(self.position[0], self.position[1]), radius=self.radius)
+        return GoalSpec(road=self.road, lane=self.lane, offset=self.offset)
+
+
+class MissionFile(Schema):
+    """Where an agent starts and where it has to go."""
+
+    start: StartFile
+    goal: GoalFile
+    route_via: list[Text] = Field(default_factory=list, description="Roads the route must pass, in order.")
+    on_end: Literal[MISSION_END_ACTIONS] = Field(  # type: ignore[valid-type]
+        "remove", description="remove: the vehicle leaves when the mission ends; traffic: traffic drives it on."
+    )
+    follow: Text | None = Field(
+        None, description="Id of the vehicle this agent follows (a traffic trip or another agent)."
+    )
+
+    def to_spec(self) -> MissionSpec:
+        return MissionSpec(
+            start=self.start.to_spec(),
+            goal=self.goal.to_spec(),
+            route_via=list(self.route_via),
+            on_end=self.on_end,
+            follow=self.follow,
         )
 
-    def trip(self, value: Any, path: str, declared: Mapping[str, Any]) -> TripSpec:
-        keys = (
-            "id", "route", "origin", "destination", "depart", "vehicle_type", "depart_lane",
-            "depart_speed", "depart_pos",
-        )  # fmt: skip
-        d = self.mapping(value, path, keys)
-        trip_id = self.string(d, "id", path)
-        route, origin, destination = self.route_fields(d, path)
-        return TripSpec(
-            id=trip_id,
-            route=route,
-            origin=origin,
-            destination=destination,
-            depart=self.number(d, "depart", path, 0.0, non_negative=True),
-            vehicle_type=self.vehicle_type_ref(d, path, declared),
-            **self.depart_fields(d, path),
+
+class AgentFile(Schema):
+    """One agent: its action space, vehicle, mission, sensors and (for a social agent) its policy."""
+
+    id: Text | None = Field(None, description="Defaults to agent_<index>.")
+    action_space: Literal[ACTION_SPACES] = "relative_target_pose"  # type: ignore[valid-type]
+    controller: Literal[CONTROLLERS] = Field(  # type: ignore[valid-type]
+        "direct",
+        description="direct: the action space's own actions; lane_relative: (acceleration, lane change) "
+        "commands turned into them.",
+    )
+    policy: Annotated[Text, AfterValidator(_locator)] | None = Field(
+        None, description="Zoo locator of the policy driving this social agent; null: a learning agent."
+    )
+    vehicle: VehicleFile = VehicleFile()
+    mission: MissionFile
+    interface: InterfaceFile | None = Field(None, description="Which sensors the agent has; null: the default.")
+
+    @model_validator(mode="after")
+    def _controller_fits(self) -> AgentFile:
+        if self.controller == "lane_relative" and self.action_space not in LANE_RELATIVE_SPACES:
+            raise field_errors(self, [(
+                "controller",
+                f"lane_relative drives {', '.join(LANE_RELATIVE_SPACES)}; got action_space {self.action_space!r}",
+            )])  # fmt: skip
+        return self
+
+    def to_spec(self, index: int) -> AgentSpec:
+        return AgentSpec(
+            id=self.id if self.id is not None else f"agent_{index}",
+            mission=self.mission.to_spec(),
+            action_space=self.action_space,
+            controller=self.controller,
+            vehicle=self.vehicle.to_spec(),
+            policy=self.policy,
+            interface=None if self.interface is None else self.interface.to_interface(),
         )
 
-    def pedestrian(self, value: Any, path: str) -> PedestrianFlowSpec:
-        keys = ("id", "origin", "destination", "rate", "probability", "begin", "end", "speed")
-        d = self.mapping(value, path, keys)
-        ped_id = self.string(d, "id", path)
-        origin, destination = (self.road_id(d, key, path) for key in ("origin", "destination"))
-        rate, probability = self.rate_fields(d, path)
-        begin, end = self.time_window(d, path)
-        return PedestrianFlowSpec(
-            id=ped_id,
-            origin=origin,
-            destination=destination,
-            rate=rate,
-            probability=probability,
-            begin=begin,
-            end=end,
-            speed=self.number(d, "speed", path, 1.3, positive=True),
+
+# ---------------------------------------------------------------------------- events, reward
+class EventsFile(Schema):
+    """Which events end an agent's episode, and what counts as not moving."""
+
+    terminate_on: list[Literal[TERMINATION_EVENTS]] = Field(  # type: ignore[valid-type]
+        default_factory=lambda: list(DEFAULT_TERMINATE_ON)
+    )
+    not_moving_seconds: Positive = _EVENTS.not_moving_seconds
+    not_moving_distance: NonNegative = Field(
+        _EVENTS.not_moving_distance,
+        description="A vehicle that moved less than this many metres in not_moving_seconds is not moving.",
+    )
+
+    @model_validator(mode="after")
+    def _distinct(self) -> EventsFile:
+        twice = [
+            (("terminate_on", i), f"{name!r} is listed twice")
+            for i, name in enumerate(self.terminate_on)
+            if name in self.terminate_on[:i]
+        ]
+        if twice:
+            raise field_errors(self, twice)
+        return self
+
+    def to_spec(self) -> EventsSpec:
+        return EventsSpec(list(self.terminate_on), self.not_moving_seconds, self.not_moving_distance)
+
+
+class RewardFile(Schema):
+    """The built-in reward's terms."""
+
+    progress_weight: NonNegative = Field(_REWARD.progress_weight, description="Per metre of progress along the route.")
+    collision_penalty: NonNegative = _REWARD.collision_penalty
+    off_road_penalty: NonNegative = _REWARD.off_road_penalty
+    goal_bonus: NonNegative = _REWARD.goal_bonus
+    step_penalty: NonNegative = Field(
+        _REWARD.step_penalty, description="Subtracted every step, to favour reaching the goal sooner."
+    )
+
+    def to_spec(self) -> RewardSpec:
+        return RewardSpec(**self.model_dump())
+
+
+# ---------------------------------------------------------------------------- traffic
+class VehicleTypeFile(Schema):
+    """Driver and vehicle parameters (SUMO vType semantics; see ``VehicleTypeSpec``)."""
+
+    base: Literal[TRAFFIC_VEHICLE_BASES] = Field(  # type: ignore[valid-type]
+        _VTYPE.base, description="Dimensions and defaults of this kind of vehicle."
+    )
+    length: Positive | None = None
+    width: Positive | None = None
+    height: Positive | None = None
+    max_speed: Positive = _VTYPE.max_speed
+    accel: Positive = _VTYPE.accel
+    decel: Positive = _VTYPE.decel
+    emergency_decel: Positive = _VTYPE.emergency_decel
+    tau: Positive = Field(_VTYPE.tau, description="Desired time headway (s).")
+    min_gap: NonNegative = Field(_VTYPE.min_gap, description="Standstill gap (m).")
+    sigma: Annotated[float, Field(ge=0, le=1)] = Field(_VTYPE.sigma, description="SUMO's driver imperfection.")
+    speed_factor: Positive = Field(_VTYPE.speed_factor, description="x the lane speed limit.")
+    speed_dev: NonNegative = _VTYPE.speed_dev
+    lc_strategic: NonNegative = _VTYPE.lc_strategic
+    lc_cooperative: NonNegative = _VTYPE.lc_cooperative
+    lc_speed_gain: NonNegative = _VTYPE.lc_speed_gain
+    lc_keep_right: NonNegative = _VTYPE.lc_keep_right
+    politeness: NonNegative = Field(_VTYPE.politeness, description="MOBIL politeness (built-in engine).")
+    lc_threshold: NonNegative = Field(
+        _VTYPE.lc_threshold, description="m/s^2 of acceleration advantage a lane change must bring."
+    )
+
+    def to_spec(self, name: str) -> VehicleTypeSpec:
+        return VehicleTypeSpec(name, **self.model_dump())
+
+
+def _route_problems(item: Schema) -> list[tuple[Any, str]]:
+    """Exactly one way to give the path: ``route`` (>= 1 roads) or origin and destination."""
+    ends = [k for k in ("origin", "destination") if getattr(item, k) is not None]
+    if getattr(item, "route", None) is not None:
+        return [(ends[0], "not allowed with route: give either route or origin and destination")] if ends else []
+    if not ends:
+        return [((), "expected a route (a list of roads) or origin and destination, got neither")]
+    return [
+        (key, "required field missing (a road id)")
+        for key in ("origin", "destination")
+        if getattr(item, key) is None
+    ]
+
+
+def _rate_problems(item: Schema) -> list[tuple[Any, str]]:
+    given = [k for k in ("rate", "probability") if getattr(item, k) is not None]
+    if len(given) == 1:
+        return []
+    return [((), "expected exactly one of rate (vehicles per hour) or probability (departures per second), "
+             f"got {'both' if given else 'neither'}")]  # fmt: skip
+
+
+def _window_problems(item: Schema) -> list[tuple[Any, str]]:
+    begin, end = item.begin, item.end  # type: ignore[attr-defined]
+    if end <= begin:
+        return [("end", f"expected a time after begin ({begin:g} s), got {end:g}")]
+    return []
+
+
+class _Departure(Schema):
+    """What flows and trips share: the path, the vehicle type and how vehicles depart."""
+
+    id: Text
+    route: Annotated[list[Text], Field(min_length=1)] | None = Field(
+        None, description="Consecutive roads, or some roads the route passes in order."
+    )
+    origin: Text | None = Field(None, description="First road (with destination, instead of route).")
+    destination: Text | None = Field(None, description="Last road (with origin, instead of route).")
+    vehicle_type: Text = Field("car", description="Declared in vehicle_types, or car, bus, truck, motorcycle.")
+    depart_lane: DepartLane = Field("best", description="best, random, free, first or a lane index.")
+    depart_speed: DepartSpeed = Field("desired", description="max, desired, random or a speed in m/s.")
+    depart_pos: NonNegative = Field(0.0, description="Metres along the first road's lane.")
+
+
+class FlowFile(_Departure):
+    """Repeated departures: ``rate`` vehicles per hour or a departure ``probability`` each second."""
+
+    rate: Positive | None = Field(None, description="Vehicles per hour (evenly spaced).")
+    probability: Annotated[float, Field(gt=0, le=1)] | None = Field(None, description="Departures per second.")
+    begin: NonNegative = Field(0.0, description="s.")
+    end: Number = Field(3600.0, description="s, after begin.")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> FlowFile:
+        problems = _route_problems(self) + _rate_problems(self) + _window_problems(self)
+        if problems:
+            raise field_errors(self, problems)
+        return self
+
+    def to_spec(self) -> FlowSpec:
+        return FlowSpec(**self.model_dump())
+
+
+class TripFile(_Departure):
+    """One vehicle departing at ``depart`` seconds; its id in the vehicle table is ``id``."""
+
+    depart: NonNegative = Field(0.0, description="s.")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> TripFile:
+        problems = _route_problems(self)
+        if problems:
+            raise field_errors(self, problems)
+        return self
+
+    def to_spec(self) -> TripSpec:
+        return TripSpec(**self.model_dump())
+
+
+class PedestrianFile(Schema):
+    """People walking from ``origin`` to ``destination`` road (SUMO engine only)."""
+
+    id: Text
+    origin: Text
+    destination: Text
+    rate: Positive | None = Field(None, description="People per hour.")
+    probability: Annotated[float, Field(gt=0, le=1)] | None = Field(None, description="Departures per second.")
+    begin: NonNegative = 0.0
+    end: Number = 3600.0
+    speed: Positive = Field(1.3, description="m/s.")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> PedestrianFile:
+        problems = _rate_problems(self) + _window_problems(self)
+        if problems:
+            raise field_errors(self, problems)
+        return self
+
+    def to_spec(self) -> PedestrianFlowSpec:
+        return PedestrianFlowSpec(**self.model_dump())
+
+
+class TrafficFile(Schema):
+    """Who else is on the road, for either traffic engine (see ``smarts.core.spec.traffic``)."""
+
+    engine: Literal[TRAFFIC_ENGINES] = "builtin"  # type: ignore[valid-type]
+    density: Literal[DENSITY_LEVELS] = Field(  # type: ignore[valid-type]
+        "none", description="Generated flows between all entry and exit roads, on top of the listed flows."
+    )
+    vehicle_types: dict[Text, VehicleTypeFile] = Field(default_factory=dict, description="type name -> parameters")
+    flows: list[FlowFile] = Field(default_factory=list)
+    trips: list[TripFile] = Field(default_factory=list)
+    pedestrians: list[PedestrianFile] = Field(default_factory=list, description="SUMO only.")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> TrafficFile:
+        problems: list[tuple[Any, str]] = []
+        for key, items in (("flows", self.flows), ("trips", self.trips)):
+            for i, item in enumerate(items):
+                name = item.vehicle_type
+                if name not in self.vehicle_types and name not in DEFAULT_VEHICLE_TYPES:
+                    problems.append(((key, i, "vehicle_type"), (
+                        f"unknown vehicle type {name!r}; declared in traffic.vehicle_types: "
+                        f"{', '.join(self.vehicle_types) or 'none'}; always available: {', '.join(DEFAULT_VEHICLE_TYPES)}"
+                    )))  # fmt: skip
+        departures = [("flows", i, f.id) for i, f in enumerate(self.flows)]
+        departures += [("trips", i, t.id) for i, t in enumerate(self.trips)]
+        problems += _duplicates(departures, "flows and trips")
+        problems += _duplicates([("pedestrians", i, p.id) for i, p in enumerate(self.pedestrians)], "pedestrian flows")
+        if self.pedestrians and self.engine != "sumo":
+            problems.append((
+                "pedestrians",
+                f"pedestrians need engine: sumo (the {self.engine} engine has none), got engine {self.engine!r}",
+            ))  # fmt: skip
+        if problems:
+            raise field_errors(self, problems)
+        return self
+
+    def to_spec(self) -> TrafficSpec:
+        return TrafficSpec(
+            engine=self.engine,
+            density=self.density,
+            vehicle_types={name: vtype.to_spec(name) for name, vtype in self.vehicle_types.items()},
+            flows=[f.to_spec() for f in self.flows],
+            trips=[t.to_spec() for t in self.trips],
+            pedestrians=[p.to_spec() for p in self.pedestrians],
         )
 
-    def agents_and_traffic(self, agents: list[AgentSpec], traffic: TrafficSpec | None) -> None:
-        """Checks that span both sections: taken-over trips, hand-back, clashing vehicle ids."""
+
+def _duplicates(ids: list[tuple[str, int, str]], among: str) -> list[tuple[Any, str]]:
+    seen: dict[str, str] = {}
+    problems: list[tuple[Any, str]] = []
+    for key, i, item_id in ids:
+        if item_id in seen:
+            problems.append(((key, i, "id"), f"duplicate id {item_id!r} among {among} (also {seen[item_id]})"))
+        else:
+            seen[item_id] = f"traffic.{key}[{i}].id"
+    return problems
+
+
+# ---------------------------------------------------------------------------- the file
+class ScenarioFile(Schema):
+    """A scenario file's top level."""
+
+    name: Text = Field(description="Defaults to the file's name when read from a file.")
+    map: Annotated[Text, AfterValidator(_map_name)] = Field(
+        description="builtin:<name> or a .net.xml/.xodr path relative to the scenario file's folder."
+    )
+    step_length: Annotated[float, Field(gt=0, le=1)] = Field(0.1, description="Seconds per step.")
+    episode_steps: Annotated[int, Field(ge=1)] = 1000
+    seed: Annotated[int, Field(ge=0)] = 42
+    vehicle_capacity: Annotated[int, Field(ge=1)] = Field(
+        256, description="Rows of the vehicle table: agents, traffic and pedestrians at once."
+    )
+    agents: Annotated[list[AgentFile], Field(min_length=1)]
+    events: EventsFile = EventsFile()
+    reward: RewardFile = RewardFile()
+    traffic: TrafficFile | None = Field(None, description="null: agents only.")
+    comms: CommsFile | None = Field(None, description="V2V messaging; null: off.")
+
+    @property
+    def agent_ids(self) -> list[str]:
+        return [a.id if a.id is not None else f"agent_{i}" for i, a in enumerate(self.agents)]
+
+    @model_validator(mode="after")
+    def _consistent(self) -> ScenarioFile:
+        ids = self.agent_ids
+        problems: list[tuple[Any, str]] = []
+        if self.vehicle_capacity < len(ids):
+            problems.append((
+                "vehicle_capacity", f"expected at least the number of agents ({len(ids)}), got {self.vehicle_capacity}"
+            ))  # fmt: skip
+        first: dict[str, int] = {}
+        for i, agent_id in enumerate(ids):
+            if agent_id in first:
+                problems.append((("agents", i, "id"), f"duplicate agent id {agent_id!r} (also agents[{first[agent_id]}])"))
+            first.setdefault(agent_id, i)
+        problems += self._agents_and_traffic(first)
+        if self.comms is not None:
+            unknown = sorted(set(self.comms.agent_channels) - set(ids))
+            if unknown:
+                problems.append((
+                    ("comms", "agent_channels"), f"unknown agents {unknown}; the scenario's agents are {ids}"
+                ))  # fmt: skip
+        if problems:
+            raise field_errors(self, problems)
+        return self
+
+    def _agents_and_traffic(self, agent_index: dict[str, int]) -> list[tuple[Any, str]]:
+        """Checks that span both sections: taken-over trips, hand-back, leads, clashing vehicle ids."""
+        traffic = self.traffic
         trips = {} if traffic is None else {t.id: t for t in traffic.trips}
+        problems: list[tuple[Any, str]] = []
         taken_by: dict[str, int] = {}
-        for i, agent in enumerate(agents):
-            where = f"agents[{i}].mission"
-            trip_id = agent.mission.start.take_over
-            if trip_id is not None:
-                path = f"{where}.start.take_over"
-                if traffic is None:
-                    raise self.error(
-                        path,
-                        f"no trip {trip_id!r} to take over: the scenario has no traffic section",
-                    )
-                if trip_id not in trips:
-                    hint = difflib.get_close_matches(trip_id, trips, n=1)
-                    suggestion = f" (did you mean {hint[0]!r}?)" if hint else ""
-                    raise self.error(
-                        path,
-                        f"unknown trip {trip_id!r}{suggestion}; traffic.trips: "
-                        f"{', '.join(trips) or 'none'}",
-                    )
-                depart = trips[trip_id].depart
-                if depart != 0.0:
-                    raise self.error(
-                        path,
-                        f"trip {trip_id!r} departs at {depart:g} s; only a trip departing at 0 "
-                        "exists at reset to be taken over",
-                    )
-                if trip_id in taken_by:
-                    raise self.error(
-                        path,
-                        f"trip {trip_id!r} is already taken over by agents[{taken_by[trip_id]}]",
-                    )
+        for i, agent in enumerate(self.agents):
+            mission = agent.mission
+            trip_id = mission.start.take_over
+            where = ("agents", i, "mission", "start", "take_over")
+            if trip_id is None:
+                pass
+            elif traffic is None:
+                problems.append((where, f"no trip {trip_id!r} to take over: the scenario has no traffic section"))
+            elif trip_id not in trips:
+                problems.append((where, f"unknown trip {trip_id!r}{_did_you_mean(trip_id, trips)}; "
+                                 f"traffic.trips: {', '.join(trips) or 'none'}"))  # fmt: skip
+            elif trips[trip_id].depart != 0.0:
+                problems.append((where, f"trip {trip_id!r} departs at {trips[trip_id].depart:g} s; only a trip "
+                                 "departing at 0 exists at reset to be taken over"))  # fmt: skip
+            elif trip_id in taken_by:
+                problems.append((where, f"trip {trip_id!r} is already taken over by agents[{taken_by[trip_id]}]"))
+            else:
                 taken_by[trip_id] = i
-            if agent.mission.on_end == "traffic" and traffic is None:
-                raise self.error(
-                    f"{where}.on_end",
-                    "'traffic' hands the vehicle to traffic, but the scenario has no traffic "
-                    "section",
-                )
-        agent_index = {a.id: i for i, a in enumerate(agents)}
-        for i, agent in enumerate(agents):
+            if mission.on_end == "traffic" and traffic is None:
+                problems.append((("agents", i, "mission", "on_end"), "'traffic' hands the vehicle to traffic, but "
+                                 "the scenario has no traffic section"))  # fmt: skip
+        ids = self.agent_ids
+        for i, agent in enumerate(self.agents):
             lead = agent.mission.follow
+            where = ("agents", i, "mission", "follow")
             if lead is None:
                 continue
-            if lead == agent.id:
-                raise self.error(f"agents[{i}].mission.follow", "an agent cannot follow itself")
-            if lead not in trips and lead not in agent_index:
+            if lead == ids[i]:
+                problems.append((where, "an agent cannot follow itself"))
+            elif lead not in trips and lead not in agent_index:
                 known = [*trips, *agent_index]
-                hint = difflib.get_close_matches(lead, known, n=1)
-                suggestion = f" (did you mean {hint[0]!r}?)" if hint else ""
-                raise self.error(
-                    f"agents[{i}].mission.follow",
-                    f"no vehicle {lead!r} to follow{suggestion}; traffic.trips and agents: "
-                    f"{', '.join(known) or 'none'}",
-                )
+                problems.append((where, f"no vehicle {lead!r} to follow{_did_you_mean(lead, known)}; "
+                                 f"traffic.trips and agents: {', '.join(known) or 'none'}"))  # fmt: skip
         for j, trip in enumerate(traffic.trips if traffic is not None else []):
             if trip.id in agent_index:
-                raise self.error(
-                    f"traffic.trips[{j}].id",
-                    f"{trip.id!r} is also the id of agents[{agent_index[trip.id]}]; "
-                    "vehicle ids must be unique",
-                )
+                problems.append((("traffic", "trips", j, "id"), f"{trip.id!r} is also the id of "
+                                 f"agents[{agent_index[trip.id]}]; vehicle ids must be unique"))  # fmt: skip
+        return problems
 
-    def comms(self, value: Any, agents: list[AgentSpec]) -> CommsConfig:
-        """The V2V settings, validated by ``smarts.comms`` (errors name ``comms.<field>``)."""
-        from smarts.comms.config import CommsConfig
-
-        where = f"{self.source}: comms"
-        config = CommsConfig.from_dict(value, where=where)
-        config.check_agents([a.id for a in agents], where=where)
-        return config
-
-    def events(self, value: Any) -> EventsSpec:
-        path = "events"
-        d = self.mapping(value, path, ("terminate_on", "not_moving_seconds", "not_moving_distance"))
-        terminate_on = self.string_list(d, "terminate_on", path, list(DEFAULT_TERMINATE_ON))
-        for i, name in enumerate(terminate_on):
-            if name not in TERMINATION_EVENTS:
-                raise self.error(
-                    f"{path}.terminate_on[{i}]",
-                    f"expected one of {', '.join(TERMINATION_EVENTS)}; got {name!r}",
-                )
-            if name in terminate_on[:i]:
-                raise self.error(f"{path}.terminate_on[{i}]", f"{name!r} is listed twice")
-        return EventsSpec(
-            terminate_on=terminate_on,
-            not_moving_seconds=self.number(d, "not_moving_seconds", path, 60.0, positive=True),
-            not_moving_distance=self.number(d, "not_moving_distance", path, 1.0, non_negative=True),
+    def to_spec(self, spec_class: type[ScenarioSpec], source: str, base_dir: Path | None) -> ScenarioSpec:
+        """The validated file as the simulator's dataclasses."""
+        return spec_class(
+            name=self.name,
+            map=self.map,
+            agents=[agent.to_spec(i) for i, agent in enumerate(self.agents)],
+            step_length=self.step_length,
+            episode_steps=self.episode_steps,
+            seed=self.seed,
+            vehicle_capacity=self.vehicle_capacity,
+            events=self.events.to_spec(),
+            reward=self.reward.to_spec(),
+            traffic=None if self.traffic is None else self.traffic.to_spec(),
+            comms=None if self.comms is None else self.comms.to_config(),
+            source=source,
+            base_dir=base_dir,
         )
 
-    def reward(self, value: Any) -> RewardSpec:
-        path = "reward"
-        keys = (
-            "progress_weight",
-            "collision_penalty",
-            "off_road_penalty",
-            "goal_bonus",
-            "step_penalty",
-        )
-        d = self.mapping(value, path, keys)
-        defaults = RewardSpec()
-        return RewardSpec(
-            **{k: self.number(d, k, path, getattr(defaults, k), non_negative=True) for k in keys}
-        )
+
+def _did_you_mean(name: str, known: Any) -> str:
+    hint = difflib.get_close_matches(name, list(known), n=1)
+    return f" (did you mean {hint[0]!r}?)" if hint else ""

@@ -47,7 +47,7 @@ def test_scenario_show_reports_errors_on_stderr(tmp_path, capsys):
     bad = tmp_path / "bad.yaml"
     bad.write_text("map: builtin:straight_2lane\nagents: []\n", encoding="utf-8")
     assert main(["scenario", "show", str(bad)]) == 1
-    assert f"{bad}: agents: expected a list of at least one agent" in capsys.readouterr().err
+    assert f"{bad}: agents: list should have at least 1 item" in capsys.readouterr().err
 
 
 def test_map_list_and_build(capsys, monkeypatch, map_cache_dir, built_maps):

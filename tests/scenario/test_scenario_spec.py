@@ -124,7 +124,7 @@ BAD_SPECS = [
         "agents[1].mission.goal.radius",
         -2,
         "agents[1].mission.goal.radius",
-        "expected a positive number, got -2",
+        "input should be greater than 0, got -2",
     ),
     ("agents[1].id", "agent_0", "agents[1].id", "duplicate agent id 'agent_0'"),
     ("agents[0].mission.goal.endless", True, "agents[0].mission.goal", "exactly one goal kind"),
@@ -133,25 +133,25 @@ BAD_SPECS = [
     ("map", "builtin:no_such_map", "map", "unknown built-in map 'no_such_map'"),
     ("map", "roads.osm", "map", ".net.xml"),
     ("map", "missing.net.xml", "map", "does not exist"),
-    ("episode_steps", "100", "episode_steps", "expected an integer >= 1, got '100'"),
-    ("episode_steps", 0, "episode_steps", "expected an integer >= 1, got 0"),
-    ("step_length", 2.0, "step_length", "<= 1"),
-    ("seed", 1.5, "seed", "expected an integer"),
-    ("agents[0].mission.start.lane", 1.5, "agents[0].mission.start.lane", "expected an integer"),
+    ("episode_steps", "100", "episode_steps", "input should be a valid integer, got '100'"),
+    ("episode_steps", 0, "episode_steps", "input should be greater than or equal to 1, got 0"),
+    ("step_length", 2.0, "step_length", "less than or equal to 1"),
+    ("seed", 1.5, "seed", "valid integer"),
+    ("agents[0].mission.start.lane", 1.5, "agents[0].mission.start.lane", "valid integer"),
     (
         "agents[0].mission.start.speed",
         True,
         "agents[0].mission.start.speed",
-        "expected a non-negative number",
+        "input should be a valid number, got True",  # strict: true is not a number
     ),
-    ("agents[0].mission.start.offset", -1.0, "agents[0].mission.start.offset", "non-negative"),
+    ("agents[0].mission.start.offset", -1.0, "agents[0].mission.start.offset", "greater than or equal to 0"),
     (
         "agents[0].mission.start.road",
         _DELETE,
         "agents[0].mission.start.road",
-        "missing required field",
+        "required field missing (a road id, or give take_over instead)",
     ),
-    ("agents[0].mission.goal", _DELETE, "agents[0].mission.goal", "missing required field"),
+    ("agents[0].mission.goal", _DELETE, "agents[0].mission.goal", "required field missing"),
     (
         "agents[0].mission.goal.radius",
         3.0,
@@ -162,26 +162,26 @@ BAD_SPECS = [
         "agents[1].mission.goal.position",
         [1.0],
         "agents[1].mission.goal.position",
-        "expected [x, y]",
+        "at least 2 items",
     ),
     (
         "agents[1].mission.goal.position",
         [1.0, "a"],
         "agents[1].mission.goal.position[1]",
-        "expected a number",
+        "valid number",
     ),
     ("agents[1].vehicle.type", "tank", "agents[1].vehicle.type", "passenger"),
-    ("agents[1].vehicle.mass", 0, "agents[1].vehicle.mass", "positive"),
-    ("agents[1].mission.route_via", "west_out", "agents[1].mission.route_via", "list of strings"),
-    ("agents", [], "agents", "at least one agent"),
-    ("agents", _DELETE, "agents", "missing required field"),
+    ("agents[1].vehicle.mass", 0, "agents[1].vehicle.mass", "greater than 0"),
+    ("agents[1].mission.route_via", "west_out", "agents[1].mission.route_via", "valid list"),
+    ("agents", [], "agents", "at least 1 item"),
+    ("agents", _DELETE, "agents", "required field missing"),
     ("vehicle_capacity", 1, "vehicle_capacity", "number of agents (2)"),
     ("events.terminate_on", ["collision", "exploded"], "events.terminate_on[1]", "off_road"),
     ("events.terminate_on", ["collision", "collision"], "events.terminate_on[1]", "listed twice"),
-    ("events.not_moving_seconds", 0, "events.not_moving_seconds", "positive"),
-    ("reward.goal_bonus", -1, "reward.goal_bonus", "non-negative"),
+    ("events.not_moving_seconds", 0, "events.not_moving_seconds", "greater than 0"),
+    ("reward.goal_bonus", -1, "reward.goal_bonus", "greater than or equal to 0"),
     ("reward.speed_bonus", 1, "reward.speed_bonus", "unknown field"),
-    ("traffic", ["flow"], "traffic", "expected a mapping"),
+    ("traffic", ["flow"], "traffic", "valid dictionary"),
     ("name", "", "name", "non-empty string"),
 ]
 
@@ -203,7 +203,7 @@ def test_error_message_matches_documented_form(tmp_path):
     with pytest.raises(
         ValueError,
         match=r"intersection\.yaml: agents\[1\]\.mission\.goal\.radius: "
-        r"expected a positive number, got -2$",
+        r"input should be greater than 0, got -2$",
     ):
         ScenarioSpec.from_yaml(file)
 
@@ -224,13 +224,13 @@ def test_invalid_yaml_and_missing_file_name_the_file(tmp_path):
     scalar = tmp_path / "scalar.yaml"
     scalar.write_text("42\n", encoding="utf-8")
     with pytest.raises(
-        ScenarioError, match=r"scalar\.yaml: expected a mapping of scenario fields, got 42"
+        ScenarioError, match=r"scalar\.yaml: expected a mapping at the top level, got int"
     ):
         ScenarioSpec.from_yaml(scalar)
 
 
 def test_from_dict_names_its_source():
-    with pytest.raises(ScenarioError, match=r"^inline: seed: expected an integer >= 0, got -1$"):
+    with pytest.raises(ScenarioError, match=r"^inline: seed: input should be greater than or equal to 0, got -1$"):
         ScenarioSpec.from_dict(_set(BASE, "seed", -1), source="inline")
 
 
@@ -325,3 +325,106 @@ def test_check_map_with_the_map_compiler(built_maps, map_cache_dir):
         ScenarioError, match=r"agents\[0\]\.mission\.start\.lane: road 'west_in' has 2 lanes"
     ):
         ScenarioSpec.from_dict(_set(BASE, "agents[0].mission.start.lane", 3)).check_map(road_map)
+
+
+# ---------------------------------------------------------------------------- the schema
+def test_every_problem_is_reported_at_once_each_with_file_and_field(tmp_path):
+    data = _set(BASE, "seed", -1)
+    data = _set(data, "agents[0].mission.goal.raod", "north_out")
+    data = _set(data, "agents[1].vehicle.mass", 0)
+    data = _set(data, "events.terminate_on", ["collision", "exploded"])
+    file = write_yaml(tmp_path, data)
+    with pytest.raises(ScenarioError) as info:
+        ScenarioSpec.from_yaml(file)
+    lines = str(info.value).splitlines()
+    assert [line.split(": ")[1] for line in lines] == [
+        "seed",
+        "agents[0].mission.goal.raod",
+        "agents[1].vehicle.mass",
+        "events.terminate_on[1]",
+    ]
+    assert all(line.startswith(f"{file}: ") for line in lines)
+
+
+@pytest.mark.parametrize(
+    "dotted,expected",
+    [
+        ("agents[0].mission.goal.raod", "agents[0].mission.goal.raod: unknown field; did you mean 'road'?"),
+        ("agents[1].mission.start.ofset", "agents[1].mission.start.ofset: unknown field; did you mean 'offset'?"),
+        ("agents[0].interface.lidar.rayz", "agents[0].interface.lidar.rayz: unknown field; did you mean 'rays'?"),
+        ("traffic.vehicle_types.calm.max_sped", "traffic.vehicle_types.calm.max_sped: unknown field; did you mean 'max_speed'?"),
+        ("traffic.flows[0].vehicle_typ", "traffic.flows[0].vehicle_typ: unknown field; did you mean 'vehicle_type'?"),
+        ("comms.latncy", "comms.latncy: unknown field; did you mean 'latency'?"),
+    ],
+)
+def test_a_misspelt_key_at_a_nested_path_gets_a_did_you_mean(dotted, expected):
+    data = _set(BASE, "traffic", {"vehicle_types": {"calm": {}}, "flows": [{"id": "f", "route": ["west_in"], "rate": 60}]})
+    data = _set(data, "agents[0].interface", {"lidar": {}})
+    data = _set(data, "comms", {})
+    with pytest.raises(ScenarioError) as info:
+        ScenarioSpec.from_dict(_set(data, dotted, 1), source="inline")
+    assert str(info.value).startswith(f"inline: {expected} (known: "), str(info.value)
+
+
+@pytest.mark.parametrize(
+    "dotted,value,expected",
+    [
+        ("step_length", True, "step_length: input should be a valid number, got True"),
+        ("agents[0].mission.start.offset", False, "agents[0].mission.start.offset: input should be a valid number, got False"),
+        ("seed", True, "seed: input should be a valid integer, got True"),
+        ("agents[0].mission.start.lane", "1", "agents[0].mission.start.lane: input should be a valid integer, got '1'"),
+        ("reward.goal_bonus", "10", "reward.goal_bonus: input should be a valid number, got '10'"),
+        ("agents[0].mission.goal.endless", 1, "agents[0].mission.goal.endless: input should be a valid boolean, got 1"),
+        ("name", 7, "name: input should be a valid string, got 7"),
+    ],
+)
+def test_types_are_strict(dotted, value, expected):
+    """true is not a number and "1" is not an integer (an integer is a valid number)."""
+    with pytest.raises(ScenarioError) as info:
+        ScenarioSpec.from_dict(_set(BASE, dotted, value), source="inline")
+    assert str(info.value) == f"inline: {expected}"
+
+
+def test_integers_are_read_as_floats_where_numbers_are_expected():
+    spec = ScenarioSpec.from_dict(_set(BASE, "agents[0].mission.start.offset", 20), source="inline")
+    assert type(spec.agents[0].mission.start.offset) is float and spec.agents[0].mission.start.offset == 20.0
+    assert type(spec.agents[1].mission.goal.position[0]) is float
+
+
+def test_the_file_models_hold_the_dataclasses_fields_and_defaults():
+    """Each section's schema model has the fields of the dataclass it becomes, with its defaults."""
+    import dataclasses
+
+    from smarts.comms.config import CommsConfig, CommsFile
+    from smarts.core.spec import EventsSpec, FlowSpec, PedestrianFlowSpec, RewardSpec, TripSpec, VehicleTypeSpec
+    from smarts.scenario import reader
+    from smarts.sensors import interface
+
+    pairs = [
+        (reader.VehicleTypeFile, VehicleTypeSpec, {"id"}),
+        (reader.FlowFile, FlowSpec, set()),
+        (reader.TripFile, TripSpec, set()),
+        (reader.PedestrianFile, PedestrianFlowSpec, set()),
+        (reader.RewardFile, RewardSpec, set()),
+        (reader.EventsFile, EventsSpec, set()),
+        (reader.VehicleFile, VehicleSpec, set()),
+        (CommsFile, CommsConfig, set()),
+        (interface.EgoFile, interface.EgoInterface, set()),
+        (interface.NeighboursFile, interface.NeighboursInterface, set()),
+        (interface.WaypointsFile, interface.WaypointsInterface, set()),
+        (interface.OcclusionFile, interface.OcclusionInterface, set()),
+        (interface.RastersFile, interface.RasterInterface, set()),
+        (interface.LidarFile, interface.LidarInterface, set()),
+    ]
+    for model, spec, only_in_spec in pairs:
+        spec_fields = {f.name: f for f in dataclasses.fields(spec)}
+        assert set(model.model_fields) == set(spec_fields) - only_in_spec, model.__name__
+        for name, info in model.model_fields.items():
+            f = spec_fields[name]
+            default = info.get_default(call_default_factory=True)
+            if f.default is not dataclasses.MISSING:
+                assert default == f.default or list(f.default) == default, (model.__name__, name)
+            elif f.default_factory is not dataclasses.MISSING:
+                assert default == f.default_factory(), (model.__name__, name)
+            else:
+                assert info.is_required(), (model.__name__, name)

@@ -98,7 +98,7 @@ def test_every_sensor_adds_keys_or_trailing_columns():
         ({"waypoints": {"spacing": 0}}, "agents[1].interface.waypoints.spacing: input should be greater than or equal to 1"),
         ({"signals": 1}, "agents[1].interface.signals: input should be a valid boolean, got 1"),
         ({"lidars": {}}, "agents[1].interface.lidars: unknown field; did you mean 'lidar'?"),
-        ([1, 2], "agents[1].interface: expected a mapping of sensors"),
+        ([1, 2], "agents[1].interface: input should be a valid dictionary"),
     ],
 )
 def test_invalid_fields_are_named(interface, message):
