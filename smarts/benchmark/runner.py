@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import functools
 import hashlib
 import multiprocessing
 import multiprocessing.connection
@@ -232,18 +231,12 @@ def _summary(job: Job, scenario: str, failure: str | None, info: dict) -> dict:
             "failure": failure, "log": job.log_path, **{k: info.get(k) for k in ("action_space", "controller")}}  # fmt: skip
 
 
-@functools.lru_cache(maxsize=256)
-def _file_digest(path: str, mtime_ns: int, size: int) -> bytes:
-    return hashlib.sha256(Path(path).read_bytes()).digest()
-
-
 def _digest_of(path: str) -> bytes:
-    """The content hash of a file (cached while it is unchanged), or nothing for a non-file."""
+    """The content hash of a file, or nothing for a locator that is not one."""
     try:
-        stat = Path(path).stat()
+        return hashlib.sha256(Path(path).read_bytes()).digest() if Path(path).is_file() else b""
     except (OSError, ValueError):
         return b""
-    return _file_digest(str(Path(path).resolve()), stat.st_mtime_ns, stat.st_size) if Path(path).is_file() else b""
 
 
 def job_inputs(job: Job) -> str:
@@ -252,7 +245,8 @@ def job_inputs(job: Job) -> str:
     file's contents. Every log records it (``info["inputs"]``); ``resume`` reuses a log only when
     it matches, so a changed suite or retrained checkpoint is run again."""
     h = hashlib.sha256()
-    for part in (str(job.scenario_index).encode(), job.agent.encode(), _digest_of(job.suite_source), _digest_of(job.agent)):
+    parts = (str(job.scenario_index).encode(), job.agent.encode(), _digest_of(job.suite_source), _digest_of(job.agent))
+    for part in parts:
         h.update(part + b"\0")
     return h.hexdigest()[:16]
 

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from smarts.benchmark.metrics import read_episode
+from smarts.benchmark.metrics import MetricParams, read_episode
 from smarts.benchmark.report import write_report
-from smarts.benchmark.runner import finished_episode, plan_jobs, run_jobs
+from smarts.benchmark.runner import finished_episode, plan_jobs, run_jobs, write_failed_episode
 from smarts.benchmark.suites import load_suite
 from tests.benchmark.dying_agent import MARKER_DIR, resolve
 from train.__main__ import main
@@ -87,6 +87,19 @@ def test_on_ray_a_task_whose_worker_dies_is_run_again_or_becomes_a_failed_episod
     write_report(tmp_path, suite, ["test:die-once", "test:die-always"], results)
     doc = json.loads((tmp_path / "results.json").read_text())
     assert [f["agent"] for f in doc["failures"]] == ["test:die-always"] * 2
+
+
+def test_the_report_is_written_when_every_episode_failed_and_failed_episodes_are_excluded(tmp_path, monkeypatch):
+    import smarts.benchmark.report as report
+
+    suite = load_suite(TINY)
+    jobs = plan_jobs(["zoo:stand-still"], suite, 1, tmp_path, references=False)
+    results = [write_failed_episode(job, SIGKILLED, {"worker_died": True}) for job in jobs]
+    monkeypatch.setattr(report, "load_params", lambda: MetricParams(failed_episodes="exclude"))
+    write_report(tmp_path, suite, ["zoo:stand-still"], results)
+    doc = json.loads((tmp_path / "results.json").read_text())
+    assert doc["agents"]["zoo:stand-still"]["scores"] is None
+    assert [(f["scenario"], f["failure"]) for f in doc["failures"]] == [("t1_left", SIGKILLED), ("t2_straight_traffic", SIGKILLED)]
 
 
 def _bench(out, *extra):
