@@ -41,7 +41,7 @@ def test_a_bad_override_names_the_flag_and_the_field(tmp_path, capsys):
     assert not (tmp_path / "run").exists()
     with pytest.raises(ConfigError, match="--workers: workers: must be <= envs \\(2\\)"):
         load_config("platoon", overrides={"envs": "2", "workers": "3"})
-    with pytest.raises(ConfigError, match="--interface: interface: leed: unknown field \\(did you mean 'lead'"):
+    with pytest.raises(ConfigError, match="--interface: interface: leed: unknown field; did you mean 'lead'"):
         load_config("platoon", overrides={"interface": "{leed: true}"})
 
 

@@ -243,3 +243,23 @@ def test_the_final_evaluation_shows_progress_unless_quiet(tmp_path, capsys):
     assert "episodes" in capsys.readouterr().out  # the evaluation's own bar after training's
     assert main(base + ["--out-dir", str(tmp_path / "b"), "--quiet"]) == 0
     assert "episodes" not in capsys.readouterr().out
+
+
+def test_every_run_gets_its_own_numbered_folder_and_latest_points_to_the_newest(tmp_path):
+    base = ["ppo", "--task", "platoon", "--scenarios", "adaptive:a01_straight_free", "--total-steps", "64",
+            "--frames-per-batch", "64", "--minibatch-size", "64", "--epochs", "1", "--envs", "1",
+            "--eval-episodes", "0", "--runs-dir", str(tmp_path), "--quiet"]  # fmt: skip
+    assert main(base) == 0
+    first = torch.load(tmp_path / "001" / "final.pt", weights_only=True)
+    assert main(base) == 0  # the same command again: a new folder, the first run untouched
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.isdigit()) == ["001", "002"]
+    assert (tmp_path / "latest").resolve() == (tmp_path / "002").resolve()
+    again = torch.load(tmp_path / "001" / "final.pt", weights_only=True)
+    assert all(torch.equal(first["actor"][k], again["actor"][k]) for k in first["actor"])
+    # --resume without --out-dir continues in the checkpoint's own folder
+    assert main([*base[:6], "128", *base[7:], "--resume", str(tmp_path / "001" / "last.pt")]) == 0
+    assert torch.load(tmp_path / "001" / "final.pt", weights_only=True)["step"] == 128
+    assert not (tmp_path / "003").exists()
+    import json
+
+    assert json.loads((tmp_path / "002" / "config.json").read_text())["out"] == str(tmp_path / "002")

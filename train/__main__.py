@@ -49,8 +49,11 @@ def _ppo(args: argparse.Namespace) -> int:
 
     overrides = {name: getattr(args, name) for name in TrainConfig.model_fields if name != "task"}
     cfg = load_config(args.task, args.config, {k: v for k, v in overrides.items() if v is not None})
-    out = Path(cfg.out)
+    from train.run import run_folder
+
     resume = Path(args.resume) if args.resume else None
+    out = run_folder(cfg, resume)
+    cfg = cfg.model_copy(update={"out": str(out)})
     if cfg.lib == "sb3":
         from train.sb3_ppo import train_sb3
 

@@ -211,8 +211,15 @@ class TrainConfig(Schema):
         "optimiser, step 0), e.g. a platoon policy fine-tuned on the pybullet car; unlike --resume the action space "
         "may differ, the observation and the commands' meaning may not.",
     )
-    out: str = Field(
-        "runs/train", description="The run folder (config.json, checkpoints, TensorBoard); one that holds another run is refused."
+    runs_dir: str = Field(
+        "runs/train",
+        description="Where runs go when out is not given: each run gets the next numbered folder under it "
+        "(001, 002, ...) and runs_dir/latest points to the newest.",
+    )
+    out: str | None = Field(
+        None,
+        description="This run's exact folder (config.json, checkpoints, TensorBoard); one that holds another run is "
+        "refused. null: a new numbered folder under runs_dir (or, with --resume, the checkpoint's own folder).",
     )
     ray_address: str | None = Field(
         None, description="Run the collectors as Ray actors: auto | local | HOST:PORT (needs the ray extra); null: no Ray."

@@ -125,6 +125,35 @@ def lane_relative_dict(cfg: TrainConfig) -> dict | None:
 
 
 # ------------------------------------------------------------------ resuming
+def run_folder(cfg: TrainConfig, resume: Path | None = None) -> Path:
+    """The folder a run writes to: ``out`` when given; else the resumed checkpoint's folder; else
+    the next numbered folder under ``runs_dir`` (``001``, ``002``, ...). Nothing is created here:
+    :class:`Run` creates it once the setup has been checked, and points ``runs_dir/latest`` to it."""
+    if cfg.out:
+        return Path(cfg.out)
+    if resume is not None:
+        return Path(resume).parent
+    root = Path(cfg.runs_dir)
+    taken = [int(p.name) for p in root.iterdir() if p.name.isdigit()] if root.is_dir() else []
+    return root / f"{max(taken, default=0) + 1:03d}"
+
+
+def point_latest(root: Path, folder: Path) -> None:
+    """``root/latest`` -> ``folder`` (a relative symlink, replaced atomically; a text file holding
+    the folder's name where symlinks are not allowed)."""
+    link = root / "latest"
+    temporary = root / f".latest-{folder.name}"
+    try:
+        temporary.unlink(missing_ok=True)
+        temporary.symlink_to(folder.name, target_is_directory=True)
+        temporary.replace(link)
+    except OSError:
+        temporary.unlink(missing_ok=True)
+        if not link.is_symlink() and link.is_dir():
+            return  # a real folder of that name is the user's: leave it alone
+        (root / "latest.txt").write_text(folder.name + "\n")
+
+
 def checkpoint_setup(blob: dict) -> dict:
     """What a checkpoint was trained with, in the terms ``check_resume`` compares."""
     library = LIBRARY_OF_FORMAT[checkpoint_format(blob)]
@@ -193,6 +222,8 @@ class Run:
         self.cfg, self.out = cfg, out
         self.progress = progress  # a bar for the final evaluation (periodic ones run under training's bar)
         out.mkdir(parents=True, exist_ok=True)
+        if out.name.isdigit() and out.parent.resolve() == Path(cfg.runs_dir).resolve():
+            point_latest(out.parent, out)  # a numbered run: runs_dir/latest -> this one
         (out / "config.json").write_text(json.dumps(cfg.model_dump(), indent=2))
         self.writer = SummaryWriter(log_dir=str(out / "tensorboard"))
         self.best_score = -np.inf
