@@ -258,6 +258,36 @@ def test_cli_scores_a_folder(tmp_path, capsys):
     assert "no .npz" in capsys.readouterr().err
 
 
+def test_cli_scores_each_agent_of_a_benchmark_logs_folder(tmp_path, capsys):
+    # The runner's layout: logs/<agent>/<scenario>/episode_000.npz, every agent the same episodes.
+    logs = tmp_path / "logs"
+    for agent, steps in (("zoo:keep-lane", 3), ("zoo:random", 5)):
+        for ep in range(2):
+            log = make_episode({"a": make_trace(steps)}, episode=ep, info={"agent": agent})
+            write_episode(log, logs / agent.replace(":", "_") / "scenario" / f"episode_{ep:03d}.npz")
+    assert cli_main([str(logs)]) == 0
+    out = capsys.readouterr().out
+    assert out.count("overall") == 2
+    assert out.index("agent: zoo:keep-lane") < out.index("agent: zoo:random")
+    assert cli_main([str(logs), "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["agents"]
+    assert [(r["agent"], r["task"], r["scores"]["episodes"]) for r in rows] == [
+        ("zoo:keep-lane", "collaborative", {"scenario": 2}),
+        ("zoo:random", "collaborative", {"scenario": 2}),
+    ]
+    # Each agent is scored alone: its scores are those of its own folder.
+    assert cli_main([str(logs / "zoo_random"), "--json"]) == 0
+    alone = json.loads(capsys.readouterr().out)
+    assert alone["overall"] == rows[1]["scores"]["overall"]
+    # One agent's episode twice is still an error.
+    write_episode(
+        make_episode({"a": make_trace(3)}, episode=0, info={"agent": "zoo:random"}),
+        logs / "copy" / "episode_000.npz",
+    )
+    assert cli_main([str(logs)]) == 2
+    assert "episode 0 of scenario 'scenario' appears twice" in capsys.readouterr().err
+
+
 def test_log_error_survives_pickling():
     err = LogError("missing column", source="runs/e.npz", agent="a", column="speed")
     back = pickle.loads(pickle.dumps(err))
