@@ -24,7 +24,7 @@ FORMAT_VERSION = 3
 (3: the file records the SHA-256 of its arrays)."""
 
 _SUFFIXES = (".net.xml", ".xodr")
-_loaded: dict[str, RoadMap] = {}
+_loaded: dict[tuple[str, str], RoadMap] = {}
 _log = logging.getLogger(__name__)
 
 
@@ -44,7 +44,10 @@ def load_map(path: str | Path, cache_dir: Path | None = None) -> RoadMap:
     name = _checked_name(path)
     content_hash = hashlib.sha256(read_map_bytes(path)).hexdigest()
     key = f"{content_hash}-v{FORMAT_VERSION}"
-    road_map = _loaded.get(key)
+    # Kept per path as well as content: a map's ``source`` is the file it was loaded from, which
+    # SUMO reads later, so a copy elsewhere (since deleted) must not stand in for this one.
+    memo_key = (key, str(path))
+    road_map = _loaded.get(memo_key)
     if road_map is not None:
         return road_map
 
@@ -55,6 +58,7 @@ def load_map(path: str | Path, cache_dir: Path | None = None) -> RoadMap:
             continue
         try:
             road_map = RoadMap.load(cached_file)
+            road_map.source = str(path)  # compiled from a file of the same content, maybe elsewhere
             break
         except MapError as err:  # a truncated or damaged entry: compile again and replace it
             _log.warning("rebuilding the cached compiled map: %s", err)
@@ -68,7 +72,7 @@ def load_map(path: str | Path, cache_dir: Path | None = None) -> RoadMap:
                 road_map.save(cache.fallback_for(cache_folder, err) / f"{key}.npz")
             except OSError:
                 pass  # not even the temporary cache: the map is still kept in memory
-    _loaded[key] = road_map
+    _loaded[memo_key] = road_map
     return road_map
 
 

@@ -125,6 +125,7 @@ def fresh_fallback(monkeypatch: pytest.MonkeyPatch):
     yield
     if cache._fallback is not None:
         shutil.rmtree(cache._fallback, ignore_errors=True)
+    clear_memory_cache()  # maps loaded from the removed folder
 
 
 def cached_npz(cache_dir: Path, source: Path) -> Path:
@@ -255,3 +256,20 @@ def test_unwritable_cache_from_the_environment(
     clear_memory_cache()
     with pytest.warns(cache.UnwritableCacheWarning, match="SMARTS_CACHE_DIR"):
         assert load_map(straight_net).lane_ids == ["AB_1", "AB_2"]
+
+
+def test_a_copy_of_the_same_map_keeps_its_own_source(tmp_path: Path, straight_net: Path) -> None:
+    """The caches are keyed by content, but SUMO later reads ``source``: it must be this file."""
+    cache_dir = tmp_path / "cache"
+    first, second = tmp_path / "a" / "road.net.xml", tmp_path / "b" / "road.net.xml"
+    for copy in (first, second):
+        copy.parent.mkdir()
+        shutil.copy(straight_net, copy)
+    clear_memory_cache()
+    a = load_map(first, cache_dir=cache_dir)
+    b = load_map(second, cache_dir=cache_dir)  # same content: from the disk cache
+    assert (a.source, b.source) == (str(first), str(second))
+    shutil.rmtree(first.parent)
+    assert sumo_net_path(load_map(second, cache_dir=cache_dir).source) == second
+    clear_memory_cache()
+    assert load_map(second, cache_dir=cache_dir).source == str(second)

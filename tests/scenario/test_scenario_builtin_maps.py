@@ -251,6 +251,7 @@ def fresh_fallback(monkeypatch):
     yield
     if cache._fallback is not None:
         shutil.rmtree(cache._fallback, ignore_errors=True)
+    clear_memory_cache()  # maps loaded from the removed folder
 
 
 def test_truncated_netconvert_output_in_the_cache_is_rebuilt(tmp_path, built_maps, caplog):
