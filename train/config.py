@@ -30,12 +30,14 @@ from pydantic import (
     model_serializer,
 )
 
+from smarts.core.resources import config_path
 from smarts.core.schema import Schema, describe, load_yaml
 from smarts.core.spec import CONTROLLERS
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.env.task_rewards import RewardWeights
 
-CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs" / "train"
+CONFIG_DIR = config_path("train")
+"""The shipped task configs (``configs/train/``, installed as ``smarts.configs``)."""
 Task = Literal["platoon", "drive"]
 TASKS = typing.get_args(Task)
 ACTION_SPACES = {"rtp": "relative_target_pose", "continuous": "continuous"}

@@ -22,11 +22,13 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, field_validator
 
 from smarts.core.errors import ScenarioError
+from smarts.core.resources import config_path
 from smarts.core.schema import Schema, load_yaml, validate
 from smarts.scenario import ScenarioSpec
 from smarts.scenario.spec import ACTION_SPACES
 
-SUITES_DIR = Path(__file__).resolve().parents[2] / "configs" / "benchmark"
+SUITES_DIR = config_path("benchmark")
+"""The shipped suites (``configs/benchmark/``, installed as ``smarts.configs``)."""
 TASKS = ("collaborative", "adaptive")
 DIFFICULTIES = ("easy", "medium", "hard")
 TERMINATE_ON = {

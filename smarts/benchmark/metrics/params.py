@@ -1,27 +1,25 @@
 """Every constant of the benchmark metrics, as a validated dataclass loaded from YAML.
 
-The defaults are the paper's; ``configs/benchmark/metrics.yaml`` repeats them so a reader sees the
-numbers a score was computed with, and a run can override them with its own file. A YAML file
-may give any subset of the keys; the rest keep their defaults. Unknown keys are errors, so a
-typo never silently leaves a default in place.
+The defaults are the paper's; ``configs/benchmark/metrics.yaml`` (installed with the package as
+``smarts.configs``) repeats them so a reader sees the numbers a score was computed with, and a run
+can override them with its own file. A YAML file may give any subset of the keys; the rest keep
+their defaults. Unknown keys are errors, so a typo never silently leaves a default in place.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from pydantic import Field, model_validator
 
 from smarts.core.errors import MetricParamsError
+from smarts.core.resources import config_path
 from smarts.core.schema import Schema, load_yaml, validate
 
-DEFAULT_CONFIG_PATH = (
-    Path(__file__).resolve().parents[3] / "configs" / "benchmark" / "metrics.yaml"
-)
-"""The repository's metrics config; used by :func:`load_params` when it exists."""
+DEFAULT_CONFIG_PATH = config_path("benchmark", "metrics.yaml")
+"""The shipped metrics config (``configs/benchmark/metrics.yaml``); used by :func:`load_params`."""
 
 FAILED_EPISODE_POLICIES = ("worst", "exclude")
 
@@ -109,10 +107,10 @@ class MetricParams(Schema):
 
 
 def load_params(path: str | os.PathLike | None = None) -> MetricParams:
-    """Load metric constants from ``path``; with None, from the repository config if present.
+    """Load metric constants from ``path``; with None, from the shipped config.
 
-    An installed package without the repository's ``configs/`` falls back to the defaults, which
-    equal that file's contents (a test keeps the two in step).
+    Should that file be missing, the defaults are used: they equal its contents (a test keeps the
+    two in step).
     """
     if path is None:
         if not DEFAULT_CONFIG_PATH.is_file():
