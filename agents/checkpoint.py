@@ -7,6 +7,7 @@ weights_only=True)`` so nothing in a file executes code. A missing, corrupted or
 
 from __future__ import annotations
 
+import pickle
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +26,12 @@ def read_checkpoint(path: str | Path) -> Any:
     try:
         return torch.load(path, map_location="cpu", weights_only=True)
     except Exception as err:  # unpickling errors come in many types
-        raise CheckpointError(f"{path}: not a readable checkpoint ({type(err).__name__}: {err})") from None
+        if isinstance(err, pickle.UnpicklingError) or "weights_only" in str(err).lower():
+            why = "not a torch file, or one holding Python objects; only tensors and plain data are loaded"
+        else:
+            lines = str(err).strip().splitlines()
+            why = f"{type(err).__name__}: {lines[0] if lines else ''}"
+        raise CheckpointError(f"{path}: not a readable checkpoint ({why})") from None
 
 
 def checkpoint_format(blob: Any) -> str | None:

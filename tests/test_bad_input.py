@@ -1,0 +1,109 @@
+"""Bad input, as users give it, through the command lines they use: every case ends with exit code
+2 (or 1 where a CLI has its own), one message naming the file, field, flag or agent at fault and
+what was expected, no traceback, and nothing written where it should not be.
+
+The per-module tests check the messages in detail; this corpus checks the joints: that each error
+reaches the user through the CLI intact."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, *args], cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory) -> dict[str, Path]:
+    tmp = tmp_path_factory.mktemp("bad")
+    made = {
+        "garbage.pt": b"not a checkpoint",
+        "half.net.xml": b'<?xml version="1.0"?><net version="1.20"><edge id="a"',
+        "typo.yaml": b"name: x\nmap: builtin:straight_2lane\nagents:\n"
+        b"  - mission: {start: {road: main, ofset: 3}, goal: {road: main, offset: 50}}\n",
+        "strict.yaml": b"name: x\nmap: builtin:straight_2lane\nepisode_steps: true\nagents:\n"
+        b"  - mission: {start: {road: main, offset: 3}, goal: {road: main, offset: 50}}\n",
+        "no_map.yaml": b"name: x\nmap: missing.net.xml\nagents:\n"
+        b"  - mission: {start: {road: main, offset: 3}, goal: {road: main, offset: 50}}\n",
+        "not_yaml.yaml": b"name: [unclosed\n",
+        "log.npz": b"PK not really a log",
+        "suite.yaml": b"task: adaptive\nepisodes: 0\nscenarioz: []\n",
+        "train.yaml": b"task: platoon\nlr: 0.001\nepochz: 3\n",
+    }
+    paths = {}
+    for name, data in made.items():
+        (tmp / name).write_bytes(data)
+        paths[name] = tmp / name
+    paths["tmp"] = tmp
+    return paths
+
+
+CASES = [
+    # (name, command line with {file} placeholders, fragments the last stderr lines must hold)
+    ("checkpoint that is not one", ["-m", "train", "eval", "--agent", "{garbage.pt}", "--suite", "adaptive"],
+     ["garbage.pt: not a readable checkpoint"]),
+    ("resume from a non-checkpoint", ["-m", "train", "ppo", "--task", "platoon", "--resume", "{garbage.pt}",
+                                      "--out-dir", "{tmp}/resumed"], ["garbage.pt: not a readable checkpoint"]),
+    ("unknown action space flag", ["-m", "train", "ppo", "--task", "platoon", "--action-space", "warp",
+                                   "--out-dir", "{tmp}/warp"], ["--action-space: action_space:", "'warp'"]),
+    ("training YAML with a typo", ["-m", "train", "ppo", "--config", "{train.yaml}", "--out-dir", "{tmp}/typo"],
+     ["train.yaml: epochz: unknown field; did you mean 'epochs'?"]),
+    ("zero benchmark episodes", ["-m", "train", "benchmark", "--suite", "adaptive", "--episodes", "0"],
+     ["--episodes must be >= 1"]),
+    ("unknown suite", ["-m", "train", "benchmark", "--suite", "nope"], ["unknown benchmark suite 'nope'"]),
+    ("suite file with errors", ["-m", "train", "benchmark", "--suite", "{suite.yaml}"],
+     ["suite.yaml: episodes:", "scenarioz: unknown field; did you mean 'scenarios'?"]),
+    ("unknown agent locator", ["-m", "train", "benchmark", "--suite", "adaptive", "--agent", "zoo:nobody"],
+     ["zoo:nobody"]),
+    ("scenario with a misspelt field", ["-m", "smarts", "scenario", "show", "{typo.yaml}"],
+     ["typo.yaml: agents[0].mission.start.ofset: unknown field; did you mean 'offset'?"]),
+    ("scenario with a bool for a count", ["-m", "smarts", "scenario", "show", "{strict.yaml}"],
+     ["strict.yaml: episode_steps:"]),
+    ("scenario whose map file is missing", ["-m", "smarts", "scenario", "show", "--build", "{no_map.yaml}"],
+     ["missing.net.xml"]),
+    ("scenario that is not YAML", ["-m", "smarts", "scenario", "show", "{not_yaml.yaml}"], ["not_yaml.yaml"]),
+    ("episode log that is not one", ["-m", "smarts.benchmark.metrics", "{log.npz}"], ["log.npz"]),
+]
+
+
+@pytest.mark.parametrize("name, command, fragments", CASES, ids=[c[0] for c in CASES])
+def test_bad_input_names_its_source_without_a_traceback(files, name, command, fragments):
+    args = []
+    for part in command:
+        for key, path in files.items():
+            part = part.replace("{" + key + "}", str(path))
+        args.append(part)
+    result = run(*args, cwd=files["tmp"])
+    assert result.returncode in (1, 2), (name, result.returncode, result.stderr[-2000:])
+    assert "Traceback" not in result.stderr, result.stderr[-3000:]
+    for fragment in fragments:
+        assert fragment in result.stderr, (name, fragment, result.stderr[-2000:])
+    for folder in ("resumed", "warp", "typo"):  # a refused run leaves no folder behind
+        assert not (files["tmp"] / folder).exists()
+
+
+def test_a_nan_action_names_the_agent_and_changes_nothing():
+    import numpy as np
+
+    from smarts.core.errors import ActionError
+    from smarts.env import DrivingParallelEnv
+
+    env = DrivingParallelEnv("intersection_4way_signal_right")
+    obs, _ = env.reset(seed=0)
+    before = (env.sim.time, env.sim.step_count)
+    actions = {a: 0.4 * obs[a]["waypoints"][0, 1] for a in env.agents}
+    bad = dict(actions)
+    victim = env.agents[-1]
+    bad[victim] = np.full_like(actions[victim], np.nan)
+    with pytest.raises(ActionError, match=victim):
+        env.step(bad)
+    assert (env.sim.time, env.sim.step_count) == before
+    env.step(actions)  # the env goes on as if the bad step had never been asked for
+    env.close()
