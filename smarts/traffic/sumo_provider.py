@@ -6,6 +6,8 @@ Co-simulation, each step:
    traffic vehicles this provider released to another owner) has a twin in SUMO that is placed at
    the agent's pose with ``moveToXY`` and given its speed, with SUMO's safety checks and lane
    changes switched off. SUMO's drivers see the twin and react to it (follow, brake, yield).
+   A new twin is put on its lane at once (``moveTo``), before SUMO's next insertion, so SUMO
+   never inserts a vehicle onto or right behind an agent at speed (at the start in particular).
 2. ``simulation.step()``.
 3. Read: departed vehicles and persons get rows, arrived ones lose theirs; the poses of all others
    are read and written into the table by one compiled kernel.
@@ -289,6 +291,27 @@ class SumoTrafficProvider(ProviderBase):
         ls.vehicle.setSpeedMode(vid, 0)
         ls.vehicle.setLaneChangeMode(vid, 0)
         self._twins.add(vid)
+        self._place_twin(sim, vid, row)
+
+    def _place_twin(self, sim: Simulation, vid: str, row: int) -> None:
+        """Put a new twin on its lane at once, so SUMO's insertion checks see it before they
+        insert any vehicle. A vehicle added through libsumo waits for the next step's insertion
+        phase, which may insert flows first: a car could appear right behind (or on) an agent at
+        full speed. A twin off the normal lanes (inside a junction, off the road) is left to the
+        step's ``moveToXY``."""
+        t, rm = sim.table, self.road_map
+        # The table's lane columns are those of the last step (or unset for a new vehicle).
+        proj = project(rm, np.array([[t.x[row], t.y[row]]]), np.array([t.heading[row]]))
+        lane = int(proj.lane[0])
+        if lane < 0 or rm.lane_internal[lane] or proj.distance[0] > 0.5 * rm.lane_width[lane]:
+            return
+        lane_id = rm.lane_ids[lane]
+        front = float(proj.s[0]) + 0.5 * float(t.length[row])
+        try:
+            pos = sumo_lane_pos(rm, lane, front, self._ls.lane.getLength(lane_id))
+            self._ls.vehicle.moveTo(vid, lane_id, pos)
+        except self._ls.TraCIException:
+            pass  # SUMO cannot put it there: the step's moveToXY places it
 
     def _drop_twin(self, vid: str) -> None:
         self._twins.discard(vid)
@@ -585,6 +608,19 @@ def _check_net_file(net_file: Path, road_map: RoadMap) -> None:
         raise ScenarioError(
             f"{net_file}: expected a SUMO network with root <net>, found <{root_tag}>"
         )
+
+
+def sumo_lane_pos(road_map: RoadMap, lane: int, s: float, sumo_length: float) -> float:
+    """Position along a lane as SUMO counts it, for arc length ``s`` of our centre line.
+
+    Our ``s`` follows the lane's geometry; SUMO measures positions against the lane's ``length``
+    attribute, which may differ from the geometry (netconvert keeps lengths given by the source
+    and ``--geometry`` edits). Positions are scaled by SUMO length / geometric length, so both
+    ends of the lane are the same place to both, and clamped to SUMO's lane.
+    """
+    geometric = float(road_map.lane_length[lane])
+    scale = sumo_length / geometric if geometric > 0 else 1.0
+    return min(max(s * scale, 0.0), sumo_length)
 
 
 def _shut_down(work_dir: Path, started: list[bool]) -> None:

@@ -130,6 +130,30 @@ def test_traffic_stops_behind_a_stopped_agent_without_passing_through():
         assert 1.0 < gap < 5.0  # stopped close behind it (SUMO's min gap 2.5 m)
 
 
+@pytest.mark.parametrize("depart_lane", ["best", 0])
+def test_sumo_inserts_no_vehicle_onto_an_agent_near_the_road_start(depart_lane):
+    """The agent's twin is on its lane before SUMO's first insertion, so a flow starting at the
+    road's beginning is not inserted behind (or into) an agent 8 m in at full speed."""
+    traffic = TrafficSpec(
+        engine="sumo", flows=[FlowSpec("cars", route=["main"], rate=1800, depart_lane=depart_lane)]
+    )
+    stopped = agent("main", lane=0, offset=8.0, speed=0.0)
+    with sumo_sim(traffic, [stopped], "straight_2lane") as (sim, _):
+        sim.reset()
+        t = sim.table
+        me = sim.agent_row[0]
+        agent_rear = t.s[me] - t.length[me] / 2
+        for _ in range(20):
+            assert not sim.agent_events[0, Event.COLLISION]
+            rows = _traffic_rows(sim)
+            behind = rows[(t.lane[rows] == t.lane[me]) & (t.s[rows] < t.s[me])]
+            # a car behind the agent on its lane has room to stop (SUMO's safe insertion)
+            fronts = t.s[behind] + t.length[behind] / 2
+            assert (agent_rear - fronts >= 0.5 * t.speed[behind] ** 2 / 4.5 - 1e-6).all()
+            sim.step({"agent_0": STOP})
+        assert not sim.agent_events[0, Event.COLLISION]
+
+
 def test_same_seed_same_traffic_other_seed_other_traffic():
     traffic = TrafficSpec(
         flows=[
