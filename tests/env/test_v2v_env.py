@@ -226,7 +226,7 @@ def test_scenario_comms_section_round_trips_and_bad_fields_name_the_file():
 
 def test_readme_comms_example_builds_an_env():
     readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
-    block = next(b for b in re.findall(r"```yaml\n(.*?)```", readme, flags=re.DOTALL) if b.startswith("comms:"))
+    block = next(b for b in re.findall(r"```yaml\n(.*?)```", readme, flags=re.DOTALL) if "\ncomms:" in b)
     env = DrivingParallelEnv(_spec(yaml.safe_load(block)["comms"]))
     assert env.action_space("agent_0").shape == (3 + 8,)
     assert env.comms.tuned.tolist() == [0, 1]  # agent_1 listens on channel 1

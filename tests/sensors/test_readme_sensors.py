@@ -1,4 +1,4 @@
-"""The README's sensor example is a valid agent entry and gives the documented outputs."""
+"""The README's sensor example (a whole scenario file) gives the documented outputs."""
 
 import re
 from pathlib import Path
@@ -14,7 +14,7 @@ README = (Path(__file__).resolve().parents[2] / "README.md").read_text()
 
 def test_readme_interface_example_runs():
     block = next(b for b in re.findall(r"```yaml\n(.*?)```", README, flags=re.S) if "interface:" in b)
-    data = {"name": "readme_sensors", "map": "builtin:intersection_4way_2lane_signal", **yaml.safe_load(block)}
+    data = {"name": "readme_sensors", **yaml.safe_load(block)}
     env = DrivingParallelEnv(ScenarioSpec.from_dict(data, source="README sensors"))
     obs, _ = env.reset(seed=0)
     o = obs["agent_0"]
