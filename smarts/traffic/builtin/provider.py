@@ -139,6 +139,9 @@ class BuiltinTrafficProvider(ProviderBase):
             sources.append(self._source(flow, f"traffic.flows[{i}]"))
         for flow in density_flows(traffic, self.map):
             sources.append(self._source(flow, f"traffic.density (flow {flow.id})"))
+        # Spots read the packed route arrays: once all routes are in (one pack, not one each).
+        for src in sources:
+            self._spots(src, self.routes.lanes_of_first_road(src.route))
         return sources
 
     def _source(self, item: FlowSpec | TripSpec, where: str) -> _Source:
@@ -200,7 +203,6 @@ class BuiltinTrafficProvider(ProviderBase):
             depart_lane=lane_choice, depart_speed=speed, depart_pos=float(item.depart_pos),
             begin=0.0, end=math.inf,
         )
-        self._spots(src, lanes)
         if isinstance(item, TripSpec):
             if not item.depart >= 0.0:
                 raise ScenarioError(f"{where}.depart: expected a time >= 0 s, got {item.depart}")

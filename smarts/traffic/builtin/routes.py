@@ -39,6 +39,15 @@ class RouteTable:
         self.links = road_links(road_map)
         self.exits = lane_exits(road_map)
         self._minor = self._minor_merge_lanes()
+        order = np.lexsort((road_map.lane_index, road_map.lane_road))
+        bounds = np.searchsorted(road_map.lane_road[order], np.arange(len(road_map.road_ids) + 1))
+        self._road_lanes: list[list[int]] = [
+            order[bounds[r] : bounds[r + 1]].tolist() for r in range(len(road_map.road_ids))
+        ]  # per road, rightmost first (``RoadMap.road_lanes`` scans every lane per call)
+        self._road_length = np.array(
+            [float(road_map.lane_length[lanes].mean()) if lanes else 0.0
+             for lanes in self._road_lanes]
+        )
         self.routes: list[tuple[int, ...]] = []  # road sequence per route
         self.slot_of: list[dict[int, int]] = []  # per route: lane -> slot
         self._key: dict[tuple, int] = {}
@@ -48,15 +57,30 @@ class RouteTable:
         self._right: list[int] = []
         self._dir: list[int] = []
         self._cost: list[float] = []
-        self.pack()
+        self.pack_count = 0  # how often the flat arrays were built (once per batch of routes)
+        self._packed: tuple[np.ndarray, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ arrays
-    def pack(self) -> None:
-        """Rebuild the flat arrays the kernels read (after routes were added)."""
-        self.slot_int = np.array(
+    @property
+    def slot_int(self) -> np.ndarray:
+        """int64[5, slots]: lane, next, left, right and direction of every slot."""
+        return (self._packed or self.pack())[0]
+
+    @property
+    def slot_cost(self) -> np.ndarray:
+        """float64[slots]: lane changes still needed from each slot."""
+        return (self._packed or self.pack())[1]
+
+    def pack(self) -> tuple[np.ndarray, np.ndarray]:
+        """Build the flat arrays the kernels read. Adding routes only appends to lists and
+        marks the arrays stale; they are built on the next read, so building n routes costs
+        O(n) instead of one repack of every slot per route."""
+        slot_int = np.array(
             [self._lane, self._next, self._left, self._right, self._dir], dtype=np.int64
         ).reshape(5, -1)
-        self.slot_cost = np.array(self._cost, dtype=np.float64)
+        self._packed = (slot_int, np.array(self._cost, dtype=np.float64))
+        self.pack_count += 1
+        return self._packed
 
     # ------------------------------------------------------------------ road sequences
     def road_index(self, road_id: str, where: str) -> int:
@@ -64,7 +88,7 @@ class RouteTable:
         if road_id not in m.road_index_of:
             raise ScenarioError(f"{where}: unknown road {road_id!r} (map {m.source!r})")
         road = m.road_index_of[road_id]
-        if m.lane_internal[m.road_lanes(road)].any():
+        if m.lane_internal[self._road_lanes[road]].any():
             raise ScenarioError(
                 f"{where}: road {road_id!r} lies inside a junction; name the roads around it"
             )
@@ -89,8 +113,7 @@ class RouteTable:
         return full
 
     def _shortest(self, a: int, b: int) -> list[int] | None:
-        m = self.map
-        length = {}
+        road_length = self._road_length
         best = {a: 0.0}
         prev: dict[int, int] = {}
         heap = [(0.0, a)]
@@ -104,9 +127,7 @@ class RouteTable:
             if d > best.get(road, math.inf):
                 continue
             for nxt, u_turn in self.links.get(road, {}).items():
-                if nxt not in length:
-                    length[nxt] = float(m.lane_length[m.road_lanes(nxt)].mean())
-                nd = d + length[nxt] + (U_TURN_COST if u_turn else 0.0)
+                nd = d + road_length[nxt] + (U_TURN_COST if u_turn else 0.0)
                 if nd < best.get(nxt, math.inf):
                     best[nxt] = nd
                     prev[nxt] = road
@@ -168,7 +189,7 @@ class RouteTable:
         self.slot_of.append({})
         self._build(route, roads)
         self._key[key] = route
-        self.pack()
+        self._packed = None
         return route
 
     def _new_slot(self, route: int, lane: int, cost: float, direction: int) -> int:
@@ -184,7 +205,7 @@ class RouteTable:
 
     def _build(self, route: int, roads: list[int]) -> None:
         m = self.map
-        lanes_of = [[int(x) for x in m.road_lanes(r)] for r in roads]
+        lanes_of = [self._road_lanes[r] for r in roads]
         cost: dict[int, float] = {lane: 0.0 for lane in lanes_of[-1]}
         way: dict[int, tuple[tuple[int, ...], int] | None] = {}
         for lane in lanes_of[-1]:
@@ -280,7 +301,7 @@ class RouteTable:
                 self._next[prev] = j
             prev = j
         self._next[prev] = self.slot_of[new][first]
-        self.pack()
+        self._packed = None
         return new
 
     def _junction_only(self, lead: list[int]) -> int:
@@ -294,7 +315,7 @@ class RouteTable:
                 self._next[prev] = j
             prev = j
         self._next[prev] = NEXT_ARRIVE
-        self.pack()
+        self._packed = None
         return new
 
     def _minor_merge_lanes(self) -> set[int]:
@@ -315,8 +336,7 @@ class RouteTable:
     # ------------------------------------------------------------------ queries
     def lanes_of_first_road(self, route: int) -> list[int]:
         """Lanes of the route's first road, rightmost first."""
-        first = self.routes[route][0]
-        return [int(x) for x in self.map.road_lanes(first)]
+        return list(self._road_lanes[self.routes[route][0]])
 
     def slot(self, route: int, lane: int) -> int:
         return self.slot_of[route][lane]
