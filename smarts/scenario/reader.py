@@ -61,6 +61,27 @@ from smarts.sensors.interface import InterfaceFile
 MAP_FILE_SUFFIXES = (".net.xml", ".xodr")
 ZOO_PREFIX = "zoo:"
 
+# ---------------------------------------------------------------------------- physical bounds
+# What a scenario file may ask for, whatever its map. Checks that need the map (a start speed
+# against its lane's speed limit, routes) are in ``smarts.scenario.map_check``.
+MAX_SPEED = 70.0
+"""m/s (252 km/h): the most a start speed, a traffic depart speed or a vehicle type's max_speed
+may be. No road vehicle the simulator models goes faster; a larger number is a unit mistake."""
+MAX_WALKING_SPEED = 10.0
+"""m/s: the most a pedestrian flow's walking speed may be."""
+MAX_FLOW_RATE = 10_000.0
+"""Vehicles (or people) per hour of one flow: a departure every 0.36 s, more than four lanes
+carry. Heavier traffic is several flows (SUMO refuses rates whose departures are closer than it
+can time, with an error that names no field)."""
+MAX_EPISODE_STEPS = 10_000_000
+"""Steps of one episode (11.6 days of simulated time at 0.1 s)."""
+MAX_TIME = 1e7
+"""s: the latest a flow may begin or end and a trip depart (the longest episode at 1 s steps)."""
+MAX_VEHICLE_CAPACITY = 100_000
+"""Rows of the vehicle table (fixed-size arrays allocated at reset)."""
+SEED_MAX = 2**64 - 1
+"""Seeds run from 0 to 2**64 - 1, as everywhere a seed is given (``smarts.core.simulation``)."""
+
 
 def read_scenario(
     data: Any,
@@ -94,6 +115,10 @@ def read_scenario_file(
         raise ScenarioError(
             f"{source}: cannot read scenario file: {exc.strerror or exc}"
         ) from None
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(
+            f"{source}: not a YAML text file (not UTF-8: byte {exc.object[exc.start]:#04x} at offset {exc.start})"
+        ) from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
@@ -101,6 +126,8 @@ def read_scenario_file(
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(exc, "problem", None) or str(exc)
         raise ScenarioError(f"{source}: invalid YAML{where}: {problem}") from None
+    if data is None:  # an empty file: report its missing fields, not a missing name
+        data = {}
     if isinstance(data, dict) and "name" not in data:
         data = {"name": path.name.split(".")[0], **data}
     return read_scenario(data, source, path.parent, spec_class)
@@ -152,9 +179,9 @@ def _depart_lane(value: Any) -> str | int:
 def _depart_speed(value: Any) -> str | float:
     if isinstance(value, str) and value in DEPART_SPEEDS:
         return value
-    if isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value < float("inf"):
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value <= MAX_SPEED:
         return float(value)
-    raise ValueError(f"expected one of {', '.join(DEPART_SPEEDS)} or a speed in m/s (a number >= 0)")
+    raise ValueError(f"expected one of {', '.join(DEPART_SPEEDS)} or a speed in m/s from 0 to {MAX_SPEED:g}")
 
 
 Text = Annotated[str, AfterValidator(_non_blank)]
@@ -162,6 +189,12 @@ Text = Annotated[str, AfterValidator(_non_blank)]
 Number = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Speed = Annotated[float, Field(ge=0, le=MAX_SPEED, allow_inf_nan=False)]
+"""m/s, from 0 to ``MAX_SPEED``."""
+Time = Annotated[float, Field(ge=0, le=MAX_TIME, allow_inf_nan=False)]
+"""s from the start of the episode, up to ``MAX_TIME``."""
+Rate = Annotated[float, Field(gt=0, le=MAX_FLOW_RATE, allow_inf_nan=False)]
+"""Per hour, up to ``MAX_FLOW_RATE``."""
 Index = Annotated[int, Field(ge=0)]
 DepartLane = Annotated[str | int, PlainValidator(_depart_lane, json_schema_input_type=str | int)]
 DepartSpeed = Annotated[str | float, PlainValidator(_depart_speed, json_schema_input_type=str | float)]
@@ -199,7 +232,11 @@ class StartFile(Schema):
     road: Text | None = Field(None, description="Road id; required unless take_over is given.")
     lane: Index = 0
     offset: NonNegative = Field(0.0, description="Metres along the lane from its start.")
-    speed: NonNegative = Field(0.0, description="m/s.")
+    speed: Speed = Field(
+        0.0,
+        description=f"m/s, 0 to {MAX_SPEED:g}; on the map at most its lane's speed limit times "
+        "1.5, and what the action space can drive.",
+    )
     heading: Number | None = Field(None, description="Radians; null: along the lane.")
     take_over: Text | None = Field(
         None,
@@ -387,7 +424,9 @@ class VehicleTypeFile(Schema):
     length: Positive | None = None
     width: Positive | None = None
     height: Positive | None = None
-    max_speed: Positive = _VTYPE.max_speed
+    max_speed: Annotated[float, Field(gt=0, le=MAX_SPEED, allow_inf_nan=False)] = Field(
+        _VTYPE.max_speed, description=f"m/s, at most {MAX_SPEED:g}."
+    )
     accel: Positive = _VTYPE.accel
     decel: Positive = _VTYPE.decel
     emergency_decel: Positive = _VTYPE.emergency_decel
@@ -449,17 +488,22 @@ class _Departure(Schema):
     destination: Text | None = Field(None, description="Last road (with origin, instead of route).")
     vehicle_type: Text = Field("car", description="Declared in vehicle_types, or car, bus, truck, motorcycle.")
     depart_lane: DepartLane = Field("best", description="best, random, free, first or a lane index.")
-    depart_speed: DepartSpeed = Field("desired", description="max, desired, random or a speed in m/s.")
+    depart_speed: DepartSpeed = Field(
+        "desired",
+        description="max, desired, random or a speed in m/s (at most the vehicle type's max_speed).",
+    )
     depart_pos: NonNegative = Field(0.0, description="Metres along the first road's lane.")
 
 
 class FlowFile(_Departure):
     """Repeated departures: ``rate`` vehicles per hour or a departure ``probability`` each second."""
 
-    rate: Positive | None = Field(None, description="Vehicles per hour (evenly spaced).")
+    rate: Rate | None = Field(
+        None, description=f"Vehicles per hour (evenly spaced), at most {MAX_FLOW_RATE:,.0f}."
+    )
     probability: Annotated[float, Field(gt=0, le=1)] | None = Field(None, description="Departures per second.")
-    begin: NonNegative = Field(0.0, description="s.")
-    end: Number = Field(3600.0, description="s, after begin.")
+    begin: Time = Field(0.0, description="s.")
+    end: Time = Field(3600.0, description="s, after begin.")
 
     @model_validator(mode="after")
     def _consistent(self) -> FlowFile:
@@ -475,7 +519,7 @@ class FlowFile(_Departure):
 class TripFile(_Departure):
     """One vehicle departing at ``depart`` seconds; its id in the vehicle table is ``id``."""
 
-    depart: NonNegative = Field(0.0, description="s.")
+    depart: Time = Field(0.0, description="s.")
 
     @model_validator(mode="after")
     def _consistent(self) -> TripFile:
@@ -494,11 +538,13 @@ class PedestrianFile(Schema):
     id: Text
     origin: Text
     destination: Text
-    rate: Positive | None = Field(None, description="People per hour.")
+    rate: Rate | None = Field(None, description=f"People per hour, at most {MAX_FLOW_RATE:,.0f}.")
     probability: Annotated[float, Field(gt=0, le=1)] | None = Field(None, description="Departures per second.")
-    begin: NonNegative = 0.0
-    end: Number = 3600.0
-    speed: Positive = Field(1.3, description="m/s.")
+    begin: Time = 0.0
+    end: Time = 3600.0
+    speed: Annotated[float, Field(gt=0, le=MAX_WALKING_SPEED, allow_inf_nan=False)] = Field(
+        1.3, description=f"Walking speed, m/s, at most {MAX_WALKING_SPEED:g}."
+    )
 
     @model_validator(mode="after")
     def _consistent(self) -> PedestrianFile:
@@ -533,6 +579,13 @@ class TrafficFile(Schema):
                     problems.append(((key, i, "vehicle_type"), (
                         f"unknown vehicle type {name!r}; declared in traffic.vehicle_types: "
                         f"{', '.join(self.vehicle_types) or 'none'}; always available: {', '.join(DEFAULT_VEHICLE_TYPES)}"
+                    )))  # fmt: skip
+                    continue
+                vtype = self.vehicle_types.get(name) or DEFAULT_VEHICLE_TYPES[name]
+                speed = item.depart_speed
+                if not isinstance(speed, str) and speed > vtype.max_speed:
+                    problems.append(((key, i, "depart_speed"), (
+                        f"expected at most vehicle type {name!r}'s max_speed ({vtype.max_speed:g} m/s), got {speed:g}"
                     )))  # fmt: skip
         departures = [("flows", i, f.id) for i, f in enumerate(self.flows)]
         departures += [("trips", i, t.id) for i, t in enumerate(self.trips)]
@@ -577,11 +630,17 @@ class ScenarioFile(Schema):
     map: Annotated[Text, AfterValidator(_map_name)] = Field(
         description="builtin:<name> or a .net.xml/.xodr path relative to the scenario file's folder."
     )
-    step_length: Annotated[float, Field(gt=0, le=1)] = Field(0.1, description="Seconds per step.")
-    episode_steps: Annotated[int, Field(ge=1)] = 1000
-    seed: Annotated[int, Field(ge=0)] = 42
-    vehicle_capacity: Annotated[int, Field(ge=1)] = Field(
-        256, description="Rows of the vehicle table: agents, traffic and pedestrians at once."
+    step_length: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)] = Field(
+        0.1, description="Seconds per step, in (0, 1]."
+    )
+    episode_steps: Annotated[int, Field(ge=1, le=MAX_EPISODE_STEPS)] = Field(
+        1000, description=f"1 to {MAX_EPISODE_STEPS:,}."
+    )
+    seed: Annotated[int, Field(ge=0, le=SEED_MAX)] = Field(42, description="0 to 2**64 - 1.")
+    vehicle_capacity: Annotated[int, Field(ge=1, le=MAX_VEHICLE_CAPACITY)] = Field(
+        256,
+        description=f"Rows of the vehicle table: agents, traffic and pedestrians at once; at most "
+        f"{MAX_VEHICLE_CAPACITY:,}.",
     )
     agents: Annotated[list[AgentFile], Field(min_length=1)]
     events: EventsFile = EventsFile()

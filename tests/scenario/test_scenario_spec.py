@@ -227,6 +227,15 @@ def test_invalid_yaml_and_missing_file_name_the_file(tmp_path):
         ScenarioError, match=r"scalar\.yaml: expected a mapping at the top level, got int"
     ):
         ScenarioSpec.from_yaml(scalar)
+    binary = tmp_path / "binary.yaml"
+    binary.write_bytes(b"name: \xff\n")
+    with pytest.raises(ScenarioError, match=r"binary\.yaml: not a YAML text file \(not UTF-8: byte 0xff at offset 6\)$"):
+        ScenarioSpec.from_yaml(binary)
+    empty = tmp_path / "empty.yaml"
+    empty.write_text("", encoding="utf-8")
+    with pytest.raises(ScenarioError) as info:  # the name defaults to the file's, as always
+        ScenarioSpec.from_yaml(empty)
+    assert str(info.value) == f"{empty}: map: required field missing\n{empty}: agents: required field missing"
 
 
 def test_from_dict_names_its_source():

@@ -255,7 +255,7 @@ BAD = [
     ("traffic.flows[0].depart_lane", 1.0, "lane index"),
     ("traffic.flows[0].depart_lane", True, "lane index"),
     ("traffic.flows[0].depart_speed", "fast", "max, desired, random"),
-    ("traffic.flows[0].depart_speed", -2, "number >= 0"),
+    ("traffic.flows[0].depart_speed", -2, "a speed in m/s from 0 to 70, got -2"),
     ("traffic.flows[0].depart_pos", -1, "greater than or equal to 0"),
     ("traffic.trips[1].depart", -1, "greater than or equal to 0"),
     ("traffic.trips[1].rate", 5, "unknown field"),
