@@ -140,7 +140,7 @@ def agent_events(
     data, lane, alive, agents, rows,
     flat_raster, raster_width, raster_origin, inv_res, cell_max,
     lane_internal, lane_road, on_route_road,
-    goal_kind, goal_xy, goal_radius, goal_road, goal_lane, goal_s,
+    goal_kind, goal_xy, goal_radius, goal_road, goal_lane, goal_s, goal_gate, prev_xy, prev_row,
     anchor, anchor_time, not_moving_seconds, not_moving_distance, time, at_step_limit,
     terminate_on, events, done,
 ):  # pragma: no cover - compiled
@@ -149,6 +149,13 @@ def agent_events(
     Collisions are tested against all ``alive`` rows (circle pre-test, then separating axes).
     Goal kinds: 1 = within ``goal_radius`` of ``goal_xy``; 2 = on ``goal_road`` (and ``goal_lane``
     unless it is -1) at or past ``goal_s``.
+
+    Goals are tested on the whole movement since the last call (``prev_xy`` of the agent's
+    ``prev_row``; both are updated here), not only at the new position: a position goal is
+    reached when that segment passes within the radius, a road goal when it crosses the goal
+    line (``goal_gate``) forwards. A lane shorter than one step's travel is otherwise jumped over
+    and its goal never seen. Off route is not flagged on the step the goal is reached (the route
+    ends at the goal; what lies beyond it is off the route).
     """
     own = np.empty((4, 2))
     other = np.empty((4, 2))
@@ -180,16 +187,21 @@ def agent_events(
         if ln >= 0 and not lane_internal[ln]:  # junction lanes cross each other: no direction
             ev[WRONG_WAY] = math.cos(h - data[_LANE_HEADING, r]) < 0.0
             ev[OFF_ROUTE] = not on_route_road[a, road]
+        px, py = (prev_xy[a, 0], prev_xy[a, 1]) if prev_row[a] == r else (x, y)
+        prev_xy[a, 0], prev_xy[a, 1], prev_row[a] = x, y, r
         if goal_kind[a] == 1:
-            gx, gy = x - goal_xy[a, 0], y - goal_xy[a, 1]
-            ev[REACHED_GOAL] = gx * gx + gy * gy <= goal_radius[a] * goal_radius[a]
+            ev[REACHED_GOAL] = segment_point_distance2(
+                px, py, x, y, goal_xy[a, 0], goal_xy[a, 1]
+            ) <= goal_radius[a] * goal_radius[a]
         elif goal_kind[a] == 2:
             ev[REACHED_GOAL] = (
                 ln >= 0
                 and road == goal_road[a]
                 and (goal_lane[a] < 0 or ln == goal_lane[a])
                 and data[_S, r] >= goal_s[a]
-            )
+            ) or crosses_gate(px, py, x, y, goal_gate[a])
+        if ev[REACHED_GOAL]:
+            ev[OFF_ROUTE] = False
         ev[NOT_MOVING] = not_moving_step(
             anchor, anchor_time, r, x, y, time, not_moving_seconds, not_moving_distance
         )
@@ -198,6 +210,31 @@ def agent_events(
         for e in range(ev.shape[0]):
             finished |= ev[e] and terminate_on[e]
         done[a] = finished
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def segment_point_distance2(x0, y0, x1, y1, px, py):  # pragma: no cover - compiled
+    """Squared distance from point (px, py) to the segment (x0, y0)-(x1, y1)."""
+    dx, dy = x1 - x0, y1 - y0
+    n2 = dx * dx + dy * dy
+    f = 0.0 if n2 <= 0.0 else min(max(((px - x0) * dx + (py - y0) * dy) / n2, 0.0), 1.0)
+    ex, ey = x0 + f * dx - px, y0 + f * dy - py
+    return ex * ex + ey * ey
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def crosses_gate(x0, y0, x1, y1, gate):  # pragma: no cover - compiled
+    """Whether moving from (x0, y0) to (x1, y1) crosses a goal line forwards: from behind it to
+    on or past it, between its ends. ``gate``: x, y, unit direction dx, dy, lateral lo, hi."""
+    gx, gy, dx, dy, lo, hi = gate[0], gate[1], gate[2], gate[3], gate[4], gate[5]
+    a0 = (x0 - gx) * dx + (y0 - gy) * dy
+    a1 = (x1 - gx) * dx + (y1 - gy) * dy
+    if not (a0 < 0.0 <= a1):
+        return False
+    f = a0 / (a0 - a1)
+    qx, qy = x0 + f * (x1 - x0) - gx, y0 + f * (y1 - y0) - gy
+    u = -qx * dy + qy * dx  # along the left normal (-dy, dx)
+    return lo <= u <= hi
 
 
 _X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]

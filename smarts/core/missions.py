@@ -36,6 +36,10 @@ class ResolvedMission:
     goal_road: int  # -1 unless a road goal
     goal_lane: int  # -1 for any lane of the goal road
     goal_s: float  # road goals are reached at or past this offset on the goal lane
+    goal_gate: np.ndarray = None  # float64[6] road goals: the line across the road at goal_s
+    """x, y of the goal point, unit lane direction dx, dy there, and the extent (lo, hi) of the
+    goal lane (any lane: the whole road) along the left normal (-dy, dx) from the goal point. A
+    step whose movement crosses this line forwards reaches the goal, however short the lane."""
     on_end: str = "remove"  # or "traffic": the vehicle goes back to traffic when the mission ends
     follow: str | None = None  # id of the vehicle this agent follows (its lead), None for none
 
@@ -51,6 +55,24 @@ def lane_pose_at(road_map: RoadMap, lane: int, s: float) -> tuple[np.ndarray, fl
     seg_len = max(ps[i + 1] - ps[i], 1e-9)
     xy = pts[i] + seg * ((s - ps[i]) / seg_len)
     return xy, float(np.arctan2(seg[1], seg[0]))
+
+
+def goal_line(road_map: RoadMap, lane: int, lanes: np.ndarray, s: float) -> np.ndarray:
+    """float64[6]: the line across ``lanes`` (the goal lane, or all lanes of the goal road) at
+    arc length ``s`` of ``lane``: goal point x, y, unit direction, and the lateral extent lo, hi
+    of the lanes' outer edges along the left normal (see ``ResolvedMission.goal_gate``)."""
+    xy, heading = lane_pose_at(road_map, lane, s)
+    d = np.array([np.cos(heading), np.sin(heading)])
+    normal = np.array([-d[1], d[0]])
+    lo, hi = np.inf, -np.inf
+    for other in np.asarray(lanes).tolist():
+        # the same fraction of each lane's length: lanes of a curved road differ in length
+        frac = s / max(float(road_map.lane_length[lane]), 1e-9)
+        pos, _ = lane_pose_at(road_map, int(other), frac * float(road_map.lane_length[other]))
+        u = float((pos - xy) @ normal)
+        half = 0.5 * float(road_map.lane_width[other])
+        lo, hi = min(lo, u - half), max(hi, u + half)
+    return np.array([xy[0], xy[1], d[0], d[1], lo, hi])
 
 
 def _lane_of(road_map: RoadMap, road_id: str, lane_index: int, where: str) -> int:
@@ -115,6 +137,7 @@ def resolve_mission(
     goal = mission.goal
     goal_kind, goal_xy, goal_radius = GOAL_NONE, np.zeros(2), 0.0
     goal_road, goal_lane, goal_s = -1, -1, 0.0
+    goal_gate = np.zeros(6)
     # Legs: start lane -> each via road -> goal.
     legs_from = start_lane
     route_parts: list[np.ndarray] = []
@@ -151,6 +174,7 @@ def resolve_mission(
         goal_s = float(getattr(goal, "offset", None) or 0.0)
         goal_xy, _ = lane_pose_at(road_map, int(tail[-1]), goal_s)
         goal_radius = float(road_map.lane_width[int(tail[-1])])
+        goal_gate = goal_line(road_map, int(tail[-1]), lanes, goal_s)
     route = np.concatenate(route_parts + [tail if not route_parts else tail[1:]]).astype(np.int32)
     path = route_polyline(road_map, route, start_s=float(start.offset))
     end = len(path.s)
@@ -174,6 +198,7 @@ def resolve_mission(
         goal_road=goal_road,
         goal_lane=goal_lane,
         goal_s=goal_s,
+        goal_gate=goal_gate,
         on_end=getattr(mission, "on_end", "remove"),
         follow=getattr(mission, "follow", None),
     )
@@ -210,6 +235,7 @@ class MissionArrays:
     goal_road: np.ndarray  # int32[A]
     goal_lane: np.ndarray  # int32[A]
     goal_s: np.ndarray
+    goal_gate: np.ndarray  # float64[A, 6] (see ResolvedMission.goal_gate)
     signal_via: np.ndarray  # int32[A, M] next signal-controlled junction lane on the route, -1 none
     signal_s: np.ndarray  # float64[A, M] route arc length of that signal's stop line
 
@@ -277,6 +303,9 @@ def stack_missions(road_map: RoadMap, missions: list[ResolvedMission]) -> Missio
         goal_road=np.array([ms.goal_road for ms in missions], dtype=np.int32),
         goal_lane=np.array([ms.goal_lane for ms in missions], dtype=np.int32),
         goal_s=np.array([ms.goal_s for ms in missions]),
+        goal_gate=np.array(
+            [ms.goal_gate if ms.goal_gate is not None else np.zeros(6) for ms in missions]
+        ).reshape(-1, 6),
         signal_via=signal_via,
         signal_s=signal_s,
     )

@@ -97,6 +97,10 @@ class Simulation:
         self.route_index = np.zeros(n, dtype=np.int64)  # nearest route point
         self.route_progress = np.zeros(n)  # arc length along the route path
         self.route_progress_delta = np.zeros(n)
+        # where each agent's vehicle (row) was at the last event test: goals are tested on the
+        # movement since then (a short goal lane can lie wholly inside one step's travel)
+        self.agent_prev_xy = np.zeros((n, 2))
+        self.agent_prev_row = np.full(n, -1, dtype=np.int64)
         self.not_moving = NotMovingTracker(
             capacity, self.event_config.not_moving_seconds, self.event_config.not_moving_distance
         )
@@ -152,6 +156,7 @@ class Simulation:
         self.route_index[:] = 0
         self.route_progress[:] = 0.0
         self.route_progress_delta[:] = 0.0
+        self.agent_prev_row[:] = -1
         for p in self.providers:
             p.reset(self)
         for p in self.providers:
@@ -272,6 +277,7 @@ class Simulation:
             flat, width, origin, inv_res, cell_max,
             self.road_map.lane_internal, self.road_map.lane_road, ma.on_route_road,
             ma.goal_kind, ma.goal_xy, ma.goal_radius, ma.goal_road, ma.goal_lane, ma.goal_s,
+            ma.goal_gate, self.agent_prev_xy, self.agent_prev_row,
             self.not_moving.anchor, self.not_moving.anchor_time,
             self.not_moving.seconds, self.not_moving.distance, self.time,
             self.step_count >= self.episode_steps, self.event_config.terminate_on,
