@@ -108,10 +108,14 @@ class ScenarioSpec(_core.ScenarioSpec):
             return builtin_map_path(self.builtin_map, cache_dir)
         return resolve_map_file(self.map, self.base_dir)
 
-    def check_map(self, road_map: Any) -> None:
-        """Check every mission's and every traffic entry's roads, lanes and offsets against the map.
+    def check_map(self, road_map: Any, limits: Any = None) -> None:
+        """Check the missions and traffic against the map; one ``ScenarioError`` lists every
+        problem (roads, lanes, offsets, speeds against the lanes' limits, routes from each start to
+        its goal and along each flow and trip; see ``smarts.scenario.map_check``).
 
         ``road_map`` needs ``road_index_of``, ``road_lanes(road)`` and ``lane_length`` (and uses
-        ``lane_internal`` and ``bounds`` when present), as on :class:`smarts.maps.road_map.RoadMap`.
+        the speed limits, lane graph, ``lane_internal`` and ``bounds`` when present), as on
+        :class:`smarts.maps.road_map.RoadMap`. ``limits`` (``ReachLimits``) also bounds the start
+        speeds of agents whose action space obeys them.
         """
-        check_scenario_map(self, road_map)
+        check_scenario_map(self, road_map, limits)

@@ -91,4 +91,4 @@ def test_scenario_show_build_counts_roads_and_checks_missions(
     out = capsys.readouterr().out
     assert f"# map file: {built_maps['t_junction']}" in out
     assert "# roads: 6 (" in out
-    assert "# missions: all roads, lanes and offsets exist on the map" in out
+    assert "# missions and traffic: every road, lane, offset, speed and route checked on the map" in out
