@@ -1,7 +1,7 @@
 """Road maps compiled to arrays: lanes, lane graph, spatial index, drivable raster, routes."""
 
 from smarts.maps.drivable import on_road
-from smarts.maps.errors import MapError, NoRouteError
+from smarts.maps.errors import MapError, MapWarning, NoRouteError
 from smarts.maps.loader import FORMAT_VERSION, load_map, sumo_net_path
 from smarts.maps.projection import LaneProjection, project
 from smarts.maps.road_map import RoadMap
@@ -12,6 +12,7 @@ __all__ = [
     "FORMAT_VERSION",
     "LaneProjection",
     "MapError",
+    "MapWarning",
     "NoRouteError",
     "RoadMap",
     "RoutePath",

@@ -12,3 +12,7 @@ class MapError(ValueError):
 
 class NoRouteError(MapError):
     """No lane sequence connects the requested start and end lanes."""
+
+
+class MapWarning(UserWarning):
+    """A map was loaded, but not entirely as written (e.g. parts netconvert could not convert)."""

@@ -8,6 +8,7 @@ memory for the life of the process.
 from __future__ import annotations
 
 import hashlib
+import json
 import logging
 import shutil
 from pathlib import Path
@@ -15,7 +16,13 @@ from pathlib import Path
 from smarts import cache
 from smarts.cache import cache_home
 from smarts.maps.errors import MapError
-from smarts.maps.opendrive import convert_opendrive
+from smarts.maps.opendrive import (
+    IGNORED_ERRORS_NAME,
+    ConversionError,
+    convert_opendrive,
+    netconvert_identity,
+    warn_ignored_errors,
+)
 from smarts.maps.road_map import RoadMap
 from smarts.maps.sumo_net import compile_sumo_net, read_map_bytes
 
@@ -50,6 +57,9 @@ def load_map(path: str | Path, cache_dir: Path | None = None) -> RoadMap:
     road_map = _loaded.get(memo_key)
     if road_map is not None:
         return road_map
+    if name.endswith(".xodr"):  # built from a network netconvert made with --ignore-errors?
+        for folder in cache.candidates(Path(cache_dir) if cache_dir is not None else default_cache_dir()):
+            _warn_if_converted_leniently(path, folder / f"{content_hash}-net")
 
     cache_folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     for folder in cache.candidates(cache_folder):
@@ -82,7 +92,13 @@ def sumo_net_path(path: str | Path, cache_dir: Path | None = None) -> Path:
 
     A converted network is cached as a folder ``<sha256 of the .xodr>-net`` holding the
     ``.net.xml`` and a ``SHA256SUMS`` manifest; it is built privately and renamed into place, and
-    rebuilt when its files no longer match the manifest.
+    rebuilt when its files no longer match the manifest. A network netconvert could only build
+    with ``--ignore-errors`` also holds the list of what it ignored, repeated as a warning on
+    every load.
+
+    A file netconvert rejects altogether is remembered as ``<sha256>-net.failed`` (netconvert's
+    message and which netconvert gave it): later loads of the same content fail at once with the
+    same message instead of converting again; a changed file or another netconvert tries again.
     """
     path = Path(path)
     if _checked_name(path).endswith(".net.xml"):
@@ -93,12 +109,19 @@ def sumo_net_path(path: str | Path, cache_dir: Path | None = None) -> Path:
     cache_folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     entry_name = f"{content_hash}-net"
     net_name = f"{path.name[: -len('.xodr')]}.net.xml"
+    failed_name = f"{entry_name}.failed"
+    identity = netconvert_identity()
     for folder in cache.candidates(cache_folder):
         problem = cache.check_manifest(folder / entry_name, [net_name])
         if problem is None:
+            _warn_if_converted_leniently(path, folder / entry_name)
             return folder / entry_name / net_name
         if problem != "missing":
             _log.warning("rebuilding the cached network of %s in %s: %s", path, folder, problem)
+    for folder in cache.candidates(cache_folder):
+        detail = _cached_failure(folder / failed_name, identity)
+        if detail is not None:
+            raise ConversionError(path, detail)
     folder = cache.writable_dir(cache_folder)
     try:
         build = cache.new_build_dir(folder, "xodr")
@@ -106,15 +129,57 @@ def sumo_net_path(path: str | Path, cache_dir: Path | None = None) -> Path:
         folder = cache.fallback_for(cache_folder, err)
         build = cache.new_build_dir(folder, "xodr")
     try:
-        convert_opendrive(path, build)
-        cache.write_manifest(build, [net_name])
+        try:
+            convert_opendrive(path, build)
+        except ConversionError as err:
+            _remember_failure(folder / failed_name, identity, err.detail)
+            raise
+        names = [net_name] + ([IGNORED_ERRORS_NAME] if (build / IGNORED_ERRORS_NAME).is_file() else [])
+        cache.write_manifest(build, names)
         final = cache.publish_dir(
             build, folder / entry_name, lambda d: cache.check_manifest(d, [net_name]) is None
         )
     finally:
         if build.exists():
             shutil.rmtree(build, ignore_errors=True)
+    _warned_lenient.add((str(path), str(final)))  # convert_opendrive has just warned
     return final / net_name
+
+
+_warned_lenient: set[tuple[str, str]] = set()
+
+
+def _warn_if_converted_leniently(path: Path, entry: Path) -> None:
+    """Repeat (once per process and file) the warning of a conversion with ``--ignore-errors``."""
+    ignored = entry / IGNORED_ERRORS_NAME
+    if not ignored.is_file() or (str(path), str(entry)) in _warned_lenient:
+        return
+    _warned_lenient.add((str(path), str(entry)))
+    try:
+        lines = ignored.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError):
+        lines = []
+    warn_ignored_errors(path, [line for line in lines if line.strip()])
+
+
+def _cached_failure(record: Path, identity: str) -> str | None:
+    """netconvert's message from a failure record made by this netconvert, else None."""
+    try:
+        data = json.loads(record.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None  # none, unreadable or partial: convert (and record) again
+    if not isinstance(data, dict) or data.get("netconvert") != identity:
+        return None
+    detail = data.get("error")
+    return detail if isinstance(detail, str) and detail else None
+
+
+def _remember_failure(record: Path, identity: str, detail: str) -> None:
+    data = json.dumps({"netconvert": identity, "error": detail}, indent=1).encode()
+    try:
+        cache.atomic_write_bytes(record, data)
+    except OSError as err:
+        _log.warning("cannot record the failed conversion in %s: %s", record, err)
 
 
 def _compile(path: Path, name: str, cache: Path, content_hash: str) -> RoadMap:

@@ -219,8 +219,10 @@ def test_corrupt_user_map_is_an_error_naming_the_file(
         load_map(xodr, cache_dir=cache_dir)
     with pytest.raises(MapError, match=r"half\.xodr"):
         sumo_net_path(xodr, cache_dir)
-    # Nothing was cached for either file; no temporary left behind.
-    assert not cache_dir.exists() or list(cache_dir.iterdir()) == []
+    # Nothing was cached for either file but the record of the failed conversion (so the next
+    # load fails at once); no temporary left behind.
+    digest = hashlib.sha256(xodr.read_bytes()).hexdigest()
+    assert [p.name for p in cache_dir.iterdir()] == [f"{digest}-net.failed"]
 
 
 def test_unwritable_cache_falls_back_to_a_temporary_one_with_one_warning(
@@ -273,3 +275,95 @@ def test_a_copy_of_the_same_map_keeps_its_own_source(tmp_path: Path, straight_ne
     assert sumo_net_path(load_map(second, cache_dir=cache_dir).source) == second
     clear_memory_cache()
     assert load_map(second, cache_dir=cache_dir).source == str(second)
+
+
+# ---------------------------------------------------------------- OpenDRIVE netconvert rejects
+@pytest.fixture
+def netconvert_runs(monkeypatch: pytest.MonkeyPatch) -> list:
+    """Counts netconvert runs (each still runs the real netconvert)."""
+    from smarts.maps import opendrive
+
+    runs: list = []
+    real_run = opendrive.subprocess.run
+
+    def counting_run(command, *args, **kwargs):
+        runs.append(command)
+        return real_run(command, *args, **kwargs)
+
+    monkeypatch.setattr(opendrive.subprocess, "run", counting_run)
+    return runs
+
+
+def test_a_failed_conversion_is_cached_and_fails_fast_with_the_same_message(
+    tmp_path: Path, netconvert_runs: list
+) -> None:
+    bad = tmp_path / "broken.xodr"
+    bad.write_text("<OpenDRIVE><road id='1' length='x'>")
+    with pytest.raises(MapError, match="broken.xodr: netconvert could not convert") as first:
+        load_map(bad, cache_dir=tmp_path / "cache")
+    assert len(netconvert_runs) == 2  # strict, then --ignore-errors
+    assert "Invalid Number Format" in str(first.value)  # netconvert's own words
+    for _ in range(2):
+        with pytest.raises(MapError) as again:
+            load_map(bad, cache_dir=tmp_path / "cache")
+        assert str(again.value) == str(first.value)
+        with pytest.raises(MapError) as via_sumo:
+            sumo_net_path(bad, tmp_path / "cache")
+        assert str(via_sumo.value) == str(first.value)
+    assert len(netconvert_runs) == 2  # not converted again
+    # the same content under another name fails fast too, naming that file
+    copy = tmp_path / "copy.xodr"
+    copy.write_bytes(bad.read_bytes())
+    with pytest.raises(MapError, match="copy.xodr: netconvert could not convert"):
+        load_map(copy, cache_dir=tmp_path / "cache")
+    assert len(netconvert_runs) == 2
+    # an edited file is converted again
+    bad.write_text("<OpenDRIVE><road id='2' length='y'>")
+    with pytest.raises(MapError, match="broken.xodr"):
+        load_map(bad, cache_dir=tmp_path / "cache")
+    assert len(netconvert_runs) == 4
+
+
+def test_a_failure_recorded_by_another_netconvert_is_retried(
+    tmp_path: Path, netconvert_runs: list
+) -> None:
+    import json
+
+    bad = tmp_path / "broken.xodr"
+    bad.write_text("<OpenDRIVE><road id='1' length='x'>")
+    with pytest.raises(MapError):
+        load_map(bad, cache_dir=tmp_path / "cache")
+    (record,) = (tmp_path / "cache").glob("*-net.failed")
+    data = json.loads(record.read_text())
+    record.write_text(json.dumps({**data, "netconvert": "an older netconvert"}))
+    with pytest.raises(MapError):
+        load_map(bad, cache_dir=tmp_path / "cache")
+    assert len(netconvert_runs) == 4
+    record.write_text("{partial")  # a damaged record: converted (and recorded) again
+    with pytest.raises(MapError):
+        load_map(bad, cache_dir=tmp_path / "cache")
+    assert len(netconvert_runs) == 6
+    assert json.loads(record.read_text())["netconvert"] == data["netconvert"]
+
+
+def test_a_network_built_ignoring_errors_warns_on_every_load(
+    tmp_path: Path, netconvert_runs: list, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from smarts.maps import loader
+    from smarts.maps.opendrive import MapWarning
+    from tests.maps.conftest import STRAIGHT_XODR
+    from tests.maps.test_opendrive import UNKNOWN_ROAD_LINK
+
+    path = tmp_path / "lenient.xodr"
+    path.write_text(STRAIGHT_XODR.replace("</OpenDRIVE>", UNKNOWN_ROAD_LINK))
+    monkeypatch.setattr(loader, "_warned_lenient", set())
+    with pytest.warns(MapWarning, match="road '55' is not known") as record:
+        m = load_map(path, cache_dir=tmp_path / "cache")
+        sumo_net_path(path, tmp_path / "cache")
+    assert len(record) == 1 and m.num_lanes == 2
+    # a later process (memory caches empty) loads from the disk cache and is told again
+    clear_memory_cache()
+    monkeypatch.setattr(loader, "_warned_lenient", set())
+    with pytest.warns(MapWarning, match="road '55' is not known"):
+        load_map(path, cache_dir=tmp_path / "cache")
+    assert len(netconvert_runs) == 2  # converted once

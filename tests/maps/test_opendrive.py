@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from smarts.maps import MapError, on_road, project
-from smarts.maps.opendrive import convert_opendrive
+from smarts.maps.opendrive import IGNORED_ERRORS_NAME, MapWarning, convert_opendrive
 from smarts.maps.sumo_net import compile_sumo_net
 
 
@@ -42,3 +42,29 @@ def test_invalid_xodr_reports_netconvert_error(tmp_path: Path) -> None:
 def test_missing_xodr(tmp_path: Path) -> None:
     with pytest.raises(MapError, match="gone.xodr.*not found"):
         convert_opendrive(tmp_path / "gone.xodr", tmp_path)
+
+
+# A junction whose lane link names a road the file does not have: netconvert's strict mode
+# rejects the whole file ("incoming road '55' is not known"); with --ignore-errors the rest of the
+# network converts.
+UNKNOWN_ROAD_LINK = """
+  <junction id="1" name="j">
+    <connection id="0" incomingRoad="55" connectingRoad="7" contactPoint="start">
+      <laneLink from="-1" to="-1"/>
+    </connection>
+  </junction>
+</OpenDRIVE>"""
+
+
+def test_file_netconvert_rejects_in_strict_mode_converts_ignoring_errors_with_a_warning(
+    tmp_path: Path,
+) -> None:
+    from tests.maps.conftest import STRAIGHT_XODR
+
+    path = tmp_path / "lenient.xodr"
+    path.write_text(STRAIGHT_XODR.replace("</OpenDRIVE>", UNKNOWN_ROAD_LINK))
+    with pytest.warns(MapWarning, match=r"lenient.xodr.*--ignore-errors(.|\n)*road '55' is not known"):
+        net = convert_opendrive(path, tmp_path / "out")
+    m = compile_sumo_net(net)
+    assert m.num_lanes == 2  # the road itself is there
+    assert "road '55'" in (tmp_path / "out" / IGNORED_ERRORS_NAME).read_text()
