@@ -35,6 +35,7 @@ class LaneSpec:
     speed_limit: float
     internal: bool
     shape: np.ndarray  # float64[n, 2], n >= 1, consecutive duplicates allowed
+    sumo_length: float | None = None  # SUMO's ``length`` attribute; None: the shape's length
 
 
 def assemble_road_map(
@@ -77,6 +78,11 @@ def assemble_road_map(
     running = np.cumsum(step)
     point_s = running - np.repeat(running[point_offsets[:-1]], counts)
     lane_length = point_s[point_offsets[1:] - 1]
+    lane_sumo_length = np.array(
+        [lane.sumo_length if lane.sumo_length is not None else length
+         for lane, length in zip(lanes, lane_length.tolist())],
+        dtype=np.float64,
+    )
 
     lane_left, lane_right = _neighbours(lane_road, lane_index)
     succ_offsets, succ = _csr(num_lanes, links, reverse=False)
@@ -128,6 +134,7 @@ def assemble_road_map(
         lane_width=lane_width,
         lane_speed_limit=lane_speed,
         lane_length=lane_length,
+        lane_sumo_length=lane_sumo_length,
         lane_internal=lane_internal,
         lane_left=lane_left,
         lane_right=lane_right,

@@ -9,6 +9,10 @@ Conventions (used across the whole simulator):
 - Lane index 0 is the rightmost lane of its road.
 - Lane coordinates: ``s`` is the arc length along the lane centre line, ``t`` the signed lateral
   offset from it (positive to the left).
+- Lane offsets (``s``, mission and goal offsets, ``depart_pos``) are metres along the drawn lane.
+  SUMO measures a lane by its ``length`` attribute, which netconvert may set apart from the shape
+  (up to ~20% on real networks); positions handed to SUMO are scaled by ``lane_sumo_length /
+  lane_length`` (:meth:`RoadMap.to_sumo_pos`), so an offset means the same place to both.
 
 Variable-length per-lane data is stored CSR-style: ``X_offsets[i]:X_offsets[i + 1]`` slices the
 flat array ``X`` for lane ``i``.
@@ -58,6 +62,7 @@ class RoadMap:
     lane_width: np.ndarray  # float64[L]
     lane_speed_limit: np.ndarray  # float64[L] m/s
     lane_length: np.ndarray  # float64[L] arc length of the centre polyline
+    lane_sumo_length: np.ndarray  # float64[L] SUMO's lane length (its ``length`` attribute)
     lane_internal: np.ndarray  # bool[L] lane lies inside a junction
     lane_left: np.ndarray  # int32[L] neighbour lane to the left on the same road, -1 if none
     lane_right: np.ndarray  # int32[L] neighbour lane to the right, -1 if none
@@ -159,6 +164,21 @@ class RoadMap:
 
     def predecessors(self, lane: int) -> np.ndarray:
         return self.pred[self.pred_offsets[lane] : self.pred_offsets[lane + 1]]
+
+    def to_sumo_pos(self, lane: int, s: float) -> float:
+        """SUMO's position on ``lane`` for arc length ``s`` along its shape (clamped to the lane):
+        SUMO counts positions against the lane's ``length`` attribute, which may differ from the
+        shape's length."""
+        geometric, sumo = float(self.lane_length[lane]), float(self.lane_sumo_length[lane])
+        scale = sumo / geometric if geometric > 0 else 1.0
+        return min(max(float(s) * scale, 0.0), sumo)
+
+    def from_sumo_pos(self, lane: int, pos: float) -> float:
+        """Arc length along ``lane``'s shape for SUMO's position ``pos`` (inverse of
+        :meth:`to_sumo_pos`)."""
+        geometric, sumo = float(self.lane_length[lane]), float(self.lane_sumo_length[lane])
+        scale = geometric / sumo if sumo > 0 else 1.0
+        return min(max(float(pos) * scale, 0.0), geometric)
 
     def lane_polyline(self, lane: int) -> np.ndarray:
         return self.points[self.lane_point_offsets[lane] : self.lane_point_offsets[lane + 1]]

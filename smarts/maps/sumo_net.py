@@ -77,6 +77,7 @@ def compile_sumo_net(path: Path) -> RoadMap:
                     speed_limit=_float_attr(path, lane, "speed", DEFAULT_SPEED_LIMIT),
                     internal=function == "internal",
                     shape=_parse_shape(path, lane_id, lane.get("shape")),
+                    sumo_length=_length_attr(path, lane),
                 )
             )
     if not lanes:
@@ -225,6 +226,22 @@ def _float_attr(path: Path, element: ET.Element, name: str, default: float) -> f
         raise MapError(
             f"{path}: <{element.tag} id={element.get('id')!r}> needs a positive number for "
             f"{name!r}, got {value!r}"
+        )
+    return number
+
+
+def _length_attr(path: Path, lane: ET.Element) -> float | None:
+    """SUMO's ``length`` of a lane (0 allowed: zero-length junction lanes), None when absent."""
+    value = lane.get("length")
+    if value is None:
+        return None
+    try:
+        number = float(value)
+    except ValueError:
+        number = float("nan")
+    if not np.isfinite(number) or number < 0:
+        raise MapError(
+            f"{path}: <lane id={lane.get('id')!r}> needs a length >= 0, got {value!r}"
         )
     return number
 

@@ -21,6 +21,8 @@ which is exactly SUMO's own value under its Euler update.
 
 Conventions converted here: SUMO positions a vehicle by its front bumper and measures angles in
 degrees clockwise from north; the table holds box centres and radians counter-clockwise from east.
+Offsets along a lane are metres along its shape here and SUMO's lane ``length`` there
+(``RoadMap.to_sumo_pos``); poses are exchanged as x, y, which need no conversion.
 SUMO's clock runs one step ahead of the simulation's: ``reset`` steps SUMO once so vehicles that
 depart at time 0 are already on the road in the first observation.
 
@@ -308,8 +310,7 @@ class SumoTrafficProvider(ProviderBase):
         lane_id = rm.lane_ids[lane]
         front = float(proj.s[0]) + 0.5 * float(t.length[row])
         try:
-            pos = sumo_lane_pos(rm, lane, front, self._ls.lane.getLength(lane_id))
-            self._ls.vehicle.moveTo(vid, lane_id, pos)
+            self._ls.vehicle.moveTo(vid, lane_id, rm.to_sumo_pos(lane, front))
         except self._ls.TraCIException:
             pass  # SUMO cannot put it there: the step's moveToXY places it
 
@@ -608,19 +609,6 @@ def _check_net_file(net_file: Path, road_map: RoadMap) -> None:
         raise ScenarioError(
             f"{net_file}: expected a SUMO network with root <net>, found <{root_tag}>"
         )
-
-
-def sumo_lane_pos(road_map: RoadMap, lane: int, s: float, sumo_length: float) -> float:
-    """Position along a lane as SUMO counts it, for arc length ``s`` of our centre line.
-
-    Our ``s`` follows the lane's geometry; SUMO measures positions against the lane's ``length``
-    attribute, which may differ from the geometry (netconvert keeps lengths given by the source
-    and ``--geometry`` edits). Positions are scaled by SUMO length / geometric length, so both
-    ends of the lane are the same place to both, and clamped to SUMO's lane.
-    """
-    geometric = float(road_map.lane_length[lane])
-    scale = sumo_length / geometric if geometric > 0 else 1.0
-    return min(max(s * scale, 0.0), sumo_length)
 
 
 def _shut_down(work_dir: Path, started: list[bool]) -> None:

@@ -408,7 +408,8 @@ def _depart_attrib(
 ) -> dict[str, str]:
     """SUMO depart attributes. ``depart_pos`` is where the box centre starts (our convention),
     so SUMO, which places the front bumper, gets ``depart_pos + length / 2``; 0 keeps the whole
-    vehicle on the road (SUMO's "base")."""
+    vehicle on the road (SUMO's "base"). It is metres along the lane's shape, scaled to SUMO's
+    lane length (``RoadMap.to_sumo_pos``) where the network gives lanes another length."""
     first_road = road_map.road(item.roads[0])
     lanes = road_map.road_lanes(first_road)
     lane = item.depart_lane
@@ -419,11 +420,16 @@ def _depart_attrib(
     speed = item.depart_speed
     depart_speed = speed if isinstance(speed, str) else _num(speed)
     length = vehicle_type_info(traffic.vehicle_type(item.vehicle_type)).length
-    lane_length = float(road_map.lane_length[lanes].min())
+    if isinstance(lane, str):  # SUMO picks the lane: the shortest one bounds the position
+        lane_for_pos = int(lanes[int(np.argmin(road_map.lane_length[lanes]))])
+    else:
+        lane_for_pos = int(lanes[int(lane)])
+    lane_length = float(road_map.lane_length[lane_for_pos])
     if item.depart_pos <= 0:
         depart_pos = "base"
     else:
-        depart_pos = _num(min(max(item.depart_pos + length / 2, length), lane_length))
+        front = min(max(item.depart_pos + length / 2, length), lane_length)
+        depart_pos = _num(road_map.to_sumo_pos(lane_for_pos, front))
     return {
         "type": item.vehicle_type,
         "departLane": depart_lane,

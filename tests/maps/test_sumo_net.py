@@ -169,3 +169,24 @@ def test_bad_width_names_file_and_lane(tmp_path: Path, straight_net: Path) -> No
     path.write_text(text)
     with pytest.raises(MapError, match=r"bad_width.net.xml.*'AB_1'.*'width'"):
         compile_sumo_net(path)
+
+
+def test_sumo_lane_lengths_are_kept_and_offsets_convert_both_ways(tmp_path) -> None:
+    """SUMO's lane ``length`` (here the edge's length attribute, 120 m on a 100 m shape) is
+    kept next to the shape's length; offsets scale between the two."""
+    from tests.maps.conftest import build_net
+
+    nodes = '<nodes><node id="A" x="0" y="0"/><node id="B" x="100" y="0"/></nodes>'
+    edges = '<edges><edge id="AB" from="A" to="B" numLanes="1" length="120"/></edges>'
+    m = compile_sumo_net(build_net(tmp_path, "long", nodes, edges))
+    lane = m.lane("AB_0")
+    assert m.lane_length[lane] == pytest.approx(100.0)
+    assert m.lane_sumo_length[lane] == pytest.approx(120.0)
+    assert m.to_sumo_pos(lane, 50.0) == pytest.approx(60.0)
+    assert m.from_sumo_pos(lane, 60.0) == pytest.approx(50.0)
+    assert m.to_sumo_pos(lane, 130.0) == pytest.approx(120.0)  # clamped to the lane
+    assert m.from_sumo_pos(lane, -1.0) == 0.0
+
+
+def test_lanes_without_a_length_attribute_use_their_shape(straight_map) -> None:
+    np.testing.assert_allclose(straight_map.lane_sumo_length, straight_map.lane_length, atol=0.01)

@@ -264,3 +264,57 @@ def test_vehicles_leaving_the_map_lose_their_rows():
         _run(sim, 60)
         assert "t" not in sim.table.row_of
         assert len(_traffic_rows(sim)) == 0
+
+
+@pytest.fixture(scope="module")
+def long_lanes_net(tmp_path_factory):
+    """A 100 m road whose lanes SUMO measures as 120 m (the edge's ``length`` attribute)."""
+    from tests.maps.conftest import build_net
+
+    nodes = '<nodes><node id="A" x="0" y="0"/><node id="B" x="100" y="0"/></nodes>'
+    edges = '<edges><edge id="AB" from="A" to="B" numLanes="2" speed="20" length="120"/></edges>'
+    return build_net(tmp_path_factory.mktemp("long_lanes"), "long_lanes", nodes, edges)
+
+
+def test_offsets_mean_the_same_place_to_sumo_when_its_lane_length_differs(long_lanes_net):
+    """Offsets are metres along the drawn lane for trips and agents alike; SUMO, which counts
+    along its 120 m lane length, gets them scaled, so a trip at depart_pos 50 starts in the
+    middle of the road and an agent's twin stands where the agent is."""
+    from smarts.scenario import ScenarioSpec
+
+    spec = ScenarioSpec.from_dict(
+        {
+            "name": "long-lanes",
+            "map": str(long_lanes_net),
+            "agents": [{
+                "action_space": "relative_target_pose",
+                "mission": {"start": {"road": "AB", "lane": 1, "offset": 70.0, "speed": 0.0},
+                            "goal": {"endless": True}},
+            }],
+        },
+        source="long-lanes",
+    )
+    sim = build_simulation(spec)
+    rm = sim.road_map
+    assert rm.lane_length[0] == pytest.approx(100.0) and rm.lane_sumo_length[0] == pytest.approx(120.0)
+    traffic = TrafficSpec(
+        trips=[TripSpec("mid", route=["AB"], depart_pos=50.0, depart_speed=0.0, depart_lane=0)]
+    )
+    provider = SumoTrafficProvider(traffic, rm, sumo_net_path(rm.source), sim.dt)
+    sim.add_provider(provider)
+    try:
+        sim.reset()
+        t = sim.table
+        mid = t.row_of["mid"]
+        assert t.x[mid] == pytest.approx(50.0, abs=0.05)
+        assert t.s[mid] == pytest.approx(50.0, abs=0.05)
+        ls = provider._ls
+        me = sim.agent_row[0]
+        front = t.x[me] + t.length[me] / 2
+        assert ls.vehicle.getPosition("agent_0")[0] == pytest.approx(front, abs=0.05)
+        # SUMO's own lane position of the twin is the scaled offset
+        assert ls.vehicle.getLanePosition("agent_0") == pytest.approx(1.2 * front, abs=0.05)
+        sim.step({"agent_0": STOP})
+        assert ls.vehicle.getPosition("agent_0")[0] == pytest.approx(front, abs=0.05)
+    finally:
+        sim.close()
