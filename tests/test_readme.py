@@ -176,15 +176,15 @@ def test_metrics_command_scores_a_benchmark_logs_folder(tmp_path, monkeypatch):
 
 
 # ------------------------------------------------------------------------------ python blocks
-AGENT_RED = (230, 60, 50)  # smarts.sensors.topdown.ROLE_COLOURS[Role.AGENT]
-
-
 def _check_intersection(namespace: dict, printed: list[str]) -> None:
+    from smarts.core.vehicle_table import Role
+    from smarts.sensors.topdown import ROLE_COLOURS
+
     assert printed == ["agent_0 ['reached_goal']", "agent_1 ['reached_goal']"]
     frame = namespace["frame"]
     assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
     # The kept frame shows a vehicle still driving: pixels of an agent's colour.
-    assert (frame == AGENT_RED).all(axis=2).sum() > 20
+    assert (frame == ROLE_COLOURS[int(Role.AGENT)]).all(axis=2).sum() > 20
 
 
 def _check_gymnasium(namespace: dict, printed: list[str]) -> None:
