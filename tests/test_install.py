@@ -34,7 +34,7 @@ def _source_files() -> dict[str, Path]:
             rel = path.relative_to(ROOT / top)
             if path.is_dir() or "__pycache__" in rel.parts or any(p.startswith(".") for p in rel.parts):
                 continue
-            if path.suffix in (".pyc", ".nbi", ".nbc"):
+            if path.suffix in (".pyc", ".nbi", ".nbc") or ".tmp." in path.name:
                 continue
             files[f"{target}/{rel.as_posix()}"] = path
     return files
