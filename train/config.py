@@ -30,6 +30,7 @@ from pydantic import (
     model_serializer,
 )
 
+from smarts.core.errors import ConfigError
 from smarts.core.resources import config_path
 from smarts.core.schema import Schema, describe, load_yaml
 from smarts.core.spec import CONTROLLERS
@@ -45,10 +46,6 @@ ACTION_SPACES = {"rtp": "relative_target_pose", "continuous": "continuous"}
 LIBS = ("torchrl", "sb3")
 FLAGS = {"out": "--out-dir"}
 """Command-line flags whose name is not the field's (``--out`` is an alias of ``--out-dir``)."""
-
-
-class ConfigError(ValueError):
-    pass
 
 
 def flag(name: str) -> str:

@@ -59,6 +59,11 @@ class InterfaceError(ValueError):
         super().__init__(f"{path}: {problem}")
 
 
+class ConfigError(ValueError):
+    """A training config (YAML or command-line override) is invalid; the message names the file or
+    flag and the field."""
+
+
 class AgentSetupError(ValueError):
     """A policy cannot be benchmarked as declared (unknown action space or controller, one the
     suite does not host, an invalid interface or lane-relative settings); the message names the
