@@ -8,11 +8,10 @@ import os
 from pathlib import Path
 
 import pytest
+import ray  # noqa: F401  (the test extra installs it: a missing Ray fails here instead of skipping)
 import torch
 
 from train.__main__ import main
-
-pytest.importorskip("ray", reason="ray is not installed: pip install 'smarts[ray]' to run the Ray scale-out tests")
 
 TINY = str(Path(__file__).parent / "benchmark" / "tiny_suite.yaml")
 

@@ -75,7 +75,7 @@ def test_an_episode_whose_worker_always_dies_fails_with_the_reason_and_the_rest_
 
 
 def test_on_ray_a_task_whose_worker_dies_is_run_again_or_becomes_a_failed_episode(tmp_path, marker_dir):
-    pytest.importorskip("ray", reason="ray is not installed: pip install 'smarts[ray]'")
+    import ray  # noqa: F401  (installed by the test extra; never skipped)
     suite = load_suite(TINY)
     jobs = plan_jobs(["test:die-once", "test:die-always"], suite, 1, tmp_path, references=False, policy_resolver=resolve)
     results = run_jobs(jobs, progress=False, ray_address="local", policy_resolver=resolve)

@@ -85,15 +85,11 @@ def _library_map(name: str) -> str:
 
 @pytest.fixture
 def library_scenario():
-    """``load(name)``: a library scenario, skipped while its built-in map recipe does not exist.
+    """``load(name)``: a library scenario; its built-in map must exist (no skipping)."""
 
-    intersection_pedestrians names a map whose recipe is added separately; until it is in
-    BUILTIN_MAPS that scenario cannot load, and only tests touching it are skipped.
-    """
     def load(name: str):
         map_name = _library_map(name)
-        if map_name not in BUILTIN_MAPS:
-            pytest.skip(f"built-in map {map_name!r} of scenario {name!r} is not available yet")
+        assert map_name in BUILTIN_MAPS, f"scenario {name!r} names the unknown built-in map {map_name!r}"
         return load_scenario(name)
 
     return load
@@ -101,7 +97,6 @@ def library_scenario():
 
 @pytest.fixture
 def library_maps_available():
-    """Skips a test that needs every library scenario to load (see ``library_scenario``)."""
+    """Every library scenario's built-in map exists (a failure, not a skip, when one does not)."""
     missing = {n: m for n in list_scenarios() if (m := _library_map(n)) not in BUILTIN_MAPS}
-    if missing:
-        pytest.skip(f"built-in maps not available yet: {missing}")
+    assert not missing, f"library scenarios name unknown built-in maps: {missing}"

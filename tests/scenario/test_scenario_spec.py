@@ -321,10 +321,9 @@ def test_check_map_names_agent_and_field(lane_table_maps, dotted, value, expecte
 
 
 def test_check_map_with_the_map_compiler(built_maps, map_cache_dir):
-    """Runs once smarts.maps.load_map exists (it is written separately)."""
-    maps = pytest.importorskip("smarts.maps")
-    if not hasattr(maps, "load_map"):
-        pytest.skip("smarts.maps.load_map is not available yet")
+    """The spec checked against the map the real compiler builds."""
+    from smarts import maps
+
     road_map = maps.load_map(
         built_maps["intersection_4way_2lane"], cache_dir=map_cache_dir / "maps"
     )

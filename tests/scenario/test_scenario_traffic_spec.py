@@ -22,6 +22,7 @@ from smarts.scenario import (
     TripSpec,
     VehicleTypeSpec,
     list_scenarios,
+    load_scenario,
 )
 
 BASE = {
@@ -426,16 +427,31 @@ def test_traffic_scenarios_load_with_their_engine_and_map(name, library_scenario
 
 
 @pytest.mark.filterwarnings("ignore:Module 'rtree' not available")
-@pytest.mark.parametrize("name", list_scenarios())
+def _scenarios_with_routes() -> list[str]:
+    """Library scenarios whose traffic names at least one road-to-road step (the others have
+    nothing for the route test to check)."""
+    names = []
+    for name in list_scenarios():
+        traffic = load_scenario(name).traffic
+        if traffic is not None and any(len(i.roads) > 1 for i in [*traffic.flows, *traffic.trips]):
+            names.append(name)
+    return names
+
+
+def test_some_library_scenarios_have_routes_to_check():
+    assert len(_scenarios_with_routes()) >= 2
+
+
+@pytest.mark.parametrize("name", _scenarios_with_routes())
 def test_library_traffic_routes_connect(name, sumo_nets, library_scenario):
     """Every flow and trip can drive its roads in order on the map (checked with sumolib)."""
     spec = library_scenario(name)
-    if spec.traffic is None:
-        return
     net = sumo_nets[spec.builtin_map]
-    for item in [*spec.traffic.flows, *spec.traffic.trips]:
-        for a, b in itertools.pairwise(item.roads):
-            assert net.getShortestPath(net.getEdge(a), net.getEdge(b))[0], f"{item.id}: {a}->{b}"
+    pairs = [(item.id, a, b) for item in [*spec.traffic.flows, *spec.traffic.trips]
+             for a, b in itertools.pairwise(item.roads)]  # fmt: skip
+    assert pairs
+    for item_id, a, b in pairs:
+        assert net.getShortestPath(net.getEdge(a), net.getEdge(b))[0], f"{item_id}: {a}->{b}"
 
 
 def _direction(net, from_road: str, to_road: str) -> set[str]:
@@ -463,8 +479,9 @@ def test_social_scenario_has_one_learner_and_one_keep_lane_driver(library_scenar
     assert [a.policy for a in spec.agents] == [None, "zoo:keep-lane"]
     assert spec.social_agent_ids == ["social_0"]
     assert (spec.traffic.engine, spec.traffic.density) == ("builtin", "low")
-    registry = pytest.importorskip("zoo.registry")
-    assert "keep-lane" in registry.ZOO
+    from smarts.core.policies import resolve_policy
+
+    assert resolve_policy("zoo:keep-lane").action_space == "relative_target_pose"  # the locator resolves
 
 
 def test_takeover_scenario_drives_trip_lead_and_hands_it_back(library_scenario):
