@@ -263,3 +263,30 @@ def test_every_run_gets_its_own_numbered_folder_and_latest_points_to_the_newest(
     import json
 
     assert json.loads((tmp_path / "002" / "config.json").read_text())["out"] == str(tmp_path / "002")
+
+
+def test_the_ppo_settings_reach_torchrl_objects():
+    from train.config import load_config
+    from train.ppo import build_learner, build_modules, make_env
+
+    cfg = load_config("platoon", overrides={"envs": 1, "scenarios": "adaptive:a01_straight_free", "gamma": 0.9,
+                                            "gae_lambda": 0.8, "clip_epsilon": 0.3, "entropy_coeff": 0.02,
+                                            "critic_coeff": 0.7, "lr": 3e-4})  # fmt: skip
+    env = make_env(cfg)
+    try:
+        *_, actor, critic, _, _ = build_modules(env, cfg)
+        advantage, loss, optimizer = build_learner(cfg, actor, critic)
+    finally:
+        env.close()
+    assert float(advantage.gamma) == pytest.approx(0.9) and float(advantage.lmbda) == pytest.approx(0.8)
+    assert float(loss.clip_epsilon) == pytest.approx(0.3) and float(loss.entropy_coeff) == pytest.approx(0.02)
+    assert float(loss.critic_coeff) == pytest.approx(0.7) and optimizer.param_groups[0]["lr"] == 3e-4
+
+
+def test_epochs_and_minibatches_set_the_number_of_updates(tmp_path):
+    args = ["ppo", "--task", "platoon", "--scenarios", "adaptive:a01_straight_free", "--total-steps", "64",
+            "--frames-per-batch", "64", "--minibatch-size", "16", "--epochs", "3", "--target-kl", "0",
+            "--envs", "1", "--eval-episodes", "0", "--out-dir", str(tmp_path / "run"), "--quiet"]  # fmt: skip
+    assert main(args) == 0
+    state = torch.load(tmp_path / "run" / "final.pt", weights_only=True)["optimizer"]["state"]
+    assert {int(s["step"]) for s in state.values()} == {3 * 64 // 16}  # every parameter: 12 Adam steps

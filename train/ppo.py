@@ -253,6 +253,16 @@ def check_init_from(path: Path, cfg: TrainConfig) -> dict:
     return blob
 
 
+def build_learner(cfg: TrainConfig, actor, critic) -> tuple[GAE, ClipPPOLoss, torch.optim.Adam]:
+    """torchrl's GAE and clipped PPO loss and the optimiser, with the config's settings."""
+    advantage = GAE(gamma=cfg.gamma, lmbda=cfg.gae_lambda, value_network=critic, average_gae=False)
+    loss_module = ClipPPOLoss(actor, critic, clip_epsilon=cfg.clip_epsilon, entropy_coeff=cfg.entropy_coeff,
+                              critic_coeff=cfg.critic_coeff, loss_critic_type="l2",
+                              normalize_advantage=True)  # fmt: skip
+    optimizer = torch.optim.Adam(loss_module.parameters(), lr=cfg.lr)
+    return advantage, loss_module, optimizer
+
+
 def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | None = None) -> Path:
     """Train, log and checkpoint under ``out``; returns the final checkpoint path. ``resume``
     continues from a checkpoint (networks, observation statistics, optimiser, step count) up to
@@ -277,13 +287,9 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
     else:
         env = make_env(cfg)
     layout, normalizer, actor_net, critic_net, actor, critic, low, high = build_modules(env, cfg)
-    advantage = GAE(gamma=cfg.gamma, lmbda=cfg.gae_lambda, value_network=critic, average_gae=False)
-    loss_module = ClipPPOLoss(actor, critic, clip_epsilon=cfg.clip_epsilon, entropy_coeff=cfg.entropy_coeff,
-                              critic_coeff=cfg.critic_coeff, loss_critic_type="l2",
-                              normalize_advantage=True)  # fmt: skip
+    advantage, loss_module, optimizer = build_learner(cfg, actor, critic)
     scale_rewards = RewardScaler(cfg.gamma)
     bound_low, bound_high = torch.as_tensor(low), torch.as_tensor(high)
-    optimizer = torch.optim.Adam(loss_module.parameters(), lr=cfg.lr)
     step = 0
     if blob is not None:
         try:
