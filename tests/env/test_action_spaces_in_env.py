@@ -116,3 +116,27 @@ def test_position_goal_is_reached():
         if terms["agent_0"]:
             break
     assert infos["agent_0"]["events"] == ["reached_goal"] and rewards["agent_0"] > 10.0
+
+
+def test_lane_action_changes_lane_right():
+    env = DrivingParallelEnv(make_spec([agent(lane=1, offset=10.0, speed=8.0, action_space="lane")]))
+    env.reset(seed=0)
+    row = env.sim.agent_row[0]
+    env.step({"agent_0": np.array([8.0, -1.0])})  # change right once, then keep lane
+    _drive(env, np.array([8.0, 0.0]), 60)
+    assert env.sim.table.lane[row] == env.sim.road_map.lane("main_0")
+    assert abs(env.sim.table.t[row]) < 0.2
+
+
+@pytest.mark.parametrize("space", ["relative_target_pose", "target_pose", "continuous"])
+@pytest.mark.parametrize("command, start_lane, end_lane", [(1.0, 0, "main_1"), (-1.0, 1, "main_0")])
+def test_lane_relative_commands_change_lanes_both_ways_in_every_space(space, command, start_lane, end_lane):
+    spec = make_spec([agent(lane=start_lane, offset=10.0, speed=8.0, action_space=space, controller="lane_relative")])
+    env = DrivingParallelEnv(spec)
+    env.reset(seed=0)
+    row = env.sim.agent_row[0]
+    env.step({"agent_0": np.array([-0.4, command])})  # about 8 m/s on this road, one lane change
+    _drive(env, np.array([-0.4, 0.0]), 80)
+    assert env.sim.table.lane[row] == env.sim.road_map.lane(end_lane), space
+    assert abs(env.sim.table.t[row]) < 0.3
+    env.close()
