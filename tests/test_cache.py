@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from smarts import cache
+from tests.builders import PERMISSIONS_SKIP
 
 
 @pytest.fixture
@@ -27,27 +28,6 @@ def fresh_fallback(monkeypatch: pytest.MonkeyPatch):
         shutil.rmtree(cache._fallback, ignore_errors=True)
 
 
-def _permission_bits_bind() -> bool:
-    """Whether a 0o500 folder refuses writes here (not for root, which bypasses the bits)."""
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as d:
-        probe = Path(d) / "ro"
-        probe.mkdir()
-        probe.chmod(0o500)
-        try:
-            (probe / "x").write_text("")
-        except PermissionError:
-            return True
-        finally:
-            probe.chmod(0o700)
-        return False
-
-
-PERMISSIONS_SKIP = pytest.mark.skipif(
-    not _permission_bits_bind(),
-    reason="permission bits do not stop this user (root); the path-under-a-file tests cover the fallback",
-)
 
 
 def unwritable_dir(tmp_path: Path) -> Path:

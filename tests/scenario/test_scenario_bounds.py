@@ -4,11 +4,11 @@ field."""
 
 from __future__ import annotations
 
-import copy
 
 import pytest
 
 from smarts.scenario import ScenarioError, ScenarioSpec
+from tests.builders import with_
 
 CROSS = {
     "name": "cross",
@@ -17,16 +17,6 @@ CROSS = {
 }
 
 
-def with_(base: dict, **changes) -> dict:
-    """A deep copy of ``base`` with fields set, ``__`` between the parts of a path."""
-    data = copy.deepcopy(base)
-    for dotted, value in changes.items():
-        node = data
-        parts = dotted.split("__")
-        for part in parts[:-1]:
-            node = node[int(part)] if part.isdigit() else node.setdefault(part, {})
-        node[int(parts[-1]) if parts[-1].isdigit() else parts[-1]] = value
-    return data
 
 
 BOUNDS = [

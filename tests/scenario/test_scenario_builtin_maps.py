@@ -30,6 +30,7 @@ from smarts.scenario.builtin_maps import (
     cache_root,
     compile_map,
 )
+from tests.builders import PERMISSIONS_SKIP
 
 FOUR_ARMS = [f"{arm}_{way}" for arm in ("west", "north", "east", "south") for way in ("in", "out")]
 
@@ -270,27 +271,6 @@ def test_truncated_netconvert_output_in_the_cache_is_rebuilt(tmp_path, built_map
     assert os.listdir(cache_root(tmp_path)) == [net.parent.name]
 
 
-def _permission_bits_bind() -> bool:
-    """Whether a 0o500 folder refuses writes here (not for root, which bypasses the bits)."""
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as d:
-        probe = Path(d) / "ro"
-        probe.mkdir()
-        probe.chmod(0o500)
-        try:
-            (probe / "x").write_text("")
-        except PermissionError:
-            return True
-        finally:
-            probe.chmod(0o700)
-        return False
-
-
-PERMISSIONS_SKIP = pytest.mark.skipif(
-    not _permission_bits_bind(),
-    reason="permission bits do not stop this user (root); the path-under-a-file tests cover the fallback",
-)
 
 
 @pytest.mark.parametrize("damage", ["manifest removed", "input removed", "entry is a file"])

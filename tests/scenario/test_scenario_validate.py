@@ -17,6 +17,7 @@ from smarts.core.spec.scenario import ACTION_SPACES
 from smarts.scenario import ScenarioError, ScenarioSpec, list_scenarios
 from smarts.scenario.map_check import START_SPEED_MARGIN
 from smarts.scenario.validate import validate_scenario, validate_spec
+from tests.builders import with_
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -45,16 +46,6 @@ def write(folder: Path, data, name: str = "scenario.yaml") -> Path:
     return path
 
 
-def with_(base: dict, **changes) -> dict:
-    """A deep copy of ``base`` with dotted fields set (``agents.0.mission.goal``)."""
-    data = copy.deepcopy(base)
-    for dotted, value in changes.items():
-        node = data
-        parts = dotted.split("__")
-        for part in parts[:-1]:
-            node = node[int(part)] if part.isdigit() else node.setdefault(part, {})
-        node[int(parts[-1]) if parts[-1].isdigit() else parts[-1]] = value
-    return data
 
 
 def validate_cli(capsys, *files) -> tuple[int, list[str], str]:
