@@ -120,3 +120,32 @@ def test_weights_are_validated():
         RewardWeights(task="race")
     with pytest.raises(ValueError, match="reward.collision"):
         RewardWeights(collision=-1.0)
+
+
+@pytest.mark.parametrize("task", ["platoon", "drive"])
+def test_event_penalties_wrong_way_partial_and_full_off_road(task):
+    """Each road-conduct penalty alone, in both task rewards, on the step its event fires."""
+    env = DrivingParallelEnv(_single(), reward=TaskReward(_weights(task, partial_off_road=2.0)))
+    env.reset(seed=0)
+    row = env.sim.agent_row[0]
+    width = env.sim.road_map.lane_width[env.sim.table.lane[row]]
+    # Right lane of two: its centre is half a lane from the road's right edge. The car's centre goes
+    # 0.1 m inside that edge, so its right corners (half a car width further) are off the surface.
+    env.sim.table.y[row] -= 0.5 * width - 0.1
+    r = env.step({"agent_0": np.array([1.0, 0.0, 0.0])})[1]["agent_0"]
+    ev = env.sim.agent_events[0]
+    assert ev[Event.PARTIAL_OFF_ROAD] and not ev[Event.OFF_ROAD]
+    assert r == pytest.approx(-2.0)
+
+    env = DrivingParallelEnv(_single(), reward=TaskReward(_weights(task, off_road=3.0)))
+    env.reset(seed=0)
+    env.sim.table.y[env.sim.agent_row[0]] += 30.0
+    r = env.step({"agent_0": np.array([1.0, 0.0, 0.0])})[1]["agent_0"]
+    assert env.sim.agent_events[0, Event.OFF_ROAD] and r == pytest.approx(-3.0)
+
+    env = DrivingParallelEnv(_single(), reward=TaskReward(_weights(task, wrong_way=1.5)))
+    env.reset(seed=0)
+    assert env.step({"agent_0": np.array([1.0, 0.0, 0.0])})[1]["agent_0"] == 0.0
+    env.sim.table.heading[env.sim.agent_row[0]] += np.pi  # turned around in its lane
+    r = env.step({"agent_0": np.array([1.0, 0.0, 0.0])})[1]["agent_0"]
+    assert env.sim.agent_events[0, Event.WRONG_WAY] and r == pytest.approx(-1.5)
