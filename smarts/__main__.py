@@ -17,6 +17,9 @@ def build_parser() -> argparse.ArgumentParser:
     from smarts.scenario.cli import add_commands as add_scenario_commands
 
     add_scenario_commands(subparsers)
+    from smarts.viz.cli import add_commands as add_viz_commands
+
+    add_viz_commands(subparsers)
     return parser
 
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from smarts.viz.server import DEFAULT_HOST, DEFAULT_PORT
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 8765
 
 DESCRIPTION = """Serve the diagnostic viewer: recorded episodes under PATH (episode recordings and
 benchmark logs, e.g. runs/benchmark/adaptive/logs) and live envs (smarts.viz.WatchedEnv(env,

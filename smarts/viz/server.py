@@ -26,11 +26,10 @@ from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
+from smarts.viz.cli import DEFAULT_HOST, DEFAULT_PORT
 from smarts.viz.sources import EpisodeEntry, episode_json, find_episodes
 
 STATIC_DIR = Path(__file__).parent / "static"
-DEFAULT_HOST = "127.0.0.1"
-DEFAULT_PORT = 8765
 LIVE_HISTORY = 3000
 """Frames of the current live episode kept for pages that connect later (seek back)."""
 
