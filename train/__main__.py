@@ -4,6 +4,7 @@
     python -m train ppo --task platoon --lib sb3 --resume runs/train/platoon/last.pt
     python -m train eval --agent runs/train/platoon/final.pt --suite adaptive
     python -m train benchmark --agent zoo:keep-lane --agent zoo:random --suite collaborative
+    python -m train enjoy --agent zoo:keep-lane --scenario adaptive:a01_straight_free --video out.mp4 [--viz]
     add --ray-address auto|local|HOST:PORT to run episodes (benchmark, eval) or collectors (ppo) on Ray
 """
 
@@ -136,6 +137,10 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                           "either library")  # fmt: skip
     _ppo_options(ppo, argv)
     ppo.set_defaults(run=_ppo)
+
+    from train.enjoy import add_parser as add_enjoy
+
+    add_enjoy(sub)
     return parser
 
 
