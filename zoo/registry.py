@@ -35,6 +35,9 @@ ZOO: dict[str, tuple[str, str, str]] = {
     "platoon-rtp": (CHECKPOINT, "checkpoints/platoon-rtp.pt", "PPO following, RelativeTargetPose (cards/)"),
     "drive": (CHECKPOINT, "checkpoints/drive.pt", "PPO turning at intersections, RelativeTargetPose (cards/)"),
     "platoon-c": (CHECKPOINT, "checkpoints/platoon-c.pt", "PPO following, Continuous on the pybullet car (cards/)"),
+    "tf-rules": ("agents.planners.tf", "TFPlanner", "TF driving rules without the learned stop/move veto (cards/tf.md)"),
+    "vcr-ttc": ("agents.planners.vcr", "VCRPlanner", "VCR Bezier follower, speed from a time-to-collision rule (cards/vcr.md)"),
+    "aid-cv": ("agents.planners.aid", "AIDPlanner", "AID Frenet sampling planner, constant-velocity prediction (cards/aid.md)"),
 }
 """name -> (module, class, one-line description)."""
 
