@@ -26,6 +26,7 @@ __all__ = [
     "NetconvertError",
     "NoResolverError",
     "NoRouteError",
+    "ReplayError",
     "ScenarioError",
     "WorkerError",
 ]
@@ -36,6 +37,11 @@ class ScenarioError(ValueError):
 
     Also raised for invalid traffic and comms sections, and for traffic that does not fit its map.
     """
+
+
+class ReplayError(ValueError):
+    """A recorded dataset (NGSIM CSV, Argoverse 2 parquet or map JSON, Waymo TFRecord) that cannot
+    be read or replayed; the message names the file, the record or column, and what was expected."""
 
 
 class NetconvertError(RuntimeError):

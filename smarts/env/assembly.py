@@ -14,6 +14,7 @@ import numpy as np
 from smarts.core.errors import ScenarioError
 from smarts.core.events import NUM_EVENTS, event_from_name
 from smarts.core.missions import resolve_mission
+from smarts.core.provider import ProviderBase
 from smarts.core.spec import ScenarioSpec as PlainScenarioSpec
 from smarts.core.simulation import EventConfig, Simulation, check_seed
 from smarts.core.vehicle_table import Role, VehicleType
@@ -50,9 +51,12 @@ def build_simulation(
 ) -> Simulation:
     road_map = road_map or scenario_map(spec)
     limits = limits or ReachLimits()
+    replay = _replay_plan(spec)
+    taken = {t.agent_id: t for t in replay.take_overs} if replay is not None else {}
     missions = [
         resolve_mission(
-            road_map, agent.id, agent.mission, f"{spec.source}: agents[{i}].mission", spec.traffic
+            road_map, agent.id, _replay_mission(road_map, taken, agent, f"{spec.source}: replay.take_over.{agent.id}"),
+            f"{spec.source}: agents[{i}].mission", spec.traffic,
         )
         for i, agent in enumerate(spec.agents)
     ]
@@ -69,7 +73,7 @@ def build_simulation(
                 height=dims.height,
                 mass=dims.mass,
                 role=Role.SOCIAL_AGENT if agent.is_social else Role.AGENT,
-                take_over=agent.mission.start.take_over,
+                take_over=taken[agent.id].table_id if agent.id in taken else agent.mission.start.take_over,
                 controller=agent.controller,
             )
         )
@@ -84,6 +88,8 @@ def build_simulation(
     signals = SignalState(road_map) if road_map.tls_ids else None
     providers = [AgentProvider(vehicles, limits, spec.step_length, lane_relative)]
     providers += traffic_providers(spec, road_map, signals)
+    if replay is not None:
+        providers.insert(1, _replay_provider(spec, replay, road_map, providers, signals))
     sim = Simulation(
         road_map,
         missions,
@@ -96,6 +102,44 @@ def build_simulation(
     )
     sim.signals = signals
     return sim
+
+
+def _replay_plan(spec: ScenarioSpec):
+    """The scenario's replay section checked against its recording (None without one)."""
+    if spec.replay is None:
+        return None
+    from smarts.replay import plan_replay
+
+    return plan_replay(spec.replay, spec.base_dir, spec.source)
+
+
+def _replay_mission(road_map: RoadMap, taken: dict, agent, where: str):
+    """An agent's mission; one taking over a recorded vehicle starts in it and ends where it did."""
+    if agent.id not in taken:
+        return agent.mission
+    from smarts.replay import take_over_mission
+
+    return take_over_mission(road_map, taken[agent.id], where)
+
+
+def _replay_provider(spec: ScenarioSpec, replay, road_map: RoadMap, providers: list, signals):
+    """The replay provider, stepped right after the agents; reactive vehicles are handed to the
+    scenario's traffic engine, or to a built-in traffic model with no flows of its own."""
+    from smarts.replay import ReplayProvider
+
+    target = None
+    if spec.replay.reactive != "off":
+        target = next((p for p in providers[1:] if type(p).can_accept is not ProviderBase.can_accept), None)
+        if target is None:
+            from smarts.core.spec.traffic import TrafficSpec
+            from smarts.traffic.builtin import BuiltinTrafficProvider
+
+            target = BuiltinTrafficProvider(TrafficSpec(), road_map, spec.step_length, signals)
+            providers.append(target)
+    return ReplayProvider(
+        replay.recording, replay.start, replay.duration, reactive=spec.replay.reactive,
+        reactive_distance=spec.replay.reactive_distance, reactive_target=target,
+    )  # fmt: skip
 
 
 def traffic_providers(spec: ScenarioSpec, road_map: RoadMap, signals: SignalState | None) -> list:

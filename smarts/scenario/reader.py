@@ -55,7 +55,9 @@ from smarts.core.spec.traffic import (
     TripSpec,
     VehicleTypeSpec,
 )
+from smarts.core.spec.replay import REPLAY_MAP
 from smarts.scenario.builtin_maps import BUILTIN_MAPS
+from smarts.scenario.replay import ReplayFile
 from smarts.sensors.interface import InterfaceFile
 
 MAP_FILE_SUFFIXES = (".net.xml", ".xodr")
@@ -96,7 +98,7 @@ def read_scenario(
     """
     folder = None if base_dir is None else Path(base_dir)
     scenario = validate(ScenarioFile, data, source, ScenarioError)
-    if not scenario.map.startswith(BUILTIN_PREFIX):
+    if not scenario.map.startswith(BUILTIN_PREFIX) and scenario.map != REPLAY_MAP:
         path = resolve_map_file(scenario.map, folder)
         if not path.is_file():
             raise ScenarioError(f"{source}: map: map file {str(path)!r} does not exist")
@@ -156,8 +158,11 @@ def _map_name(value: str) -> str:
             hint = difflib.get_close_matches(name, BUILTIN_MAPS, n=1)
             suggestion = f" (did you mean {hint[0]!r}?)" if hint else ""
             raise ValueError(f"unknown built-in map {name!r}{suggestion}; known: {', '.join(sorted(BUILTIN_MAPS))}")
-    elif not value.endswith(MAP_FILE_SUFFIXES):
-        raise ValueError(f"expected 'builtin:<name>' or a path ending in {' or '.join(MAP_FILE_SUFFIXES)}")
+    elif value != REPLAY_MAP and not value.endswith(MAP_FILE_SUFFIXES):
+        raise ValueError(
+            f"expected 'builtin:<name>', {REPLAY_MAP!r} (a replay dataset's own map) or a path ending in "
+            f"{' or '.join(MAP_FILE_SUFFIXES)}"
+        )
     return value
 
 
@@ -347,7 +352,7 @@ class AgentFile(Schema):
         None, description="Zoo locator of the policy driving this social agent; null: a learning agent."
     )
     vehicle: VehicleFile = VehicleFile()
-    mission: MissionFile
+    mission: MissionFile | None = Field(None, description="Required unless replay.take_over names the agent.")
     interface: InterfaceFile | None = Field(None, description="Which sensors the agent has; null: the default.")
 
     @model_validator(mode="after")
@@ -359,10 +364,14 @@ class AgentFile(Schema):
             )])  # fmt: skip
         return self
 
-    def to_spec(self, index: int) -> AgentSpec:
+    def to_spec(self, index: int, replay_vehicle: str | None = None) -> AgentSpec:
+        if self.mission is None:  # takes over a recorded vehicle: the env builds its mission
+            mission = MissionSpec(start=StartSpec(take_over=replay_vehicle), goal=GoalSpec(endless=True))
+        else:
+            mission = self.mission.to_spec()
         return AgentSpec(
             id=self.id if self.id is not None else f"agent_{index}",
-            mission=self.mission.to_spec(),
+            mission=mission,
             action_space=self.action_space,
             controller=self.controller,
             vehicle=self.vehicle.to_spec(),
@@ -647,6 +656,7 @@ class ScenarioFile(Schema):
     reward: RewardFile = RewardFile()
     traffic: TrafficFile | None = Field(None, description="null: agents only.")
     comms: CommsFile | None = Field(None, description="V2V messaging; null: off.")
+    replay: ReplayFile | None = Field(None, description="Recorded traffic replayed from a dataset; null: none.")
 
     @property
     def agent_ids(self) -> list[str]:
@@ -665,6 +675,7 @@ class ScenarioFile(Schema):
             if agent_id in first:
                 problems.append((("agents", i, "id"), f"duplicate agent id {agent_id!r} (also agents[{first[agent_id]}])"))
             first.setdefault(agent_id, i)
+        problems += self._agents_and_replay(ids)
         problems += self._agents_and_traffic(first)
         if self.comms is not None:
             unknown = sorted(set(self.comms.agent_channels) - set(ids))
@@ -676,6 +687,31 @@ class ScenarioFile(Schema):
             raise field_errors(self, problems)
         return self
 
+    def _agents_and_replay(self, ids: list[str]) -> list[tuple[Any, str]]:
+        """Agents taking over recorded vehicles have no mission of their own; the others need one."""
+        taken = {} if self.replay is None else self.replay.take_over
+        problems: list[tuple[Any, str]] = []
+        for i, agent in enumerate(self.agents):
+            if ids[i] in taken and agent.mission is not None:
+                problems.append((("agents", i, "mission"), f"not allowed: replay.take_over gives agent {ids[i]!r} "
+                                 f"recorded vehicle {taken[ids[i]]!r}, whose track sets its start and goal"))  # fmt: skip
+            elif ids[i] not in taken and agent.mission is None:
+                problems.append((("agents", i, "mission"), "required field missing (or name the agent in replay.take_over)"))
+        for agent_id in taken:
+            if agent_id not in ids:
+                problems.append((("replay", "take_over", agent_id), f"unknown agent {agent_id!r}{_did_you_mean(agent_id, ids)}; "
+                                 f"the scenario's agents are {ids}"))  # fmt: skip
+        twice = [v for i, v in enumerate(taken.values()) if v in list(taken.values())[:i]]
+        for vehicle in dict.fromkeys(twice):
+            problems.append((("replay", "take_over"), f"recorded vehicle {vehicle!r} is taken over by more than one agent"))
+        if self.map == REPLAY_MAP and (self.replay is None or self.replay.format == "ngsim"):
+            problems.append(("map", f"{REPLAY_MAP!r} is the map of an argoverse2 or waymo replay; "
+                             + ("the scenario has no replay section" if self.replay is None else
+                                "NGSIM has no map of its own: name its .net.xml")))  # fmt: skip
+        if self.map == REPLAY_MAP and self.traffic is not None and self.traffic.engine == "sumo":
+            problems.append((("traffic", "engine"), f"sumo needs a SUMO network; map {REPLAY_MAP!r} has none (use builtin)"))
+        return problems
+
     def _agents_and_traffic(self, agent_index: dict[str, int]) -> list[tuple[Any, str]]:
         """Checks that span both sections: taken-over trips, hand-back, leads, clashing vehicle ids."""
         traffic = self.traffic
@@ -684,6 +720,8 @@ class ScenarioFile(Schema):
         taken_by: dict[str, int] = {}
         for i, agent in enumerate(self.agents):
             mission = agent.mission
+            if mission is None:  # takes over a recorded vehicle (checked with the replay)
+                continue
             trip_id = mission.start.take_over
             where = ("agents", i, "mission", "start", "take_over")
             if trip_id is None:
@@ -705,6 +743,8 @@ class ScenarioFile(Schema):
                                  "the scenario has no traffic section"))  # fmt: skip
         ids = self.agent_ids
         for i, agent in enumerate(self.agents):
+            if agent.mission is None:
+                continue
             lead = agent.mission.follow
             where = ("agents", i, "mission", "follow")
             if lead is None:
@@ -726,7 +766,10 @@ class ScenarioFile(Schema):
         return spec_class(
             name=self.name,
             map=self.map,
-            agents=[agent.to_spec(i) for i, agent in enumerate(self.agents)],
+            agents=[
+                agent.to_spec(i, None if self.replay is None else self.replay.take_over.get(agent_id))
+                for i, (agent, agent_id) in enumerate(zip(self.agents, self.agent_ids))
+            ],
             step_length=self.step_length,
             episode_steps=self.episode_steps,
             seed=self.seed,
@@ -735,6 +778,7 @@ class ScenarioFile(Schema):
             reward=self.reward.to_spec(),
             traffic=None if self.traffic is None else self.traffic.to_spec(),
             comms=None if self.comms is None else self.comms.to_config(),
+            replay=None if self.replay is None else self.replay.to_spec(),
             source=source,
             base_dir=base_dir,
         )

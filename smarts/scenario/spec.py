@@ -34,6 +34,7 @@ from smarts.core.spec.scenario import (
     VehicleDimensions,
     VehicleSpec,
 )
+from smarts.core.spec.replay import REPLAY_MAP
 from smarts.core.spec.traffic import TRAFFIC_VEHICLE_BASES
 from smarts.scenario.builtin_maps import builtin_map_path
 from smarts.scenario.map_check import check_scenario_map
@@ -106,6 +107,10 @@ class ScenarioSpec(_core.ScenarioSpec):
         """The map file to load: a built-in map is compiled (and cached) by netconvert first."""
         if self.builtin_map is not None:
             return builtin_map_path(self.builtin_map, cache_dir)
+        if self.map == REPLAY_MAP and self.replay is not None:  # the dataset's map: its recording
+            from smarts.replay.load import replay_path
+
+            return replay_path(self.replay, self.base_dir)
         return resolve_map_file(self.map, self.base_dir)
 
     def check_map(self, road_map: Any, limits: Any = None) -> None:

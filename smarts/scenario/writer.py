@@ -18,6 +18,19 @@ if TYPE_CHECKING:
 
 def scenario_to_dict(spec: ScenarioSpec) -> dict[str, Any]:
     """Plain data (lists, dicts, scalars) that ``read_scenario`` turns back into an equal spec."""
+    data = _scenario_dict(spec)
+    if spec.replay is not None:
+        from smarts.scenario.replay import replay_to_dict
+
+        data["replay"] = replay_to_dict(spec.replay)
+        taken = spec.replay.take_over
+        for agent in data["agents"]:
+            if agent["id"] in taken:  # its mission comes from the recorded vehicle's track
+                del agent["mission"]
+    return data
+
+
+def _scenario_dict(spec: ScenarioSpec) -> dict[str, Any]:
     return {
         "name": spec.name,
         "map": spec.map,

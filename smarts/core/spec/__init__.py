@@ -4,6 +4,7 @@
 the traffic section. Reading and writing YAML lives in ``smarts.scenario``.
 """
 
+from smarts.core.spec.replay import COORDINATES, REACTIVE_MODES, REPLAY_FORMATS, REPLAY_MAP, ReplaySpec
 from smarts.core.spec.scenario import (
     ACTION_SPACES,
     BUILTIN_PREFIX,
@@ -40,6 +41,11 @@ from smarts.core.spec.traffic import (
 
 __all__ = [
     "ACTION_SPACES",
+    "COORDINATES",
+    "REACTIVE_MODES",
+    "REPLAY_FORMATS",
+    "REPLAY_MAP",
+    "ReplaySpec",
     "BUILTIN_PREFIX",
     "CONTROLLERS",
     "DEFAULT_TERMINATE_ON",

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from smarts.core.spec.replay import ReplaySpec
 from smarts.core.spec.traffic import TrafficSpec
 from smarts.core.vehicle_table import VEHICLE_DIMENSIONS, VehicleType
 
@@ -185,6 +186,8 @@ class ScenarioSpec:
     comms: CommsConfig | None = None
     """V2V messaging between agents and connected traffic (``smarts.comms``); None: comms off, the
     action and observation spaces have no message parts."""
+    replay: ReplaySpec | None = None
+    """Recorded traffic replayed from a dataset (``smarts.replay``); None: no replay."""
     source: str = field(default="<dict>", compare=False, repr=False)
     """Where the spec was read from; prefixes every error message."""
     base_dir: Path | None = field(default=None, compare=False, repr=False)
