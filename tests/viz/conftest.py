@@ -1,0 +1,57 @@
+"""Episodes for the viewer tests: a recording of a signalised intersection with built-in traffic
+(cut at 150 steps) and a benchmark log written by the benchmark runner."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+SCENARIO = "intersection_4way_signal_traffic"  # signals and built-in traffic
+STEPS = 150
+
+
+def drive(env, steps: int | None = None) -> int:
+    """The README's policy: 40% of the way to the waypoint 2 m ahead; returns the steps taken."""
+    obs, _ = env.reset(seed=0)
+    n = 0
+    while env.agents and (steps is None or n < steps):
+        obs, *_ = env.step({a: 0.4 * obs[a]["waypoints"][0, 1] for a in env.agents})
+        n += 1
+    return n
+
+
+@pytest.fixture(scope="session")
+def recorded(tmp_path_factory) -> dict:
+    """One recorded episode with built-in traffic, and what the simulator
+    held at every step (vehicle id -> x, y, speed), read by a listener of its own."""
+    from smarts.env import DrivingParallelEnv
+    from smarts.viz.watch import WatchedEnv
+
+    folder = tmp_path_factory.mktemp("recordings")
+    env = WatchedEnv(DrivingParallelEnv(SCENARIO), record=folder)
+    seen = {}
+    env.env.add_step_listener(lambda sim: seen.setdefault(
+        int(round(sim.time / sim.dt)),
+        {sim.table.ids[r]: (float(sim.table.x[r]), float(sim.table.y[r]), float(sim.table.speed[r]))
+         for r in sim.table.alive_rows},
+    ))  # fmt: skip
+    steps = drive(env, STEPS)
+    env.close()
+    (path,) = env.recordings
+    return {"path": Path(path), "folder": folder, "steps": steps, "truth": seen, "agents": list(env.possible_agents)}
+
+
+@pytest.fixture(scope="session")
+def benchmark_log(tmp_path_factory) -> Path:
+    """One adaptive-suite episode of zoo:keep-lane, written by the benchmark runner."""
+    from smarts.benchmark.runner import plan_jobs, run_jobs
+    from smarts.benchmark.suites import load_suite
+
+    out = tmp_path_factory.mktemp("benchmark") / "adaptive"
+    suite = load_suite("adaptive")
+    suite.scenarios = suite.scenarios[:1]
+    jobs = plan_jobs(["zoo:keep-lane"], suite, 1, out, references=False)
+    run_jobs(jobs, workers=1, progress=False)
+    (log,) = sorted((out / "logs").rglob("*.npz"))
+    return log
