@@ -1,0 +1,143 @@
+"""The batched backend: B episodes as one simulation give, per episode, what a single env gives."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+from torchrl.envs.utils import check_env_specs
+
+from smarts.benchmark.suites import load_suite
+from smarts.core.errors import ActionError
+from smarts.env.batched import BatchedDriving, BatchedSetupError
+from smarts.env.batched.torchrl_env import BatchedTorchRLEnv
+from smarts.env.parallel_env import DrivingParallelEnv
+from smarts.env.task_rewards import RewardWeights, reward_factory
+from smarts.env.torchrl_env import SmartsBatchedEnv
+from smarts.sensors.interface import AgentInterface
+from tests.builders import agent, make_spec
+
+PLATOON = AgentInterface(lead=True, ahead=True)
+
+
+def _adaptive(*names: str) -> list:
+    """Adaptive suite scenarios with lane-relative commands on RelativeTargetPose (as training)."""
+    suite = {s.name: s.spec for s in load_suite("adaptive").scenarios}
+    out = []
+    for name in names:
+        spec = suite[name]
+        agents = [dataclasses.replace(a, action_space="relative_target_pose", controller="lane_relative") for a in spec.agents]
+        out.append(dataclasses.replace(spec, agents=agents))
+    return out
+
+
+def _platoon_reward():
+    return reward_factory(RewardWeights(task="platoon"))
+
+
+def test_episode_with_seed_s_follows_the_single_env_with_seed_s():
+    """Four episodes of a two-agent scenario with traffic and a signalled one, each against a
+    single env reset with the same seed and given the same commands: observations, rewards and
+    end flags equal bit for bit over whole episodes, through the batch's auto-resets."""
+    specs = _adaptive("a02_straight_two_followers_low", "a09_lead_turns_right_at_signal_medium") * 2
+    batch = BatchedDriving(specs, observation=PLATOON, reward_factory=_platoon_reward())
+    batch.set_seed(7)
+    first = batch.reset()
+    singles = [DrivingParallelEnv(s, observation=PLATOON, reward=_platoon_reward()()) for s in specs]
+    episode = [0] * len(specs)
+    single_obs = [env.reset(seed=7 + i * 100_003)[0] for i, env in enumerate(singles)]
+    slot = {key: j for j, key in enumerate(batch.slots)}
+
+    def check(obs_batch, obs_single, copy):
+        for a, o in obs_single.items():
+            for key, value in o.items():
+                np.testing.assert_array_equal(value, obs_batch[key][slot[(copy, a)]], err_msg=f"copy {copy} {a} {key}")
+
+    for i in range(len(specs)):
+        check(first, single_obs[i], i)
+    rng = np.random.default_rng(3)
+    resets = compared = 0
+    for _ in range(420):
+        commands = rng.uniform(-1.0, 1.0, size=(batch.num_slots, 2))
+        res = batch.step(commands)
+        for i, env in enumerate(singles):
+            acting = {a: commands[slot[(i, a)]] for a in env.agents}
+            obs, rew, term, trunc, _ = env.step(acting)
+            check(res.obs, obs, i)
+            for a in acting:
+                j = slot[(i, a)]
+                assert res.acted[j]
+                assert rew[a] == res.reward[j].item() or abs(rew[a] - res.reward[j]) < 1e-5 * max(1.0, abs(rew[a]))
+                assert (term[a], trunc[a]) == (res.terminated[j], res.truncated[j])
+                compared += 1
+            if not env.agents:
+                episode[i] += 1
+                resets += 1
+                first_obs, _ = env.reset(seed=7 + i * 100_003 + episode[i])
+                assert all(res.restarted[slot[(i, a)]] for a in env.possible_agents)
+                check(res.first, first_obs, i)
+    assert resets >= 4 and compared > 1000
+
+
+def test_torchrl_env_gives_what_the_per_env_batched_env_gives():
+    """Same seeds and actions: BatchedTorchRLEnv and SmartsBatchedEnv produce equal tensors."""
+    specs = _adaptive("a01_straight_free", "a02_straight_two_followers_low", "a08_lead_turns_left_at_junction")
+    kwargs = dict(observation=PLATOON, reward_factory=_platoon_reward())
+    fast, slow = BatchedTorchRLEnv(specs, **kwargs), SmartsBatchedEnv(specs, **kwargs)
+    check_env_specs(fast)
+    assert fast.slots == slow.slots and fast.batch_size == slow.batch_size
+    for env in (fast, slow):
+        env.set_seed(11)
+    td_fast, td_slow = fast.reset(), slow.reset()
+    gen = torch.Generator().manual_seed(0)
+    for t in range(300):
+        action = torch.rand((fast.batch_size[0], 2), generator=gen) * 2 - 1
+        td_fast = fast.step(td_fast.set("action", action.clone()))
+        td_slow = slow.step(td_slow.set("action", action.clone()))
+        for key in td_slow["next"].keys(include_nested=True, leaves_only=True):
+            assert torch.equal(td_fast["next", key], td_slow["next", key]) or torch.allclose(
+                td_fast["next", key].float(), td_slow["next", key].float(), atol=1e-5
+            ), (t, key)
+        td_fast, td_slow = fast.step_mdp(td_fast), slow.step_mdp(td_slow)
+        done = td_slow["done"].clone()
+        if done.any():
+            td_fast = fast.reset(td_fast.set("_reset", done.clone()))
+            td_slow = slow.reset(td_slow.set("_reset", done.clone()))
+            for key in ("valid", "agent_steps"):
+                assert torch.equal(td_fast[key], td_slow[key])
+
+
+def test_episodes_of_a_batch_do_not_see_each_other():
+    """Two episodes start the agent at the same place: a single episode neither collides nor
+    has neighbours, so in the batch neither do they."""
+    spec = make_spec([agent(offset=10.0, speed=5.0)], episode_steps=30)
+    batch = BatchedDriving([spec, spec, spec])
+    obs = batch.reset()
+    assert obs["neighbour_mask"].sum() == 0
+    for _ in range(10):
+        res = batch.step(np.tile([[1.0, 0.0, 0.0]], (3, 1)))
+        assert not res.obs["events"][:, 0].any()  # no collision
+        assert res.obs["neighbour_mask"].sum() == 0
+
+
+def test_unsupported_scenarios_are_refused_naming_the_field():
+    suite = {s.name: s.spec for s in load_suite("adaptive").scenarios}
+    sumo = dataclasses.replace(suite["a01_straight_free"], traffic=dataclasses.replace(suite["a01_straight_free"].traffic, engine="sumo"))
+    with pytest.raises(BatchedSetupError, match=r"traffic\.engine: sumo .*per-env backend"):
+        BatchedDriving([sumo])
+    cont = dataclasses.replace(sumo, traffic=None, agents=[dataclasses.replace(a, action_space="continuous") for a in sumo.agents])
+    with pytest.raises(BatchedSetupError, match=r"agents\[0\]\.action_space: continuous"):
+        BatchedDriving([cont])
+
+
+def test_bad_actions_raise_naming_the_agents_and_change_nothing():
+    spec = make_spec([agent(offset=10.0, speed=5.0)], episode_steps=30)
+    batch = BatchedDriving([spec, spec])
+    batch.reset()
+    x = batch.groups[0].sim.table.x.copy()
+    actions = np.tile([[1.0, 0.0, 0.0]], (2, 1))
+    actions[1, 0] = np.nan
+    with pytest.raises(ActionError, match="1/agent_0"):
+        batch.step(actions)
+    np.testing.assert_array_equal(batch.groups[0].sim.table.x, x)
+    assert batch.groups[0].sim.episode_step.tolist() == [0, 0]
