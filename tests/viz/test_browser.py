@@ -1,0 +1,219 @@
+"""The viewer page in a real headless browser (Debian's chromium through selenium): it loads a
+recorded episode and draws its vehicles, clicking an agent or a lane opens its panel, seeking
+moves time, a live env streams into it, a benchmark log shows its metrics; a screenshot is taken.
+
+Run with ``python -m pytest -m browser tests/viz`` (the default test run leaves these out;
+.ci/run installs chromium and runs them). A missing browser fails, it does not skip.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from smarts.viz.recording import read_recording
+from smarts.viz.server import BackgroundServer
+
+pytestmark = pytest.mark.browser
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMEDRIVER = "/usr/bin/chromedriver"
+FLAGS = ("--headless --no-sandbox --disable-gpu --disable-quic --no-first-run --disable-background-networking "
+         "--disable-component-update --disable-sync --disable-dev-shm-usage --window-size=1280,800").split()  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    for path in (CHROMIUM, CHROMEDRIVER):
+        assert Path(path).is_file(), f"{path} is missing: apt-get install -y chromium chromium-driver"
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for flag in FLAGS:
+        options.add_argument(flag)
+    profile = tempfile.mkdtemp(prefix="smarts-viz-chromium-")
+    options.add_argument(f"--user-data-dir={profile}")
+    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
+    driver.set_page_load_timeout(60)
+    yield driver
+    driver.quit()
+    shutil.rmtree(profile, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def served(recorded, benchmark_log, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("page")
+    (folder / "a.rec.npz").write_bytes(recorded["path"].read_bytes())
+    logs = folder / "adaptive" / "logs" / "zoo_keep-lane" / "a01_straight_free"
+    logs.mkdir(parents=True)
+    (logs / "episode_000.npz").write_bytes(benchmark_log.read_bytes())
+    with BackgroundServer(folder) as srv:
+        yield srv
+
+
+def wait_for(driver, script: str, timeout: float = 30.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = driver.execute_script(script)
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for: {script}")
+
+
+def open_episode(driver, url: str, episode: str) -> None:
+    driver.get(f"{url}/?episode={episode}")
+    wait_for(driver, "return window.viz.ep && window.viz.ep.frames.length > 0")
+
+
+def click_canvas_at(driver, x: float, y: float) -> None:
+    """A real mouse click at canvas CSS pixel (x, y)."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    canvas = driver.find_element("id", "canvas")
+    rect = canvas.rect
+    ActionChains(driver).move_to_element_with_offset(canvas, x - rect["width"] / 2, y - rect["height"] / 2).click().perform()
+
+
+def body_point(driver, vehicle: str) -> list[float]:
+    """Canvas CSS pixel inside a vehicle's box, off its heading mark (a quarter length behind its
+    centre)."""
+    return driver.execute_script(
+        "const v = window.viz, f = v.ep.frames[v.cur], i = f.ids.indexOf(arguments[0]);"
+        "const d = -f.length[i] / 4;"
+        "return v.screenOfPoint(f.x[i] + d * Math.cos(f.h[i]), f.y[i] + d * Math.sin(f.h[i]));", vehicle)  # fmt: skip
+
+
+def pixel(driver, x: float, y: float) -> list[int]:
+    return driver.execute_script(
+        "const c = document.getElementById('canvas'); const s = c.width / c.clientWidth;"
+        "return Array.from(c.getContext('2d').getImageData(arguments[0] * s, arguments[1] * s, 1, 1).data);", x, y)  # fmt: skip
+
+
+def field(driver, table: str, name: str) -> str:
+    return driver.find_element("css selector", f'#{table} td[data-field="{name}"]').text
+
+
+def test_recorded_episode_draws_vehicles_and_agent_panel(browser, served, recorded):
+    rec = read_recording(recorded["path"])
+    open_episode(browser, served.url, "0")
+    assert wait_for(browser, "return document.getElementById('status').textContent").startswith("recording")
+    step = 40
+    browser.execute_script("window.viz.goTo(arguments[0])", step)
+    frame = rec.frame(step)
+    roles = frame["vehicle_role"]
+    traffic = frame["vehicle_ids"][int(np.flatnonzero(roles == 3)[0])]
+    x, y = body_point(browser, traffic)
+    time.sleep(0.2)
+    assert pixel(browser, x, y)[:3] == [70, 130, 230]  # a traffic vehicle's colour where it is
+    agent = rec.agent_ids[0]
+    x, y = body_point(browser, agent)
+    assert pixel(browser, x, y)[:3] == [230, 60, 50]
+    click_canvas_at(browser, x, y)
+    wait_for(browser, "return !document.getElementById('agent-panel').hidden")
+    assert browser.find_element("id", "agent-id").text == agent
+    speed = float(frame["vehicle_state"][frame["vehicle_ids"].index(agent), 3])
+    assert field(browser, "agent-table", "speed") == f"{speed:.2f} m/s"
+    assert field(browser, "agent-table", "reward") != "–" and field(browser, "agent-table", "action") != "–"
+    assert field(browser, "agent-table", "lane").startswith(("south_in", ":center"))
+
+
+def test_click_lane_shows_its_details(browser, served, recorded):
+    rec = read_recording(recorded["path"])
+    open_episode(browser, served.url, "0")
+    lanes = rec.scene["lanes"]
+    frame = rec.frame(0)
+    xy = frame["vehicle_state"][:, :2]
+    for k, lane in enumerate(lanes):  # a road lane with no vehicle near its middle
+        mid = np.asarray(lane["points"])[len(lane["points"]) // 2] if len(lane["points"]) > 2 else np.mean(lane["points"], 0)
+        if not lane["internal"] and lane["length"] > 30 and (not len(xy) or np.hypot(*(xy - mid).T).min() > 8):
+            break
+    x, y = browser.execute_script("return window.viz.screenOfPoint(arguments[0], arguments[1])", *mid.tolist())
+    click_canvas_at(browser, x, y)
+    wait_for(browser, "return !document.getElementById('lane-panel').hidden")
+    assert browser.find_element("id", "lane-id").text == lane["id"]
+    assert field(browser, "lane-table", "road") == lane["road"]
+    assert field(browser, "lane-table", "width") == f"{lane['width']:.2f} m"
+    successors = ", ".join(lanes[i]["id"] for i in lane["successors"]) or "none"
+    assert field(browser, "lane-table", "successors") == successors
+    assert browser.execute_script("return window.viz.selectedLane") == k
+
+
+def test_seek_and_step_move_time(browser, served, recorded):
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    open_episode(browser, served.url, "0")
+    assert browser.execute_script("return window.viz.cur") == 0
+    seek = browser.find_element("id", "seek")
+    ActionChains(browser).move_to_element_with_offset(seek, seek.rect["width"] * 0.25, 0).click().perform()
+    cur = wait_for(browser, "return window.viz.cur")
+    assert cur > recorded["steps"] * 0.6
+    shown = browser.find_element("id", "time").text
+    assert shown == f"t = {cur * 0.1:.1f} s · step {cur}"
+    browser.find_element("id", "step-back").click()
+    assert browser.execute_script("return window.viz.cur") == cur - 1
+    browser.find_element("id", "play").click()
+    time.sleep(1.0)
+    browser.find_element("id", "play").click()
+    assert browser.execute_script("return window.viz.cur") > cur
+
+
+def test_benchmark_log_shows_metrics(browser, served):
+    open_episode(browser, served.url, "1")
+    assert "S_bench" in browser.find_element("id", "episode-table").text
+    agent = browser.execute_script("return window.viz.ep.meta.agent_ids[0]")
+    browser.execute_script("window.viz.goTo(20)")
+    x, y = browser.execute_script("return window.viz.screenOf(arguments[0])", agent)
+    click_canvas_at(browser, x, y)
+    wait_for(browser, "return !document.getElementById('agent-panel').hidden")
+    assert "Benchmark costs" in browser.find_element("id", "agent-metrics").text
+    assert float(field(browser, "agent-table", "speed_limit")) > 0
+
+
+def test_live_env_streams_into_the_page(browser, tmp_path):
+    from smarts.env import DrivingParallelEnv
+    from smarts.viz.watch import WatchedEnv
+
+    with BackgroundServer() as srv:
+        env = WatchedEnv(DrivingParallelEnv("intersection_4way_signal_right"), live=srv.url)
+        assert env.publisher.connected.wait(30)
+        obs, _ = env.reset(seed=0)
+        browser.get(f"{srv.url}/?episode=live")
+        wait_for(browser, "return window.viz.ep && window.viz.ep.kind === 'live'")
+        deadline = time.monotonic() + 30
+        while not env.publisher.watching and time.monotonic() < deadline:
+            time.sleep(0.02)
+        for _ in range(30):
+            obs, *_ = env.step({a: 0.4 * obs[a]["waypoints"][0, 1] for a in env.agents})
+        frames = wait_for(browser, "return window.viz.ep.frames.length >= 30 && window.viz.ep.frames.length")
+        assert frames == 30
+        x, y = body_point(browser, "agent_0")
+        time.sleep(0.2)
+        assert pixel(browser, x, y)[:3] == [230, 60, 50]
+        row = env.sim.table.row_of["agent_0"]
+        last = browser.execute_script("const f = window.viz.ep.frames.at(-1); return [f.step, f.x[f.ids.indexOf('agent_0')]]")
+        assert last[0] == 30 and abs(last[1] - env.sim.table.x[row]) < 0.01
+        env.close()
+
+
+def test_screenshot(browser, served, tmp_path):
+    open_episode(browser, served.url, "0")
+    browser.execute_script("window.viz.goTo(60)")
+    agent = browser.execute_script("return window.viz.ep.meta.agent_ids[0]")
+    x, y = browser.execute_script("return window.viz.screenOf(arguments[0])", agent)
+    click_canvas_at(browser, x, y)
+    wait_for(browser, "return !document.getElementById('agent-panel').hidden")
+    out = Path(os.environ.get("SMARTS_VIZ_SCREENSHOT", tmp_path / "viz.png"))
+    assert browser.save_screenshot(str(out))
+    from PIL import Image
+
+    with Image.open(out) as image:
+        assert image.size[0] >= 1000 and np.asarray(image.convert("RGB")).std() > 10
