@@ -20,6 +20,9 @@ def build_parser() -> argparse.ArgumentParser:
     from smarts.viz.cli import add_commands as add_viz_commands
 
     add_viz_commands(subparsers)
+    from smarts.replay.cli import add_commands as add_replay_commands
+
+    add_replay_commands(subparsers)
     return parser
 
 

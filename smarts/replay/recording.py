@@ -13,11 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from smarts.core.errors import ReplayError
-
-
-def wrap_angle(a: np.ndarray) -> np.ndarray:
-    """Angles wrapped to [-pi, pi)."""
-    return (a + np.pi) % (2 * np.pi) - np.pi
+from smarts.core.geometry import wrap_angle
 
 
 @dataclass

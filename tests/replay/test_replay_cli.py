@@ -1,0 +1,61 @@
+"""``smarts replay info`` and ``smarts replay show`` through the real command line."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+from PIL import Image
+
+from smarts.__main__ import main
+from smarts.scenario.builtin_maps import builtin_map_path
+from tests.replay.files import three_vehicles, write_ngsim
+
+
+def test_info_json_reports_vehicles_duration_frames_and_extent(tmp_path, capsys):
+    path = write_ngsim(tmp_path / "traj.csv", three_vehicles())
+    assert main(["replay", "info", str(path), "--format", "ngsim", "--swap-xy", "--flip-y", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["vehicles"] == 3 and info["frames"] == 90 and abs(info["duration_s"] - 8.9) < 1e-9
+    assert info["max_at_once"] == 3 and info["types"] == {"passenger": 2, "truck": 1}
+    e = info["extent"]
+    assert abs(e["xmin"] - 10.0) < 0.01 and abs(e["xmax"] - 115.2) < 0.01 and abs(e["ymin"] + 4.8) < 0.01
+
+
+def test_info_table_and_errors_through_the_installed_command(tmp_path):
+    path = write_ngsim(tmp_path / "traj.csv", three_vehicles())
+    done = subprocess.run([sys.executable, "-m", "smarts", "replay", "info", str(path), "--format", "ngsim"],
+                          capture_output=True, text=True, check=False)  # fmt: skip
+    assert done.returncode == 0 and "vehicles" in done.stdout and "8.9 s" in done.stdout
+    (tmp_path / "bad.csv").write_text("Vehicle_ID,Frame_ID\n1,2\n")
+    done = subprocess.run([sys.executable, "-m", "smarts", "replay", "info", str(tmp_path / "bad.csv"), "--format",
+                           "ngsim"], capture_output=True, text=True, check=False)  # fmt: skip
+    assert done.returncode == 1 and "bad.csv" in done.stderr and "Local_X" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def test_show_draws_the_vehicles_where_they_are(tmp_path, capsys):
+    path = write_ngsim(tmp_path / "traj.csv", three_vehicles())
+    out = tmp_path / "frame.png"
+    net = builtin_map_path("straight_2lane")
+    args = ["replay", "show", str(path), "--format", "ngsim", "--swap-xy", "--flip-y", "--time", "3.5",
+            "--map", str(net), "--out", str(out), "--width", "620"]  # fmt: skip
+    assert main(args) == 0
+    image = np.asarray(Image.open(out).convert("RGB")).astype(int)
+    # the canvas spans the map (x -1.6 .. 301.6 m) with 5 m margins in 620 pixels
+    blue = (np.abs(image - [80, 170, 255]).sum(axis=2) < 30)
+    cols = np.flatnonzero(blue.any(axis=0))
+    xs = cols / (620 / 313.2) - 6.6
+    # at 3.5 s: vehicle 1 at 55 m, vehicle 2 (12 m truck) at 40 m, vehicle 3 at 104 m
+    for centre, length in ((55.0, 4.5), (40.0, 12.0), (104.0, 4.5)):
+        inside = xs[(xs > centre - length / 2 - 1) & (xs < centre + length / 2 + 1)]
+        assert inside.size >= 2 * length - 3, centre
+    assert main(["replay", "show", str(path), "--format", "ngsim", "--out", str(tmp_path / "v.gif"), "--fps", "5"]) == 0
+    gif = Image.open(tmp_path / "v.gif")
+    assert gif.n_frames == 45  # 8.9 s at 5 frames per second
+    assert main(["replay", "show", str(path), "--format", "ngsim", "--out", str(tmp_path / "v.mp4")]) == 0
+    assert (tmp_path / "v.mp4").stat().st_size > 1000
+    assert main(["replay", "show", str(path), "--format", "ngsim", "--out", str(tmp_path / "v.txt")]) == 1
+    assert "expected a .png image" in capsys.readouterr().err
