@@ -10,6 +10,9 @@ The sensor case (``--sensors``) puts 10 agents with every sensor on (occlusion, 
 layers plus RGB, 64-ray lidar, extended neighbours) and V2V messaging (``SENSOR_COMMS``: every agent
 sends 8 floats a step, half the traffic broadcasts its state) among 50 built-in traffic vehicles on
 the same highway, and splits the observation time into its sensors and the V2V exchange.
+
+The replay cases (``--replay``) replay 1/10/20/50 recorded NGSIM vehicles on the same highway, and 50
+with an agent taking one of them over (``smarts.diagnostic.replay_step``).
 """
 
 from __future__ import annotations
@@ -222,6 +225,28 @@ def _builtin_case(n: int, steps: int) -> dict:
 TRAFFIC_BENCHMARKS = {"sumo": _sumo_case, "builtin": _builtin_case}
 
 
+def _replay_rows(cases: list[tuple[int, bool]], steps: int, warmup: int, console) -> list[dict]:
+    """Time dataset replay (``smarts.diagnostic.replay_step``) and print its table."""
+    from rich.progress import track
+    from rich.table import Table
+
+    from smarts.diagnostic.replay_step import replay_step_benchmark
+
+    rows = [replay_step_benchmark(n, steps, warmup, take_over) for n, take_over in
+            track(cases, description="timing replay", console=console)]  # fmt: skip
+    table = Table(title=f"NGSIM replay, {steps} timed steps per case (ms per step)")
+    for col in ("replayed", "agent", "whole step median", "whole step mean", "whole step p90", "replay provider median"):
+        table.add_column(col, justify="right", no_wrap=True)
+    for r in rows:
+        table.add_row(
+            f"{r['replayed_mean']:.0f}", "takes one over" if r["take_over"] else "stands aside",
+            f"{r['sim_step_ms_median']:.3f}", f"{r['sim_step_ms_mean']:.3f}", f"{r['sim_step_ms_p90']:.3f}",
+            f"{r['provider_ms_median']:.3f}",
+        )  # fmt: skip
+    console.print(table)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m smarts.diagnostic", description=__doc__.splitlines()[0])
     parser.add_argument("--agents", default="1,10,20,50", help="comma-separated agent counts (default 1,10,20,50)")
@@ -234,6 +259,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--sensors", default="10:50",
         help="all-sensors case as AGENTS:VEHICLES (default 10:50, built-in traffic); 'none' to skip",
+    )
+    parser.add_argument(
+        "--replay", default="1,10,20,50,50+",
+        help="replayed NGSIM vehicle counts; N+ adds an agent taking one over (default 1,10,20,50,50+; 'none' to skip)",
     )
     parser.add_argument("--out", type=Path, default=Path("reports/diagnostic.json"), help="JSON output file")
     args = parser.parse_args(argv)
@@ -311,6 +340,13 @@ def main(argv: list[str] | None = None) -> int:
             )
         console.print(stable)
 
+    replay_cases = []
+    for item in (c.strip() for c in args.replay.split(",") if c.strip() and args.replay != "none"):
+        if not item.rstrip("+").isdigit() or int(item.rstrip("+")) < 1:
+            parser.error(f"--replay: expected counts such as 1,10,50,50+ or none, got {args.replay!r}")
+        replay_cases.append((int(item.rstrip("+")), item.endswith("+")))
+    replay_rows = _replay_rows(replay_cases, args.steps, args.warmup, console) if replay_cases else []
+
     traffic_rows = []
     if engines:
         cases = [(e, n) for e in engines for n in vehicle_counts]
@@ -332,6 +368,7 @@ def main(argv: list[str] | None = None) -> int:
         "cases": rows,
         "sensor_cases": sensor_rows,
         "traffic_cases": traffic_rows,
+        "replay_cases": replay_rows,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(report, indent=2))
