@@ -283,6 +283,30 @@ def test_the_ppo_settings_reach_torchrl_objects():
     assert float(loss.critic_coeff) == pytest.approx(0.7) and optimizer.param_groups[0]["lr"] == 3e-4
 
 
+def test_the_ppo_settings_reach_the_sb3_model():
+    from train.config import load_config
+    from train.sb3_ppo import build_model, make_vec_env
+
+    cfg = load_config("platoon", overrides={"envs": 2, "scenarios": "adaptive:a01_straight_free", "lib": "sb3",
+                                            "gamma": 0.9, "gae_lambda": 0.8, "clip_epsilon": 0.3,
+                                            "entropy_coeff": 0.02, "critic_coeff": 0.7, "lr": 3e-4, "epochs": 3,
+                                            "frames_per_batch": 256, "minibatch_size": 32, "target_kl": 0.03,
+                                            "max_grad_norm": 0.4, "hidden": [32, 16], "init_log_std": [-1.0, -0.3]})  # fmt: skip
+    vec = make_vec_env(cfg)
+    try:
+        model = build_model(cfg, vec)
+    finally:
+        vec.close()
+    assert (model.gamma, model.gae_lambda, model.clip_range(1.0), model.ent_coef, model.vf_coef) == pytest.approx(
+        (0.9, 0.8, 0.3, 0.02, 0.7)
+    )
+    assert (model.n_epochs, model.batch_size, model.n_steps * vec.num_envs) == (3, 32, 256)
+    assert model.target_kl == pytest.approx(0.03) and model.max_grad_norm == pytest.approx(0.4)
+    assert model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(3e-4)
+    assert model.policy.net_arch == [32, 16]
+    assert model.policy.log_std.tolist() == pytest.approx([-1.0, -0.3])
+
+
 def test_epochs_and_minibatches_set_the_number_of_updates(tmp_path):
     args = ["ppo", "--task", "platoon", "--scenarios", "adaptive:a01_straight_free", "--total-steps", "64",
             "--frames-per-batch", "64", "--minibatch-size", "16", "--epochs", "3", "--target-kl", "0",

@@ -15,6 +15,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import torch
 
@@ -22,6 +24,11 @@ from agents.checkpoint import CheckpointError
 from agents.sb3_policy import SB3_FORMAT
 from train.config import ACTION_SPACES, TrainConfig
 from train.run import TRAIN_SEED_BASE, Run, check_resume, interface_dict, lane_relative_dict, training_specs
+
+if TYPE_CHECKING:
+    from stable_baselines3 import PPO
+
+    from smarts.env.sb3_vec_env import SmartsVecEnv
 
 
 def make_vec_env(cfg: TrainConfig):
@@ -40,21 +47,10 @@ def make_vec_env(cfg: TrainConfig):
                         processes=cfg.workers > 1)  # fmt: skip
 
 
-def train_sb3(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | None = None) -> Path:
-    """Train, log and checkpoint under ``out`` as ``train.ppo.train`` does; returns the final
-    checkpoint path. ``resume`` continues from an SB3 run's checkpoint (policy, optimiser, step
-    count) up to ``total_steps``."""
-    from rich.progress import Progress
+def build_model(cfg: TrainConfig, vec: "SmartsVecEnv") -> "PPO":
+    """SB3's PPO on ``vec`` with every setting of the training config (a test reads them back)."""
     from stable_baselines3 import PPO
 
-    torch.set_num_threads(cfg.torch_threads)
-    if cfg.init_from:
-        raise ValueError("init_from: starting from another run's networks is for lib torchrl; SB3 runs resume only")
-    if cfg.ray_address:
-        raise ValueError("ray_address: Ray collectors are for lib torchrl; SB3 runs step their envs in processes")
-    blob = check_resume(resume, cfg) if resume is not None else None
-    run = Run(cfg, out, resume, progress=progress)  # the run folder (never another run's), config.json, TensorBoard
-    vec = make_vec_env(cfg)
     n_steps = max(cfg.frames_per_batch // vec.num_envs, 8)  # per slot, per rollout
     model = PPO(
         "MultiInputPolicy",
@@ -70,11 +66,39 @@ def train_sb3(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path |
         vf_coef=cfg.critic_coeff,
         max_grad_norm=cfg.max_grad_norm,
         policy_kwargs={"net_arch": list(cfg.hidden)},
+        target_kl=cfg.target_kl or None,  # SB3 stops a rollout's epochs at 1.5 x this approximate KL
         stats_window_size=n_steps * vec.num_envs,  # room for every episode that ends in a rollout
         seed=cfg.seed,
         device="cpu",
         verbose=0,
     )
+    size = model.policy.log_std.numel()  # the same starting exploration as the torchrl trainer
+    if len(cfg.init_log_std) not in (1, size):
+        raise ValueError(f"init_log_std: expected 1 or {size} values (one per action component), got {cfg.init_log_std}")
+    with torch.no_grad():
+        model.policy.log_std.copy_(torch.as_tensor(cfg.init_log_std, dtype=model.policy.log_std.dtype).expand(size))
+    return model
+
+
+def train_sb3(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | None = None) -> Path:
+    """Train, log and checkpoint under ``out`` as ``train.ppo.train`` does; returns the final
+    checkpoint path. ``resume`` continues from an SB3 run's checkpoint (policy, optimiser, step
+    count) up to ``total_steps``."""
+    from rich.progress import Progress
+
+    torch.set_num_threads(cfg.torch_threads)
+    if cfg.init_from:
+        raise ValueError("init_from: starting from another run's networks is for lib torchrl; SB3 runs resume only")
+    if cfg.ray_address:
+        raise ValueError("ray_address: Ray collectors are for lib torchrl; SB3 runs step their envs in processes")
+    blob = check_resume(resume, cfg) if resume is not None else None
+    run = Run(cfg, out, resume, progress=progress)  # the run folder (never another run's), config.json, TensorBoard
+    vec = make_vec_env(cfg)
+    try:
+        model = build_model(cfg, vec)
+    except ValueError:
+        vec.close()
+        raise
     if blob is not None:
         try:
             model.policy.load_state_dict(blob["policy"])
