@@ -44,6 +44,7 @@ TASKS = typing.get_args(Task)
 ACTION_SPACES = {"rtp": "relative_target_pose", "continuous": "continuous"}
 """The config's action-space names -> the simulator's."""
 LIBS = ("torchrl", "sb3")
+BACKENDS = ("per_env", "batched")
 FLAGS = {"out": "--out-dir"}
 """Command-line flags whose name is not the field's (``--out`` is an alias of ``--out-dir``)."""
 
@@ -144,6 +145,11 @@ class TrainConfig(Schema):
         "config's task.",
     )
     lib: Literal[LIBS] = Field("torchrl", description="torchrl | sb3 (Stable-Baselines3's PPO).")
+    backend: Literal[BACKENDS] = Field(
+        "per_env",
+        description="per_env: one simulation per scenario copy | batched: the copies of each map stepped as one "
+        "vectorised simulation (smarts.env.batched; built-in traffic only, not with ray_address).",
+    )
     total_steps: PositiveInt = Field(60_000, description="Env steps to train for, summed over the envs.")
     envs: PositiveInt = Field(
         16, description="Scenario copies stepped together (in this process, or split over workers)."
@@ -261,6 +267,13 @@ class TrainConfig(Schema):
         if frames is not None and size > frames:
             raise ValueError(f"must be <= frames_per_batch ({frames})")
         return size
+
+    @field_validator("ray_address")
+    @classmethod
+    def _ray_per_env(cls, address: str | None, info: ValidationInfo) -> str | None:
+        if address is not None and info.data.get("backend") == "batched":
+            raise ValueError("Ray collectors step per-env copies; use backend: per_env with ray_address")
+        return address
 
     @field_validator("interface")
     @classmethod

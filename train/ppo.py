@@ -51,6 +51,7 @@ from agents.ppo import (
     scale_action,
 )
 from smarts.env.task_rewards import reward_factory
+from smarts.env.batched.torchrl_env import BatchedTorchRLEnv
 from smarts.env.torchrl_env import SmartsBatchedEnv
 from train.config import ACTION_SPACES, TrainConfig
 from train.run import TRAIN_SEED_BASE, Run, check_resume, interface_dict, lane_relative_dict, training_specs
@@ -69,15 +70,17 @@ def make_env(cfg: TrainConfig) -> TransformedEnv:
     this process, or, with ``workers`` > 1, that many such batches in worker processes (needed for
     SUMO traffic: one SUMO per process)."""
     specs = training_specs(cfg)
-    if any(s.traffic is not None and s.traffic.engine == "sumo" for s in specs) and cfg.workers < cfg.envs:
+    if cfg.backend == "per_env" and any(s.traffic is not None and s.traffic.engine == "sumo" for s in specs) and cfg.workers < cfg.envs:
         raise ValueError("SUMO scenarios run one per process: set workers equal to envs")
     options = env_options(cfg)
+    # backend batched: the copies of each map as one vectorised simulation (same keys and seeds)
+    batch_env = BatchedTorchRLEnv if cfg.backend == "batched" else SmartsBatchedEnv
     if cfg.workers > 1:
         per = [specs[w :: cfg.workers] for w in range(cfg.workers)]
-        base = ParallelEnv(cfg.workers, [functools.partial(SmartsBatchedEnv, p, **options) for p in per],
+        base = ParallelEnv(cfg.workers, [functools.partial(batch_env, p, **options) for p in per],
                            mp_start_method="spawn")  # fmt: skip
     else:
-        base = SmartsBatchedEnv(specs, **options)
+        base = batch_env(specs, **options)
     env = TransformedEnv(base, RewardSum())
     env.set_seed(TRAIN_SEED_BASE + cfg.seed * 1_000_003)
     return env
