@@ -261,9 +261,12 @@ def test_builtin_map_path_compiles_the_map(map_cache_dir, built_maps):
 
 # ---------------------------------------------------------------------------- check_map
 def test_check_map_accepts_valid_missions(lane_table_maps):
-    ScenarioSpec.from_dict(BASE, source="intersection.yaml").check_map(
-        lane_table_maps["intersection_4way_2lane"]
-    )
+    spec = ScenarioSpec.from_dict(BASE, source="intersection.yaml")
+    assert spec.check_map(lane_table_maps["intersection_4way_2lane"]) is None
+    # The same missions against another map: the check did read the map.
+    other = next(m for name, m in lane_table_maps.items() if "west_in" not in name and name.startswith("straight"))
+    with pytest.raises(ScenarioError, match="west_in"):
+        spec.check_map(other)
 
 
 MAP_ERRORS = [

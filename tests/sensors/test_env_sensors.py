@@ -60,14 +60,33 @@ def test_mixed_interfaces_pass_the_pettingzoo_api_test():
 
 
 def test_the_default_interface_observation_equals_the_basic_one():
+    """What the env hands out (the sensor suite's grouped pass) is the plain observation of the
+    default config, and its ego and neighbour features are the vehicle table's state."""
     env = DrivingParallelEnv("straight_2lane_cruise")
     env.reset(seed=0)
-    agents = env.sim.active_agents
-    ours = env.builder.build(env.sim, agents)
-    basic = ObservationBuilder(ObservationConfig()).build(env.sim, agents)
-    assert list(ours) == list(basic)
-    for key in ours:
-        np.testing.assert_array_equal(ours[key], basic[key])
+    obs, *_ = env.step({a: np.array([1.0, 0.0, 0.0], dtype=np.float32) for a in env.agents})
+    sim, t = env.sim, env.sim.table
+    agents = sim.active_agents
+    basic = ObservationBuilder(ObservationConfig()).build(sim, agents)
+    assert set(obs[env.agents[0]]) == set(basic)
+    for k, a in enumerate(agents.tolist()):
+        ours = obs[sim.agent_ids[a]]
+        for key in basic:
+            np.testing.assert_array_equal(ours[key], basic[key][k], err_msg=key)
+        # Independently of any builder: the ego's speed, lane width and size from the table and map.
+        row = sim.agent_row[a]
+        ego = ours["ego"]
+        assert ego[0] == pytest.approx(t.speed[row], abs=1e-5)
+        assert ego[8] == pytest.approx(sim.road_map.lane_width[t.lane[row]], abs=1e-5)
+        assert (ego[10], ego[11]) == pytest.approx((t.length[row], t.width[row]), abs=1e-5)
+        # The nearest other vehicle, in the ego frame.
+        others = [r for r in t.alive_rows if r != row]
+        assert others  # two agents: each is the other's neighbour
+        near = min(others, key=lambda r: np.hypot(t.x[r] - t.x[row], t.y[r] - t.y[row]))
+        dx, dy = t.x[near] - t.x[row], t.y[near] - t.y[row]
+        c, s = np.cos(t.heading[row]), np.sin(t.heading[row])
+        assert ours["neighbour_mask"][0] == 1.0
+        assert ours["neighbours"][0, :2] == pytest.approx((c * dx + s * dy, c * dy - s * dx), abs=1e-4)
     env.close()
 
 
