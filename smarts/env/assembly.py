@@ -15,6 +15,7 @@ from smarts.core.errors import ScenarioError
 from smarts.core.events import NUM_EVENTS, event_from_name
 from smarts.core.missions import resolve_mission
 from smarts.core.provider import ProviderBase
+from smarts.core.spec import REPLAY_MAP
 from smarts.core.spec import ScenarioSpec as PlainScenarioSpec
 from smarts.core.simulation import EventConfig, Simulation, check_seed
 from smarts.core.vehicle_table import Role, VehicleType
@@ -38,6 +39,12 @@ def as_spec(scenario: str | Path | PlainScenarioSpec) -> ScenarioSpec:
 
 
 def scenario_map(spec: ScenarioSpec) -> RoadMap:
+    if spec.map == REPLAY_MAP and spec.replay is not None:  # the dataset's own lanes
+        from smarts.replay import replay_road_map
+
+        road_map = replay_road_map(spec.replay, spec.base_dir, spec.source)
+        spec.check_map(road_map)
+        return road_map
     road_map = load_map(spec.map_path())
     spec.check_map(road_map)
     return road_map

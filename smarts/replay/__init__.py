@@ -5,7 +5,15 @@ Readers turn each format into a :class:`Recording` (tracks as flat arrays); the
 vehicles over and hands vehicles to the traffic model when they turn reactive.
 """
 
-from smarts.replay.load import ReplayPlan, TakeOver, load_recording, plan_replay, read_recording, take_over_mission
+from smarts.replay.load import (
+    ReplayPlan,
+    TakeOver,
+    load_recording,
+    plan_replay,
+    read_recording,
+    replay_road_map,
+    take_over_mission,
+)
 from smarts.replay.provider import ReplayProvider, table_id
 from smarts.replay.recording import DatasetMap, Recording
 
@@ -18,6 +26,7 @@ __all__ = [
     "load_recording",
     "plan_replay",
     "read_recording",
+    "replay_road_map",
     "table_id",
     "take_over_mission",
 ]

@@ -190,3 +190,13 @@ def take_over_mission(road_map, take: TakeOver, where: str):
                       speed=max(take.start_speed, 0.0), heading=take.start_heading)  # fmt: skip
     goal = GoalSpec(position=(float(take.goal_xy[0]), float(take.goal_xy[1])), radius=GOAL_RADIUS)
     return MissionSpec(start=start, goal=goal)
+
+
+def replay_road_map(replay: ReplaySpec, base_dir: Path | None, source: str = "<dict>"):
+    """The RoadMap compiled from the recording's own map (Argoverse 2, Waymo)."""
+    from smarts.replay.lane_map import compile_lane_map
+
+    rec = load_recording(replay, base_dir, source)
+    if rec.road_map is None:
+        raise ScenarioError(f"{source}: map: the {replay.format} recording {rec.source} has no map of its own")
+    return compile_lane_map(rec.road_map)

@@ -71,3 +71,74 @@ def three_vehicles() -> dict[str, dict]:
         "2": straight(110, 80, 10.0, 12.0, LANE1_Y, length=12.0, width=2.5, cls=3),
         "3": straight(130, 20, 100.0, 8.0, LANE0_Y),
     }
+
+
+# ---------------------------------------------------------------------------- Argoverse 2
+AV2_ID = "0a1b2c3d-0000-4000-8000-000000000001"
+
+
+def av2_boundary(x0: float, x1: float, y: float) -> list[dict]:
+    return [{"x": float(x), "y": float(y), "z": 0.0} for x in np.linspace(x0, x1, 6)]
+
+
+def av2_lane(lane_id: int, x0: float, x1: float, y_right: float, successors, left=None, right=None,
+             intersection=False) -> dict:  # fmt: skip
+    """A straight lane segment along +x, 3.5 m wide, its right boundary at ``y_right``."""
+    return {
+        "id": lane_id, "is_intersection": intersection, "lane_type": "VEHICLE",
+        "left_lane_boundary": av2_boundary(x0, x1, y_right + 3.5),
+        "right_lane_boundary": av2_boundary(x0, x1, y_right),
+        "left_lane_mark_type": "DASHED_WHITE", "right_lane_mark_type": "SOLID_WHITE",
+        "successors": list(successors), "predecessors": [],
+        "left_neighbor_id": left, "right_neighbor_id": right,
+    }  # fmt: skip
+
+
+def av2_map() -> dict:
+    """Two lanes along +x (right lane centre y = 1.75, left lane y = 5.25) in two 100 m segments."""
+    lanes = [
+        av2_lane(101, 0.0, 100.0, 0.0, [201], left=102),
+        av2_lane(102, 0.0, 100.0, 3.5, [202], right=101),
+        av2_lane(201, 100.0, 200.0, 0.0, [], left=202),
+        av2_lane(202, 100.0, 200.0, 3.5, [], right=201),
+    ]
+    area = [{"x": x, "y": y, "z": 0.0} for x, y in ((0, 0), (200, 0), (200, 7), (0, 7))]
+    return {
+        "lane_segments": {str(lane["id"]): lane for lane in lanes},
+        "drivable_areas": {"7": {"id": 7, "area_boundary": area}},
+        "pedestrian_crossings": {},
+    }
+
+
+def av2_tracks() -> list[dict]:
+    """Rows of the track table: 'AV' (ego) for all 110 steps, vehicle '11' from step 20 to 79 in the
+    left lane, a bus '12' from 0 to 49, and a pedestrian (not replayed)."""
+    rows = []
+
+    def add(track, kind, steps, x0, vx, y, heading=0.0):
+        for k, step in enumerate(steps):
+            rows.append({"observed": step < 50, "track_id": track, "object_type": kind, "object_category": 2,
+                         "timestep": step, "position_x": x0 + vx * 0.1 * k, "position_y": y, "heading": heading,
+                         "velocity_x": vx, "velocity_y": 0.0, "scenario_id": AV2_ID,
+                         "start_timestamp": 315966000000000000, "end_timestamp": 315966011000000000,
+                         "num_timestamps": 110, "focal_track_id": "11", "city": "PIT"})  # fmt: skip
+
+    add("AV", "vehicle", range(0, 110), 5.0, 10.0, 1.75)
+    add("11", "vehicle", range(20, 80), 30.0, 12.0, 5.25)
+    add("12", "bus", range(0, 50), 60.0, 5.0, 1.75)
+    add("ped_1", "pedestrian", range(0, 110), 50.0, 0.0, -2.0, heading=1.57)
+    return rows
+
+
+def write_av2(folder: Path, tracks: list[dict] | None = None, map_data: dict | None = None) -> Path:
+    import json
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = av2_tracks() if tracks is None else tracks
+    table = pa.table({key: [r[key] for r in rows] for key in rows[0]})
+    pq.write_table(table, folder / f"scenario_{AV2_ID}.parquet")
+    (folder / f"log_map_archive_{AV2_ID}.json").write_text(json.dumps(av2_map() if map_data is None else map_data))
+    return folder
