@@ -248,7 +248,16 @@ def _replay_rows(cases: list[tuple[int, bool]], steps: int, warmup: int, console
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if "--batched" in argv:  # the batched backend's rows have their own options
+        from smarts.diagnostic.batched_step import main as batched_main
+
+        return batched_main([a for a in argv if a != "--batched"])
     parser = argparse.ArgumentParser(prog="python -m smarts.diagnostic", description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--batched", action="store_true",
+        help="time the batched backend against the per-env path instead (see --batched --help)",
+    )
     parser.add_argument("--agents", default="1,10,20,50", help="comma-separated agent counts (default 1,10,20,50)")
     parser.add_argument("--steps", type=int, default=300, help="timed steps per case (default 300)")
     parser.add_argument("--warmup", type=int, default=20, help="untimed steps first (default 20)")

@@ -1,0 +1,285 @@
+"""Throughput of the batched backend against the per-env path, measured in one run
+(``python -m smarts.diagnostic --batched``).
+
+A row times B single-agent episodes of one case stepped with random actions and the default
+observation, auto-reset included: agent-steps per second of the batched backend
+(``BatchedDriving``: one call per stage for all B episodes) and of the per-env path (one
+``DrivingParallelEnv`` per episode stepped in turn, as ``SmartsBatchedEnv`` does) on the same
+episodes, their ratio, and the memory one episode takes in the batched backend (traced
+allocations of building and resetting it, divided by B). Rates are means over ``CHUNKS`` timed
+chunks with 95% confidence intervals. Cases:
+
+- ``free_direct``: the agent alone on a straight three-lane road, RelativeTargetPose actions;
+- ``free_lane``: the same driven by lane-relative commands (the training controller);
+- ``lead_lane``: the adaptive suite's a01_straight_free (a lead vehicle of built-in traffic to
+  follow, whose traffic provider steps per episode) with lane-relative commands.
+
+``--ppo-steps N`` adds end-to-end rows: ``python -m train ppo --task platoon`` on each backend
+(run as users run it; the env-steps/s it records).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import platform
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+
+from smarts.sensors.interface import AgentInterface
+
+CASES = {
+    "free_direct": ("free", "direct"),
+    "free_lane": ("free", "lane_relative"),
+    "lead_lane": ("lead", "lane_relative"),
+}
+DEFAULT_BATCHES = (1, 16, 64, 256, 1024)
+CHUNKS = 5
+STRAIGHT = 0.9  # RelativeTargetPose dx (m) of the direct case: 9 m/s straight ahead
+
+
+def case_spec(case: str):
+    """The single-agent scenario of ``case``, its agent on RelativeTargetPose (direct actions or
+    lane-relative commands)."""
+    from smarts.benchmark.suites import load_suite
+    from smarts.scenario import ScenarioSpec
+
+    if case not in CASES:
+        raise ValueError(f"unknown case {case!r}; expected one of {', '.join(CASES)}")
+    scenario, controller = CASES[case]
+    if scenario == "lead":
+        spec = next(s.spec for s in load_suite("adaptive").scenarios if s.name == "a01_straight_free")
+    else:
+        spec = ScenarioSpec.from_dict(
+            {
+                "name": "batched_free",
+                "map": "builtin:straight_3lane",
+                "episode_steps": 200,
+                "agents": [{"mission": {"start": {"road": "main", "lane": 1, "offset": 10, "speed": 8},
+                                        "goal": {"endless": True}}}],
+            },
+            source="batched_step_benchmark",
+        )  # fmt: skip
+    agents = [dataclasses.replace(a, action_space="relative_target_pose", controller=controller) for a in spec.agents]
+    return dataclasses.replace(spec, agents=agents)
+
+
+def _actions(case: str, rng: np.random.Generator, n: int) -> np.ndarray:
+    if CASES[case][1] == "direct":
+        out = np.zeros((n, 3))
+        out[:, 0] = STRAIGHT
+        out[:, 2] = rng.uniform(-0.02, 0.02, size=n)
+        return out
+    return rng.uniform(-1.0, 1.0, size=(n, 2))
+
+
+def _mean_ci(values: list[float]) -> tuple[float, float]:
+    """Mean and the half-width of its 95% confidence interval (t distribution)."""
+    from scipy import stats
+
+    arr = np.asarray(values, dtype=float)
+    if arr.size < 2:
+        return float(arr.mean()), float("nan")
+    return float(arr.mean()), float(stats.t.ppf(0.975, arr.size - 1) * arr.std(ddof=1) / np.sqrt(arr.size))
+
+
+def batched_rate(case: str, batch: int, steps: int, warmup: int, seed: int = 0) -> dict:
+    """Agent-steps/s (mean, 95% CI over chunks) of ``batch`` episodes in the batched backend, and
+    the memory per episode."""
+    from smarts.env.batched import BatchedDriving
+
+    spec = case_spec(case)
+    tracemalloc.start()
+    env = BatchedDriving([spec] * batch, observation=AgentInterface())
+    env.set_seed(seed)
+    env.reset()
+    memory = tracemalloc.get_traced_memory()[0]
+    tracemalloc.stop()
+    rng = np.random.default_rng(seed)
+    actions = [_actions(case, rng, env.num_slots) for _ in range(8)]
+    for k in range(warmup):
+        env.step(actions[k % 8])
+    rates = []
+    per_chunk = max(1, steps // CHUNKS)
+    for _ in range(CHUNKS):
+        acted = 0
+        t0 = time.perf_counter()
+        for k in range(per_chunk):
+            acted += int(env.step(actions[k % 8]).acted.sum())
+        rates.append(acted / (time.perf_counter() - t0))
+    env.close()
+    mean, ci = _mean_ci(rates)
+    return {"agent_steps_per_s": mean, "ci95": ci, "memory_per_episode_kb": memory / batch / 1024.0}
+
+
+def per_env_rate(case: str, batch: int, steps: int, warmup: int, seed: int = 0) -> dict:
+    """Agent-steps/s (mean, 95% CI over chunks) of ``batch`` episodes on the per-env path."""
+    from smarts.env.parallel_env import DrivingParallelEnv
+
+    spec = case_spec(case)
+    envs = [DrivingParallelEnv(spec, observation=AgentInterface()) for _ in range(batch)]
+    episode = [0] * batch
+    for i, env in enumerate(envs):
+        env.reset(seed=seed + i * 100_003)
+    rng = np.random.default_rng(seed)
+
+    def step_all() -> int:
+        commands = _actions(case, rng, batch)
+        for i, env in enumerate(envs):
+            if not env.agents:
+                episode[i] += 1
+                env.reset(seed=seed + i * 100_003 + episode[i])
+            env.step({a: commands[i] for a in env.agents})
+        return batch
+
+    for _ in range(warmup):
+        step_all()
+    rates = []
+    per_chunk = max(1, steps // CHUNKS)
+    for _ in range(CHUNKS):
+        acted = 0
+        t0 = time.perf_counter()
+        for _ in range(per_chunk):
+            acted += step_all()
+        rates.append(acted / (time.perf_counter() - t0))
+    for env in envs:
+        env.close()
+    mean, ci = _mean_ci(rates)
+    return {"agent_steps_per_s": mean, "ci95": ci}
+
+
+def batched_rows(batches=DEFAULT_BATCHES, cases=tuple(CASES), steps: int = 100, warmup: int = 10,
+                 per_env_agent_steps: int = 5000, progress=None) -> list[dict]:  # fmt: skip
+    """One row per (case, batch). The per-env path is timed on about ``per_env_agent_steps``
+    agent-steps (at least ``CHUNKS`` steps of the whole batch: it is slow at large B), the batched
+    backend on ``steps`` steps of the whole batch."""
+    rows = []
+    for case in cases:
+        for batch in batches:
+            fast = batched_rate(case, batch, steps, warmup)
+            per_steps = max(CHUNKS, per_env_agent_steps // batch)
+            slow = per_env_rate(case, batch, per_steps, min(warmup, per_steps))
+            row = {
+                "case": case,
+                "batch": int(batch),
+                "agent_steps_per_s": fast["agent_steps_per_s"],
+                "agent_steps_per_s_ci95": fast["ci95"],
+                "per_env_agent_steps_per_s": slow["agent_steps_per_s"],
+                "per_env_agent_steps_per_s_ci95": slow["ci95"],
+                "speedup": fast["agent_steps_per_s"] / slow["agent_steps_per_s"],
+                "memory_per_episode_kb": fast["memory_per_episode_kb"],
+            }
+            rows.append(row)
+            if progress is not None:
+                progress(row)
+    return rows
+
+
+def ppo_rate(backend: str, envs: int, steps: int, out_dir: Path, frames: int, minibatch: int, epochs: int) -> dict:
+    """End-to-end env-steps/s of ``python -m train ppo --task platoon`` on ``backend``: run as
+    users run it (a subprocess), the rate read from the metrics of its final checkpoint."""
+    import subprocess
+    import sys
+
+    import torch
+
+    out = Path(out_dir) / f"ppo_{backend}"
+    command = [
+        sys.executable, "-m", "train", "ppo", "--task", "platoon", "--backend", backend, "--envs", str(envs),
+        "--total-steps", str(steps), "--frames-per-batch", str(frames), "--minibatch-size", str(minibatch),
+        "--epochs", str(epochs), "--eval-episodes", "0", "--out-dir", str(out), "--quiet",
+    ]  # fmt: skip
+    done = subprocess.run(command, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
+    metrics = torch.load(out / "final.pt", weights_only=True)["metrics"]
+    return {
+        "backend": backend, "envs": envs, "total_steps": steps, "frames_per_batch": frames,
+        "minibatch_size": minibatch, "epochs": epochs,
+        "env_steps_per_s": float(metrics["perf/env_steps_per_s"]),
+        "episode_return": float(metrics.get("episode/return", float("nan"))),
+    }  # fmt: skip
+
+
+def _ints(text: str, flag: str, parser: argparse.ArgumentParser) -> list[int]:
+    try:
+        values = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        values = []
+    if not values or min(values) < 1:
+        parser.error(f"{flag}: expected comma-separated positive integers, got {text!r}")
+    return values
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m smarts.diagnostic --batched",
+        description="Batched backend against the per-env path: agent-steps/s, memory per episode, PPO env-steps/s.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument("--batches", default=",".join(map(str, DEFAULT_BATCHES)), help="episode counts B")
+    parser.add_argument("--cases", default=",".join(CASES), help=f"cases among {', '.join(CASES)}")
+    parser.add_argument("--steps", type=int, default=100, help="timed steps of the whole batch per row (batched backend)")
+    parser.add_argument("--per-env-agent-steps", type=int, default=5000, help="timed agent-steps per row on the per-env path")
+    parser.add_argument("--warmup", type=int, default=10, help="untimed steps first")
+    parser.add_argument("--ppo-steps", type=int, default=0, help="env steps of each end-to-end PPO run (0: no PPO rows)")
+    parser.add_argument("--ppo-envs", type=int, default=256, help="scenario copies of the PPO runs")
+    parser.add_argument("--ppo-frames", type=int, default=16384, help="frames per batch of the PPO runs")
+    parser.add_argument("--ppo-minibatch", type=int, default=4096, help="minibatch size of the PPO runs")
+    parser.add_argument("--ppo-epochs", type=int, default=4, help="epochs of the PPO runs")
+    parser.add_argument("--ppo-dir", type=Path, default=Path("runs/diagnostic_ppo"), help="where the PPO runs write")
+    parser.add_argument("--out", type=Path, default=Path("reports/diagnostic_batched.json"), help="JSON output file")
+    args = parser.parse_args(argv)
+    batches = _ints(args.batches, "--batches", parser)
+    cases = [c for c in args.cases.split(",") if c.strip()]
+    unknown = [c for c in cases if c not in CASES]
+    if unknown or not cases:
+        parser.error(f"--cases: unknown case(s) {unknown}; expected some of {', '.join(CASES)}")
+    if args.steps < CHUNKS or args.warmup < 0 or args.per_env_agent_steps < 1 or args.ppo_steps < 0:
+        parser.error(f"--steps must be >= {CHUNKS}, --warmup >= 0, --per-env-agent-steps >= 1, --ppo-steps >= 0")
+    if args.ppo_steps and args.ppo_minibatch > args.ppo_frames:
+        parser.error("--ppo-minibatch must be <= --ppo-frames")
+
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console(width=max(Console().width, 120))
+    rows = batched_rows(batches, cases, args.steps, args.warmup, args.per_env_agent_steps,
+                        progress=lambda r: console.log(f"{r['case']} B={r['batch']}: {r['agent_steps_per_s']:.0f} agent-steps/s"))  # fmt: skip
+    table = Table(title="Batched backend vs per-env path (agent-steps/s, mean ± 95% CI over 5 chunks)")
+    for col in ("case", "B", "batched", "per-env", "speed-up", "memory/episode"):
+        table.add_column(col, justify="right", no_wrap=True)
+    for r in rows:
+        table.add_row(
+            r["case"], str(r["batch"]), f"{r['agent_steps_per_s']:,.0f} ± {r['agent_steps_per_s_ci95']:,.0f}",
+            f"{r['per_env_agent_steps_per_s']:,.0f} ± {r['per_env_agent_steps_per_s_ci95']:,.0f}",
+            f"{r['speedup']:.1f}x", f"{r['memory_per_episode_kb']:.0f} KiB",
+        )  # fmt: skip
+    console.print(table)
+    ppo_rows = []
+    if args.ppo_steps:
+        for backend in ("per_env", "batched"):
+            console.log(f"PPO on {backend}: {args.ppo_steps} env steps")
+            ppo_rows.append(ppo_rate(backend, args.ppo_envs, args.ppo_steps, args.ppo_dir, args.ppo_frames,
+                                     args.ppo_minibatch, args.ppo_epochs))  # fmt: skip
+        ptable = Table(title=f"PPO platoon end to end ({args.ppo_envs} copies, {args.ppo_steps} steps, frames "
+                             f"{args.ppo_frames}, minibatch {args.ppo_minibatch}, {args.ppo_epochs} epochs)")  # fmt: skip
+        for col in ("backend", "env-steps/s", "ratio"):
+            ptable.add_column(col, justify="right")
+        base = ppo_rows[0]["env_steps_per_s"]
+        for r in ppo_rows:
+            ptable.add_row(r["backend"], f"{r['env_steps_per_s']:,.0f}", f"{r['env_steps_per_s'] / base:.2f}x")
+        console.print(ptable)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    report = {
+        "machine": {"python": platform.python_version(), "processor": platform.processor(), "system": platform.platform()},
+        "rows": rows,
+        "ppo": ppo_rows,
+    }
+    args.out.write_text(json.dumps(report, indent=2))
+    console.print(f"written: {args.out}")
+    return 0
