@@ -39,6 +39,12 @@ def make_vec_env(cfg: TrainConfig):
     from smarts.env.task_rewards import TaskReward
 
     interface, weights, lane = cfg.observation_interface(), cfg.reward_weights(), cfg.lane_relative_params()
+    if cfg.backend == "batched":  # the copies of each map as one vectorised simulation
+        from smarts.env.batched.sb3_vec_env import BatchedVecEnv
+        from smarts.env.task_rewards import reward_factory
+
+        return BatchedVecEnv(training_specs(cfg), observation=interface, reward_factory=reward_factory(weights),
+                             lane_relative=lane, seed=TRAIN_SEED_BASE + cfg.seed * 1_000_003, normalize_actions=True)  # fmt: skip
     factories = [
         functools.partial(DrivingParallelEnv, spec, observation=interface, reward=TaskReward(weights), lane_relative=lane)
         for spec in training_specs(cfg)

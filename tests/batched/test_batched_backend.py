@@ -141,3 +141,26 @@ def test_bad_actions_raise_naming_the_agents_and_change_nothing():
         batch.step(actions)
     np.testing.assert_array_equal(batch.groups[0].sim.table.x, x)
     assert batch.groups[0].sim.episode_step.tolist() == [0, 0]
+
+
+def test_sb3_vec_env_reports_each_end_once_and_restarts_copies_in_the_step():
+    from smarts.env.batched.sb3_vec_env import BatchedVecEnv
+
+    specs = _adaptive("a01_straight_free", "a02_straight_two_followers_low")
+    vec = BatchedVecEnv(specs, observation=PLATOON, reward_factory=_platoon_reward(), normalize_actions=True, seed=3)
+    assert vec.num_envs == 3 and vec.slot_agents == [(0, "agent_0"), (1, "agent_0"), (1, "agent_1")]
+    obs = vec.reset()
+    assert set(obs) == set(vec.observation_space.spaces) and obs["ego"].shape == (3, 12)
+    ends = 0
+    rng = np.random.default_rng(0)
+    for _ in range(600):
+        obs, rewards, dones, infos = vec.step(rng.uniform(-1, 1, size=(3, 2)).astype(np.float32))
+        for j in np.flatnonzero(dones):
+            ends += 1
+            assert {"terminal_observation", "episode", "TimeLimit.truncated"} <= set(infos[j])
+            assert infos[j]["episode"]["l"] > 0
+        for j, info in enumerate(infos):
+            if info.get("inactive"):
+                assert rewards[j] == 0 and not dones[j] and not obs["ego"][j].any()
+    assert ends >= 3
+    vec.close()

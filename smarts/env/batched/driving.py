@@ -83,6 +83,8 @@ class BatchedDriving:
     ``BatchedSetupError`` naming the scenario and field.
     """
 
+    render_mode = None  # nothing is drawn (vector-env wrappers ask)
+
     def __init__(
         self,
         scenarios: Sequence[str | Path | ScenarioSpec],
