@@ -142,3 +142,62 @@ def write_av2(folder: Path, tracks: list[dict] | None = None, map_data: dict | N
     pq.write_table(table, folder / f"scenario_{AV2_ID}.parquet")
     (folder / f"log_map_archive_{AV2_ID}.json").write_text(json.dumps(av2_map() if map_data is None else map_data))
     return folder
+
+
+# ---------------------------------------------------------------------------- Waymo Open Motion
+WAYMO_ID = "5f1d2a3b4c5d6e7f"
+
+
+def waymo_scenario(scenario_id: str = WAYMO_ID):
+    """One Scenario of 91 frames (0.1 s): vehicle 7 in lane 1001 for all frames, vehicle 8 in the
+    left lane 1002 valid from frame 10 to 60, a pedestrian, and vehicle 9 never valid. Lanes run
+    along +x: 1001 (y = 0) and 1002 (y = 3.7) from 0 to 100 m, then 1003 and 1004 to 200 m."""
+    from smarts.replay.waymo_proto import message_classes
+
+    c = message_classes()
+    msg = c["Scenario"](scenario_id=scenario_id, current_time_index=10, sdc_track_index=0)
+    msg.timestamps_seconds.extend([0.1 * k for k in range(91)])
+
+    def track(track_id, kind, valid, x0, vx, y, length=4.8, width=2.0):
+        t = msg.tracks.add(id=track_id, object_type=kind)
+        for k in range(91):
+            t.states.add(center_x=x0 + vx * 0.1 * k, center_y=y, center_z=0.5, length=length, width=width, height=1.6,
+                         heading=0.0, velocity_x=vx, velocity_y=0.0, valid=bool(valid(k)))  # fmt: skip
+
+    track(7, 1, lambda k: True, 5.0, 10.0, 0.0)
+    track(8, 1, lambda k: 10 <= k <= 60, 20.0, 8.0, 3.7, length=5.5, width=2.2)
+    track(20, 2, lambda k: True, 50.0, 0.0, -4.0, length=0.6, width=0.6)
+    track(9, 1, lambda k: False, 0.0, 0.0, 0.0)
+
+    def lane(feature_id, x0, exits, left=None, right=None, mph=25.0):
+        f = msg.map_features.add(id=feature_id)
+        y = 0.0 if feature_id % 2 else 3.7
+        f.lane.speed_limit_mph = mph
+        f.lane.type = 2
+        for x in np.linspace(x0, x0 + 100.0, 11):
+            f.lane.polyline.add(x=float(x), y=y, z=0.0)
+        f.lane.exit_lanes.extend(exits)
+        for side, other in ((f.lane.left_neighbors, left), (f.lane.right_neighbors, right)):
+            if other is not None:
+                side.add(feature_id=other, self_start_index=0, self_end_index=10, neighbor_start_index=0,
+                         neighbor_end_index=10)  # fmt: skip
+
+    lane(1001, 0.0, [1003], left=1002)
+    lane(1002, 0.0, [1004], right=1001)
+    lane(1003, 100.0, [], left=1004)
+    lane(1004, 100.0, [], right=1003)
+    stop = msg.map_features.add(id=2001)
+    stop.stop_sign.lane.append(1003)
+    stop.stop_sign.position.x, stop.stop_sign.position.y = 195.0, -2.0
+    edge = msg.map_features.add(id=3001)
+    edge.road_edge.type = 1
+    for x in (0.0, 200.0):
+        edge.road_edge.polyline.add(x=x, y=-1.85, z=0.0)
+    return msg
+
+
+def write_waymo(path: Path, scenarios=None) -> Path:
+    from smarts.replay.tfrecord import write_records
+
+    write_records(path, [m.SerializeToString() for m in (scenarios or [waymo_scenario()])])
+    return path
