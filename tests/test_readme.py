@@ -97,6 +97,18 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "python -m train ppo --task platoon --envs 16 --workers 4 --ray-address HOST:6379": (
         PARSE, "needs a Ray cluster at HOST; a full training run",
     ),
+    "python -m train benchmark --suite adaptive --agent zoo:keep-lane --episodes 1": (
+        PARSE, "11 scenarios x 4 agents, minutes",
+    ),
+    "smarts viz runs/benchmark/adaptive/logs": (
+        NOT_RUN, "serves until Ctrl-C; tests/viz/test_server.py and test_browser.py serve such a folder",
+    ),
+    "python -m train enjoy --agent zoo:platoon-rtp --scenario adaptive:a08_lead_turns_left_at_junction --viz": (
+        NOT_RUN, "waits for a browser; tests/viz/test_browser.py streams a live env into chromium",
+    ),
+    "python -m train enjoy --agent zoo:keep-lane --scenario adaptive:a01_straight_free --video drive.mp4": (
+        NOT_RUN, "tests/viz/test_enjoy.py runs it with --max-steps 40 and reads the video back",
+    ),
 }
 
 

@@ -206,8 +206,9 @@ def test_live_env_streams_into_the_page(browser, tmp_path):
 
 def test_screenshot(browser, served, tmp_path):
     open_episode(browser, served.url, "0")
-    browser.execute_script("window.viz.goTo(60)")
     agent = browser.execute_script("return window.viz.ep.meta.agent_ids[0]")
+    browser.execute_script(  # step 60, zoomed in around the junction
+        "const v = window.viz; v.goTo(60); v.view.cx = 0; v.view.cy = -10; v.view.scale *= 3; v.dirty = true;")
     x, y = browser.execute_script("return window.viz.screenOf(arguments[0])", agent)
     click_canvas_at(browser, x, y)
     wait_for(browser, "return !document.getElementById('agent-panel').hidden")
