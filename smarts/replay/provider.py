@@ -12,13 +12,16 @@ Reactive hand-over goes through the simulation's ``hand_over`` to a provider the
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
+import numba
 import numpy as np
 
 from smarts.core.provider import ProviderBase
-from smarts.core.vehicle_table import Role, VehicleType
-from smarts.replay.recording import FRAME_EPS, Recording, interpolate, wrap_angle
+from smarts.core.geometry import wrap_scalar
+from smarts.core.vehicle_table import COLUMN, Role, VehicleType
+from smarts.replay.recording import FRAME_EPS, Recording, interpolate
 
 if TYPE_CHECKING:
     from smarts.core.provider import Provider
@@ -74,6 +77,8 @@ class ReplayProvider(ProviderBase):
         self._vehicle_of_row = np.zeros(0, dtype=np.int64)
         self._dims = np.stack([recording.length[self.vehicles], recording.width[self.vehicles]])
         self._vtype = recording.vtype[self.vehicles]
+        self._enter = np.zeros(n, dtype=np.int64)  # scratch: vehicles entering / leaving this step
+        self._leave = np.zeros(n, dtype=np.int64)
         self.handed_over: list[str] = []
         """Table ids of the vehicles handed to the traffic model this episode, in order."""
 
@@ -114,41 +119,32 @@ class ReplayProvider(ProviderBase):
     def _advance(self, sim: Simulation, dt: float) -> None:
         rec = self.recording
         frame = self.frame_at(sim.time)
-        present, st = interpolate(frame, self.first, self.count, self.offsets, rec.x, rec.y, rec.heading, rec.speed)
         table = sim.table
-        leaving = np.flatnonzero((self.state == DRIVING) & ~present)
-        if leaving.size:
+        n_enter, n_leave = _advance_tracks(
+            frame, self.first, self.count, self.offsets, rec.x, rec.y, rec.heading, rec.speed,
+            self.state, self.row, table.data, dt, self._enter, self._leave,
+        )  # fmt: skip
+        if n_leave:
+            leaving = self._leave[:n_leave]
             rows = self.row[leaving]
             self._vehicle_of_row[rows] = -1
             table.remove(rows)
             self.state[leaving] = DONE
             self.row[leaving] = -1
-        # a pending vehicle whose track ended before it could enter never will
-        self.state[(self.state == PENDING) & (frame > self.first + self.count - 1 + FRAME_EPS)] = DONE
-        entering = np.flatnonzero((self.state == PENDING) & present)
-        for k in entering.tolist():
-            row = table.add(
-                self.table_ids[k], owner=self.provider_id, role=Role.REPLAY,
-                x=float(st[0, k]), y=float(st[1, k]), heading=float(st[2, k]), speed=float(st[3, k]),
-                vtype=VehicleType(int(self._vtype[k])), length=float(self._dims[0, k]), width=float(self._dims[1, k]),
-            )  # fmt: skip
-            self.row[k] = row
-            self._vehicle_of_row[row] = k
-        self.state[entering] = DRIVING
-        driving = np.flatnonzero(self.state == DRIVING)
-        if driving.size == 0:
-            return
-        rows = self.row[driving]
-        moved = np.setdiff1d(driving, entering, assume_unique=True) if entering.size else driving
-        if dt > 0 and moved.size:
-            r = self.row[moved]
-            table.accel[r] = (st[3, moved] - table.speed[r]) / dt
-            table.yaw_rate[r] = wrap_angle(st[2, moved] - table.heading[r]) / dt
-            table.lat_accel[r] = table.yaw_rate[r] * st[3, moved]
-        table.x[rows] = st[0, driving]
-        table.y[rows] = st[1, driving]
-        table.heading[rows] = st[2, driving]
-        table.speed[rows] = st[3, driving]
+        if n_enter:
+            entering = self._enter[:n_enter].copy()
+            _, st = interpolate(frame, self.first[entering], self.count[entering], self.offsets[entering],
+                                rec.x, rec.y, rec.heading, rec.speed)  # fmt: skip
+            for i, k in enumerate(entering.tolist()):
+                row = table.add(
+                    self.table_ids[k], owner=self.provider_id, role=Role.REPLAY,
+                    x=float(st[0, i]), y=float(st[1, i]), heading=float(st[2, i]), speed=float(st[3, i]),
+                    vtype=VehicleType(int(self._vtype[k])), length=float(self._dims[0, k]),
+                    width=float(self._dims[1, k]),
+                )  # fmt: skip
+                self.row[k] = row
+                self._vehicle_of_row[row] = k
+            self.state[entering] = DRIVING
 
     # ------------------------------------------------------------------ reactive hand-over
     def _interactions(self, sim: Simulation) -> None:
@@ -174,3 +170,56 @@ class ReplayProvider(ProviderBase):
         if rows.size:
             self.handed_over += [sim.table.ids[r] for r in rows.tolist()]
             sim.hand_over(rows, self.reactive_target, Role.TRAFFIC)
+
+
+_X, _Y, _H, _V = COLUMN["x"], COLUMN["y"], COLUMN["heading"], COLUMN["speed"]
+_ACC, _YAW, _LAT = COLUMN["accel"], COLUMN["yaw_rate"], COLUMN["lat_accel"]
+
+
+@numba.njit(cache=True, nogil=True)
+def _advance_tracks(
+    frame, first, count, offsets, xs, ys, hs, vs, state, row, data, dt, enter, leave
+):  # pragma: no cover - compiled
+    """One pass over the window's tracks at fractional ``frame``: driven vehicles get their
+    interpolated state (and the acceleration and yaw rate since the last step) written into their
+    table rows; vehicles due to enter or leave are listed in ``enter``/``leave`` (counts returned)
+    for the caller to add or remove; pending tracks already over are marked done."""
+    n_enter, n_leave = 0, 0
+    for k in range(first.shape[0]):
+        s = state[k]
+        if s == DONE:
+            continue
+        last = count[k] - 1
+        rel = frame - first[k]
+        present = rel >= -FRAME_EPS and rel <= last + FRAME_EPS
+        if s == PENDING:
+            if present:
+                enter[n_enter] = k
+                n_enter += 1
+            elif rel > last + FRAME_EPS:
+                state[k] = DONE
+            continue
+        if not present:
+            leave[n_leave] = k
+            n_leave += 1
+            continue
+        rel = min(max(rel, 0.0), last)
+        k0 = min(int(math.floor(rel + FRAME_EPS)), max(last - 1, 0))
+        a = min(max(rel - k0, 0.0), 1.0)
+        i0 = offsets[k] + k0
+        i1 = min(i0 + 1, offsets[k] + last)
+        dh = hs[i1] - hs[i0]
+        dh = dh - 2.0 * math.pi * math.floor((dh + math.pi) / (2.0 * math.pi))
+        h = wrap_scalar(hs[i0] + dh * a)
+        v = vs[i0] + (vs[i1] - vs[i0]) * a
+        r = row[k]
+        if dt > 0.0:
+            yaw = wrap_scalar(h - data[_H, r]) / dt
+            data[_ACC, r] = (v - data[_V, r]) / dt
+            data[_YAW, r] = yaw
+            data[_LAT, r] = yaw * v
+        data[_X, r] = xs[i0] + (xs[i1] - xs[i0]) * a
+        data[_Y, r] = ys[i0] + (ys[i1] - ys[i0]) * a
+        data[_H, r] = h
+        data[_V, r] = v
+    return n_enter, n_leave
