@@ -5,8 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-DEFAULT_HOST = "127.0.0.1"
-DEFAULT_PORT = 8765
+from smarts.viz.live import DEFAULT_HOST, DEFAULT_PORT
 
 DESCRIPTION = """Serve the diagnostic viewer: recorded episodes under PATH (episode recordings and
 benchmark logs, e.g. runs/benchmark/adaptive/logs) and live envs (smarts.viz.WatchedEnv(env,

@@ -15,7 +15,10 @@ import threading
 from typing import Any
 from urllib.parse import urlparse
 
-DEFAULT_URL = "http://127.0.0.1:8765"
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 8765
+DEFAULT_URL = f"http://{DEFAULT_HOST}:{DEFAULT_PORT}"
+"""Where ``smarts viz`` serves by default, so where live envs look for it."""
 RETRY_SECONDS = 2.0
 
 

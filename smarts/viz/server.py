@@ -26,7 +26,7 @@ from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from smarts.viz.cli import DEFAULT_HOST, DEFAULT_PORT
+from smarts.viz.live import DEFAULT_HOST, DEFAULT_PORT
 from smarts.viz.sources import EpisodeEntry, episode_json, find_episodes
 
 STATIC_DIR = Path(__file__).parent / "static"
