@@ -159,6 +159,10 @@ def test_periodic_evaluation_selects_best_by_s_bench_and_logs_it(tmp_path):
     assert main(["eval", "--agent", str(out / "best.pt"), "--suite", str(suite), "--episodes", "1",
                  "--workers", "1", "--out", str(tmp_path / "eval"), "--quiet"]) == 0  # fmt: skip
     assert (tmp_path / "eval" / "results.json").is_file()
+    # Resuming from best.pt continues the run from that checkpoint's step to a longer budget.
+    assert main([*args[:-3], "--total-steps", "384", "--eval-episodes", "0", "--out-dir", str(out), "--quiet",
+                 "--resume", str(out / "best.pt")]) == 0  # fmt: skip
+    assert torch.load(out / "final.pt", weights_only=True)["step"] == 384
 
 
 def test_periodic_evaluation_does_not_change_the_training_run(tmp_path):

@@ -150,6 +150,12 @@ def test_ctrl_c_saves_interrupted_checkpoint(tmp_path, monkeypatch, lib):
     assert blob["step"] == 64 and "optimizer" in blob
     assert not (out / "final.pt").exists()
     assert (out / "interrupted_sb3.zip").is_file() == (lib == "sb3")
+    # The interrupted run continues from interrupted.pt to its budget.
+    monkeypatch.setattr(Run, "end_of_batch", end_of_batch)
+    assert main(["ppo", "--task", "platoon", "--lib", lib, "--scenarios", "adaptive:a01_straight_free", *SMALL,
+                 "--total-steps", "256", "--eval-episodes", "0", "--out-dir", str(out), "--quiet",
+                 "--resume", str(out / "interrupted.pt")]) == 0  # fmt: skip
+    assert torch.load(out / "final.pt", weights_only=True)["step"] == 256
 
 
 def test_evaluations_in_the_training_process_do_not_change_an_sb3_run(tmp_path):
