@@ -213,7 +213,7 @@ def test_a_depart_speed_far_above_the_lane_limit_names_its_field(tmp_path, capsy
 # ---------------------------------------------------------------------------- what ships stays valid
 @pytest.mark.parametrize("name", list_scenarios())
 def test_every_builtin_scenario_is_valid(name, library_scenario, capsys):
-    library_scenario(name)  # skipped while its map recipe is missing
+    library_scenario(name)  # its built-in map must build (a missing recipe fails)
     result = validate_scenario(name)
     assert result.valid, "\n".join(result.problems)
 
@@ -232,7 +232,10 @@ def test_every_shipped_benchmark_config_loads_and_its_scenarios_are_valid(path):
     if path.stem == "metrics":
         from smarts.benchmark.metrics.params import load_params
 
-        load_params(path)
+        params = load_params(path)
+        # The paper's weights: PR 0.1, RC 0.45, Humanness 0.15, MTE or SFD 0.3.
+        w = params.weights
+        assert (w.pr, w.rc, w.humanness, w.mte, w.sfd) == pytest.approx((0.1, 0.45, 0.15, 0.3, 0.3))
         return
     from smarts.benchmark.suites import load_suite
 
