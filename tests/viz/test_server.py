@@ -141,3 +141,27 @@ def test_live_stream_builds_no_frames_until_a_page_watches():
             time.sleep(0.02)
         assert not env.publisher.watching  # the page left: frames stop again
         env.close()
+
+
+def test_bad_paths_are_named_without_a_traceback(tmp_path):
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"not an episode")
+    for path, problem in ((tmp_path / "missing", "no such file or folder"),
+                          (junk, "neither an episode recording nor a benchmark episode log")):  # fmt: skip
+        done = subprocess.run([sys.executable, "-m", "smarts.viz", str(path), "--port", "0"], capture_output=True,
+                              text=True, timeout=120)  # fmt: skip
+        assert done.returncode == 2 and f"error: {path}: {problem}" in done.stderr
+        assert "Traceback" not in done.stderr
+
+
+def test_malformed_recording_is_reported_to_the_page(recorded, tmp_path):
+    import numpy as np
+
+    with np.load(recorded["path"], allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays["agent_vehicle"] = arrays["agent_vehicle"][:-1]
+    np.savez_compressed(tmp_path / "cut.rec.npz", **arrays)
+    with BackgroundServer(tmp_path) as srv:
+        status, body, _ = get(srv.url + "/api/episodes/0")
+    error = json.loads(body)["error"]
+    assert status == 422 and "cut.rec.npz" in error and "agent_vehicle" in error
