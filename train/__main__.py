@@ -138,6 +138,11 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     _ppo_options(ppo, argv)
     ppo.set_defaults(run=_ppo)
 
+    from train import aid_predictor, trajectories
+
+    trajectories.add_parser(sub)
+    aid_predictor.add_parser(sub)
+
     from train.enjoy import add_parser as add_enjoy
 
     add_enjoy(sub)

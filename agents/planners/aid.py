@@ -11,7 +11,12 @@ candidate collides it brakes along its own lane.
 Deviations (see the zoo card): s is measured from the ego's projection on each reference (the
 original from the path's first point); the emergency plan brakes at the 9 m/s^2 our limits allow
 (not 15) along the path the ego is on (not the last path of the loop); endless missions have
-d2g = 0 for all paths; neighbour histories come from the tracker, not ids.
+d2g = 0 for all paths; neighbour histories come from the tracker, not ids. Because our cars
+cannot turn at any speed, the speed term tracks min(v_lim, sqrt(2 m/s^2 / curvature)) along the
+candidate instead of v_lim, and a candidate whose speed times curvature exceeds the 1.2 rad/s yaw
+rate limit costs 10 more (the original ran without dynamics limits); references are smoothed
+(Gaussian, 2 points) since junction lanes here are kinked polylines, and pose headings follow the
+reference (plus the lateral drift) rather than successive points.
 """
 
 from __future__ import annotations
@@ -34,9 +39,14 @@ HORIZON = 30
 DT = 0.1
 MAX_SPEED = 16.0
 LATERAL_RATE = 1.5
+MIN_LATERAL_TIME = 1.0
 REPLAN_EVERY = 3
 NEAREST = 5
 EMERGENCY_DECEL = 9.0
+MAX_YAW_RATE = 1.2
+CURVE_LAT_ACCEL = 3.0
+SMOOTH = 2.0
+INFEASIBLE = 10.0
 WINDOW_S, WINDOW_D, PREFILTER = 5.0, 2.5, 5.0
 
 
@@ -75,8 +85,9 @@ def longitudinal_profile(v_s: float, a_s: float, accel: float) -> np.ndarray:
 
 def lateral_profile(d0: float, v_d: float) -> np.ndarray:
     """Offsets [30] at t = 0.1 .. 3.0 of the quintic from (d0, v_d, 0) to (0, 0, 0) over
-    T_d = clip(|d0| / 1.5, 0.1, 3), held at 0 afterwards."""
-    T = float(np.clip(abs(d0) / LATERAL_RATE, 0.1, 3.0))
+    T_d = clip(|d0| / 1.5, 1.0, 3), held at 0 afterwards (the original's lower bound 0.1 s snaps
+    back from small offsets faster than our yaw-rate limit allows)."""
+    T = float(np.clip(abs(d0) / LATERAL_RATE, MIN_LATERAL_TIME, 3.0))
     c = quintic_coefficients(d0, v_d, 0.0, 0.0, 0.0, 0.0, T)
     t = np.arange(1, HORIZON + 1) * DT
     return np.where(t <= T + 1e-9, polyval(c, np.minimum(t, T)), 0.0)
@@ -177,7 +188,7 @@ class AIDPlanner(StatefulPlanner):
                 continue
             first = pts[0]  # one point 2 m behind, so the ego projects inside the reference
             back = np.array([first[0] - 2.0 * np.cos(first[2]), first[1] - 2.0 * np.sin(first[2]), first[2]])
-            refs.append((p, Reference(np.vstack([back, extend(pts, 51)]))))
+            refs.append((p, Reference(np.vstack([back, extend(pts, 51)]), smooth=SMOOTH)))
         return refs
 
     def plan(self, state: AIDState, row: dict[str, np.ndarray]) -> np.ndarray | None:
@@ -205,18 +216,24 @@ class AIDPlanner(StatefulPlanner):
             for a in ACCELERATIONS:
                 v = longitudinal_profile(v_s, a_s, float(a))
                 s = max(float(s_ego[0]), 0.0) + np.cumsum(DT * v)
-                xy, _, valid = ref.frenet_to_xy(s, d)
+                xy, yaw, valid = ref.frenet_to_xy(s, d)
                 n = int(np.argmin(valid)) if not valid.all() else len(valid)
                 if n < 2:
                     continue
-                cand = Candidate(p, float(a), xy[:n], heading_of(xy[:n]), s[:n], d[:n], v[:n])
+                # heading: the reference's plus the lateral drift (successive points are noisy at low speed)
+                yaw = wrap(yaw + np.arctan2(np.gradient(d, s) if len(s) > 1 else 0.0, 1.0))
+                cand = Candidate(p, float(a), xy[:n], yaw[:n], s[:n], d[:n], v[:n])
                 jerk, lat = kinematic_costs(cand.xy, cand.yaw)
-                spd = float(np.mean(np.abs(v - v_lim)) / v_lim)
+                # the speed target slows for curves (our limits: yaw rate, no instant turns)
+                kappa = np.abs(np.interp(s[:n], ref.s, ref.curvature))
+                target = np.minimum(v_lim, np.sqrt(CURVE_LAT_ACCEL / np.maximum(kappa, 1e-6)))
+                spd = float(np.mean(np.abs(v[:n] - target) / v_lim))
+                infeasible = float((v[:n] * kappa > MAX_YAW_RATE).any())
                 prox, ttc, coll = interaction_costs(cand, ref, predicted)
                 terms = np.array([d2g, spd, jerk, lat, prox, ttc, coll])
                 candidates.append(cand)
                 refs_of.append(ref)
-                costs.append(float(np.dot(WEIGHTS, terms)))
+                costs.append(float(np.dot(WEIGHTS, terms)) + INFEASIBLE * infeasible)
                 cand.terms = terms  # type: ignore[attr-defined]
         self.last_candidates, self.last_costs = candidates, np.array(costs)
         if not candidates:
@@ -235,10 +252,7 @@ class AIDPlanner(StatefulPlanner):
         s = max(float(s_ego[0]), 0.0) + np.cumsum(DT * v)
         xy, yaw, valid = ref.frenet_to_xy(s, np.full(HORIZON, float(d_ego[0])))
         n = max(int(np.argmin(valid)) if not valid.all() else len(valid), 1)
-        yaw = heading_of(xy[:n], fallback=float(yaw[0]))
-        moving = np.concatenate([[True], np.linalg.norm(np.diff(xy[:n], axis=0), axis=1) > 1e-3])
-        yaw = np.where(moving, yaw, yaw[0])
-        return np.column_stack([xy[:n], yaw])
+        return np.column_stack([xy[:n], yaw[:n]])
 
     def predict(self, state: AIDState, row: dict[str, np.ndarray]) -> np.ndarray:
         """Predicted points [N, 30, 2] (ego frame) of the 5 nearest neighbours."""

@@ -65,11 +65,25 @@ def project(path_xy: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.nda
     return s, np.sign(cross) * dist[idx, k]
 
 
-class Reference:
-    """A natural cubic spline x(s), y(s) over a path's chord length, sampled every ``step`` m."""
+def smoothed(points: np.ndarray, sigma: float) -> np.ndarray:
+    """Points [n, >=2] with x, y smoothed by a Gaussian of ``sigma`` points (ends held): lane
+    polylines through junctions have kinks that a spline through every point keeps."""
+    from scipy.ndimage import gaussian_filter1d
 
-    def __init__(self, points: np.ndarray, step: float = 0.1):
+    out = np.array(points, dtype=np.float64, copy=True)
+    out[:, :2] = gaussian_filter1d(points[:, :2], sigma, axis=0, mode="nearest")
+    out[0, :2] = points[0, :2]
+    return out
+
+
+class Reference:
+    """A natural cubic spline x(s), y(s) over a path's chord length, sampled every ``step`` m
+    (``smooth``: Gaussian smoothing of the points first, in points)."""
+
+    def __init__(self, points: np.ndarray, step: float = 0.1, smooth: float = 0.0):
         points = np.asarray(points, dtype=np.float64)
+        if smooth > 0 and len(points) > 3:
+            points = smoothed(points, smooth)
         s = arc_length(points[:, :2])
         keep = np.concatenate([[True], np.diff(s) > 1e-6])
         points, s = points[keep], s[keep]
@@ -80,6 +94,8 @@ class Reference:
         self.xy = spline(self.s)
         d = spline(self.s, 1)
         self.yaw = np.arctan2(d[:, 1], d[:, 0])
+        dd = spline(self.s, 2)
+        self.curvature = (d[:, 0] * dd[:, 1] - d[:, 1] * dd[:, 0]) / np.maximum(np.hypot(d[:, 0], d[:, 1]) ** 3, 1e-9)
         self.length = float(s[-1])
         self.step = step
 
