@@ -109,6 +109,12 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "python -m train enjoy --agent zoo:keep-lane --scenario adaptive:a01_straight_free --video drive.mp4": (
         NOT_RUN, "tests/viz/test_enjoy.py runs it with --max-steps 40 and reads the video back",
     ),
+    "smarts replay info trajectories.csv --format ngsim --json": (
+        NOT_RUN, "needs the user's NGSIM file; tests/replay/test_replay_cli.py runs it on a CSV it writes",
+    ),
+    "smarts replay show trajectories.csv --format ngsim --swap-xy --flip-y --map road.net.xml --out replay.mp4": (
+        NOT_RUN, "needs the user's files; tests/replay/test_replay_cli.py renders a CSV it writes to .png, .gif and .mp4",
+    ),
 }
 
 
@@ -256,11 +262,38 @@ def _check_scenario(env, spec, obs) -> None:
     assert env.possible_agents == ["agent_0"]
 
 
+def _check_replay(env, spec, obs) -> None:
+    replay = next(p for p in env.sim.providers if p.name == "replay")
+    assert spec.replay.take_over == {"ego": "12"} and env.possible_agents == ["ego"]
+    assert (replay.state > 0).sum() >= 3  # the recorded vehicles came in (the ego's was taken over)
+    assert replay.handed_over == ["replay-13"]  # came up behind the standing ego: turned reactive
+
+
+def _replay_files(folder: Path) -> None:
+    """The NGSIM CSV and map the README's replay block names: vehicle 12 (taken over) ahead of 13 in
+    one lane, 14 ahead of them in the other, on the built-in straight two-lane road."""
+    import shutil
+
+    from smarts.scenario.builtin_maps import builtin_map_path
+    from tests.replay.files import LANE0_Y, LANE1_Y, straight, write_ngsim
+
+    shutil.copy(builtin_map_path("straight_2lane"), folder / "road.net.xml")
+    write_ngsim(folder / "trajectories.csv", {
+        "12": straight(500, 150, 60.0, 10.0, LANE0_Y),
+        "13": straight(500, 150, 30.0, 10.0, LANE0_Y),
+        "14": straight(520, 100, 100.0, 12.0, LANE1_Y),
+    })  # fmt: skip
+
+
+YAML_FILES = {"replay:": _replay_files}
+"""Files a yaml block names, written next to it before it is read."""
+
 YAML_CHECKS = {
     "name: my_left_turn": _check_scenario,
     "traffic:\n  engine: sumo": _check_traffic,
     "    interface:": _check_sensors,
     "comms:": _check_comms,
+    "replay:": _check_replay,
 }
 
 
@@ -271,6 +304,9 @@ def test_yaml_block_is_a_scenario_that_runs(block, line, tmp_path):
 
     path = tmp_path / f"readme_line{line}.yaml"
     path.write_text(block)
+    for key, write in YAML_FILES.items():
+        if key in block:
+            write(tmp_path)
     spec = load_scenario(path)
     env = DrivingParallelEnv(str(path))
     try:

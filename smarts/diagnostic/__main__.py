@@ -234,14 +234,16 @@ def _replay_rows(cases: list[tuple[int, bool]], steps: int, warmup: int, console
 
     rows = [replay_step_benchmark(n, steps, warmup, take_over) for n, take_over in
             track(cases, description="timing replay", console=console)]  # fmt: skip
-    table = Table(title=f"NGSIM replay, {steps} timed steps per case (ms per step)")
-    for col in ("replayed", "agent", "whole step median", "whole step mean", "whole step p90", "replay provider median"):
+    table = Table(title=f"NGSIM replay, {steps} timed steps per case (ms per step; 0: no replay, the reference)")
+    for col in ("replayed", "agent", "env step median [95% CI]", "env step mean", "env step p90", "sim step median",
+                "replay provider median"):  # fmt: skip
         table.add_column(col, justify="right", no_wrap=True)
     for r in rows:
+        lo, hi = r["env_step_ms_median_ci95"]
         table.add_row(
             f"{r['replayed_mean']:.0f}", "takes one over" if r["take_over"] else "stands aside",
-            f"{r['sim_step_ms_median']:.3f}", f"{r['sim_step_ms_mean']:.3f}", f"{r['sim_step_ms_p90']:.3f}",
-            f"{r['provider_ms_median']:.3f}",
+            f"{r['env_step_ms_median']:.3f} [{lo:.3f}, {hi:.3f}]", f"{r['env_step_ms_mean']:.3f}",
+            f"{r['env_step_ms_p90']:.3f}", f"{r['sim_step_ms_median']:.3f}", f"{r['provider_ms_median']:.3f}",
         )  # fmt: skip
     console.print(table)
     return rows
@@ -270,8 +272,9 @@ def main(argv: list[str] | None = None) -> int:
         help="all-sensors case as AGENTS:VEHICLES (default 10:50, built-in traffic); 'none' to skip",
     )
     parser.add_argument(
-        "--replay", default="1,10,20,50,50+",
-        help="replayed NGSIM vehicle counts; N+ adds an agent taking one over (default 1,10,20,50,50+; 'none' to skip)",
+        "--replay", default="0,1,10,20,50,50+",
+        help="replayed NGSIM vehicle counts; N+ adds an agent taking one over, 0 is the reference without replay "
+        "(default 0,1,10,20,50,50+; 'none' to skip)",
     )
     parser.add_argument("--out", type=Path, default=Path("reports/diagnostic.json"), help="JSON output file")
     args = parser.parse_args(argv)
@@ -351,7 +354,7 @@ def main(argv: list[str] | None = None) -> int:
 
     replay_cases = []
     for item in (c.strip() for c in args.replay.split(",") if c.strip() and args.replay != "none"):
-        if not item.rstrip("+").isdigit() or int(item.rstrip("+")) < 1:
+        if not item.rstrip("+").isdigit() or item == "0+":
             parser.error(f"--replay: expected counts such as 1,10,50,50+ or none, got {args.replay!r}")
         replay_cases.append((int(item.rstrip("+")), item.endswith("+")))
     replay_rows = _replay_rows(replay_cases, args.steps, args.warmup, console) if replay_cases else []

@@ -2,10 +2,12 @@
 
 Like SMARTS's diagnostic replay cases: ``n`` recorded vehicles drive along the six lanes of the
 455 m highway (an NGSIM trajectory CSV written here in the published layout, 0.1 s frames, read
-back through the real reader), all of them present for every timed step. Timed: the replay
-provider's own step and the whole simulation step (providers, map projection of every vehicle,
-events, route progress), with one agent on the road; in the take-over case that agent drives one of
-the recorded vehicles (its first state, its goal at the track's end) while the others replay.
+back through the real reader), all of them present for every timed step. Timed: the whole
+PettingZoo step (simulation, the agent's observation with its neighbours, reward), the simulation
+step alone (providers, map projection of every vehicle, events, route progress) and the replay
+provider's own step, with one agent on the road; in the take-over case that agent drives one of
+the recorded vehicles (its first state, its goal at the track's end) while the others replay. The
+reference row (0) is the same agent with no replay.
 """
 
 from __future__ import annotations
@@ -48,68 +50,83 @@ def write_bench_csv(path: Path, n_vehicles: int, frames: int, seed: int = 0) -> 
 
 
 def replay_step_benchmark(n_vehicles: int, steps: int = 300, warmup: int = 20, take_over: bool = False) -> dict:
-    """Time ``steps`` simulation steps with ``n_vehicles`` replayed (one taken over if asked).
+    """Time ``steps`` PettingZoo steps with ``n_vehicles`` replayed (one taken over if asked; 0: no
+    replay at all, the reference row).
 
-    Returns milliseconds per step (median and mean) of the replay provider and of the whole
-    simulation step, and the replayed vehicle count while timing."""
-    from smarts.env.assembly import build_simulation
+    Returns milliseconds per step (median with a bootstrap 95% interval, mean, 90th percentile) of
+    the whole env step (simulation, the agent's observation, reward), of the simulation step alone
+    and of the replay provider, and the replayed vehicle count while timing."""
+    from smarts.env import DrivingParallelEnv
     from smarts.scenario import ScenarioSpec
 
     frames = steps + warmup + 5
     with tempfile.TemporaryDirectory(prefix="smarts-replay-bench-") as folder:
-        csv_path = write_bench_csv(Path(folder) / "bench.csv", n_vehicles, frames)
-        if take_over:
-            agent = {"id": "ego", "action_space": "relative_target_pose"}
-        else:
-            # stands at the far end of the ramp, out of everyone's way
-            agent = {"id": "ego", "mission": {"start": {"road": "ramp", "lane": 0, "offset": 5.0}, "goal": {"endless": True}}}
-        replay = {"format": "ngsim", "path": str(csv_path), "swap_xy": True, "flip_y": True}
-        if take_over:
-            replay["take_over"] = {"ego": str(n_vehicles)}  # the front vehicle of its lane
-        spec = ScenarioSpec.from_dict(
-            {"name": f"replay_{n_vehicles}", "map": f"builtin:{BENCH_MAP}", "episode_steps": frames,
-             "vehicle_capacity": n_vehicles + 8, "events": {"terminate_on": []}, "replay": replay, "agents": [agent]},
-            source="replay_step_benchmark",
-        )  # fmt: skip
-        sim = build_simulation(spec)
-    provider = next(p for p in sim.providers if p.name == "replay")
-    sim.reset()
+        data = {"name": f"replay_{n_vehicles}", "map": f"builtin:{BENCH_MAP}", "episode_steps": frames,
+                "vehicle_capacity": n_vehicles + 8, "events": {"terminate_on": []}}  # fmt: skip
+        # the agent stands at the far end of the ramp, out of everyone's way, unless it takes over
+        agent = {"id": "ego", "mission": {"start": {"road": "ramp", "lane": 0, "offset": 5.0}, "goal": {"endless": True}}}
+        if n_vehicles:
+            csv_path = write_bench_csv(Path(folder) / "bench.csv", n_vehicles, frames)
+            data["replay"] = {"format": "ngsim", "path": str(csv_path), "swap_xy": True, "flip_y": True}
+            if take_over:
+                data["replay"]["take_over"] = {"ego": str(n_vehicles)}  # the front vehicle of its lane
+                agent = {"id": "ego"}
+        data["agents"] = [agent]
+        env = DrivingParallelEnv(ScenarioSpec.from_dict(data, source="replay_step_benchmark"))
+        env.reset(seed=0)
+    sim = env.sim
+    provider = next((p for p in sim.providers if p.name == "replay"), None)
     row = int(sim.agent_row[0])
-    step_dx = np.array([SPEED * sim.dt, 0.0, 0.0])
-    zero = np.zeros(3)
+    action = np.array([SPEED * sim.dt, 0.0, 0.0] if take_over else [0.0, 0.0, 0.0], dtype=np.float32)
 
-    def actions() -> dict:
-        return {"ego": step_dx if take_over else zero}
+    provider_ms, sim_ms, env_ms, counts = [], [], [], []
+    inner_provider, inner_sim = (provider.step if provider else None), sim.step
 
-    provider_ms, sim_ms, counts = [], [], []
-    inner = provider.step
-
-    def timed_step(s, dt):
+    def timed_provider(s, dt):
         t0 = time.perf_counter()
-        inner(s, dt)
+        inner_provider(s, dt)
         provider_ms.append((time.perf_counter() - t0) * 1e3)
 
-    for _ in range(warmup):
-        sim.step(actions())
-    provider.step = timed_step
+    def timed_sim(actions):
+        t0 = time.perf_counter()
+        inner_sim(actions)
+        sim_ms.append((time.perf_counter() - t0) * 1e3)
+
     try:
+        for _ in range(warmup):
+            env.step({"ego": action})
+        if provider is not None:
+            provider.step = timed_provider
+        sim.step = timed_sim
         for _ in range(steps):
             t0 = time.perf_counter()
-            sim.step(actions())
-            sim_ms.append((time.perf_counter() - t0) * 1e3)
-            counts.append(int((provider.state == 1).sum()))
+            env.step({"ego": action})
+            env_ms.append((time.perf_counter() - t0) * 1e3)
+            counts.append(int((provider.state == 1).sum()) if provider is not None else 0)
     finally:
-        del provider.step
+        if provider is not None:
+            del provider.step
+        del sim.step
+        env.close()
+    lo, hi = median_interval(np.array(env_ms))
     return {
         "n_vehicles": int(n_vehicles),
         "take_over": bool(take_over),
         "replayed_min": int(min(counts)),
         "replayed_mean": float(np.mean(counts)),
         "agent_on_road": bool(sim.table.alive[row]),
-        "provider_ms_median": float(np.median(provider_ms)),
-        "provider_ms_mean": float(np.mean(provider_ms)),
+        "env_step_ms_median": float(np.median(env_ms)),
+        "env_step_ms_median_ci95": [lo, hi],
+        "env_step_ms_mean": float(np.mean(env_ms)),
+        "env_step_ms_p90": float(np.percentile(env_ms, 90)),
         "sim_step_ms_median": float(np.median(sim_ms)),
-        "sim_step_ms_mean": float(np.mean(sim_ms)),
-        "sim_step_ms_p90": float(np.percentile(sim_ms, 90)),
+        "provider_ms_median": float(np.median(provider_ms)) if provider_ms else 0.0,
         "steps": int(steps),
     }
+
+
+def median_interval(samples: np.ndarray, resamples: int = 1000, seed: int = 0) -> tuple[float, float]:
+    """Bootstrap 95% interval of the median of ``samples``."""
+    rng = np.random.default_rng(seed)
+    medians = np.median(rng.choice(samples, size=(resamples, samples.size), replace=True), axis=1)
+    return float(np.percentile(medians, 2.5)), float(np.percentile(medians, 97.5))
