@@ -3,8 +3,7 @@
 A step is captured in two halves: the env's step listener copies the vehicle table and the signal
 colours while agents that finished on this step still have their vehicles (``StepCapture.on_step``),
 and the wrapper then adds what only ``step()`` returns (actions, rewards, events, observations).
-Everything is copied as whole-array slices of the vehicle table; the only per-vehicle Python work is
-looking up the id strings.
+Everything is copied as whole-array slices of the vehicle table (the id strings with one gather).
 
 A frame is a dict of plain arrays and lists (``Frame``); ``frame_json`` turns it into the JSON the
 page reads, and ``smarts.viz.recording`` stacks frames into an episode recording.
@@ -12,6 +11,7 @@ page reads, and ``smarts.viz.recording`` stacks frames into an episode recording
 
 from __future__ import annotations
 
+from operator import itemgetter
 from typing import Any
 
 import numpy as np
@@ -54,7 +54,7 @@ class StepCapture:
         agent_rows = np.where(sim.agent_active[self._agents], sim.agent_row[self._agents], -1)
         return {
             "time": float(sim.time),
-            "vehicle_ids": [ids[r] for r in rows.tolist()],
+            "vehicle_ids": _ids_of(ids, rows),
             "vehicle_state": table.data[self._columns][:, rows].T.astype(np.float32),
             "vehicle_role": table.role[rows].copy(),
             "vehicle_lane": table.lane[rows].copy(),
@@ -100,6 +100,15 @@ class StepCapture:
                 entry.update(_observation_in_world(obs[agent], pose[k], bool(self._visible[k])))
             agent_data[agent] = entry
         frame["agents"] = agent_data
+
+
+def _ids_of(ids: list, rows: np.ndarray) -> list:
+    """The id strings of ``rows`` (one C-level gather, no Python loop over vehicles)."""
+    if rows.size == 0:
+        return []
+    if rows.size == 1:
+        return [ids[int(rows[0])]]
+    return list(itemgetter(*rows.tolist())(ids))
 
 
 def _observation_in_world(ob: dict, pose: np.ndarray, visible: bool) -> dict:

@@ -55,3 +55,17 @@ def benchmark_log(tmp_path_factory) -> Path:
     run_jobs(jobs, workers=1, progress=False)
     (log,) = sorted((out / "logs").rglob("*.npz"))
     return log
+
+
+@pytest.fixture(scope="session")
+def finished(tmp_path_factory) -> Path:
+    """A recording of the README's two agents driving through their intersection to their goals
+    (both reach them: events to jump to)."""
+    from smarts.env import DrivingParallelEnv
+    from smarts.viz.watch import WatchedEnv
+
+    env = WatchedEnv(DrivingParallelEnv("intersection_4way_signal_right"), record=tmp_path_factory.mktemp("finished"))
+    drive(env)
+    env.close()
+    (path,) = env.recordings
+    return Path(path)

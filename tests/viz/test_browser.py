@@ -218,3 +218,38 @@ def test_screenshot(browser, served, tmp_path):
 
     with Image.open(out) as image:
         assert image.size[0] >= 1000 and np.asarray(image.convert("RGB")).std() > 10
+
+
+def test_click_traffic_vehicle_shows_its_role_and_speed(browser, served, recorded):
+    rec = read_recording(recorded["path"])
+    open_episode(browser, served.url, "0")
+    browser.execute_script("window.viz.goTo(40)")
+    frame = rec.frame(40)
+    k = int(np.flatnonzero(frame["vehicle_role"] == 3)[0])
+    vehicle = frame["vehicle_ids"][k]
+    click_canvas_at(browser, *body_point(browser, vehicle))
+    wait_for(browser, "return !document.getElementById('vehicle-panel').hidden")
+    assert browser.find_element("id", "vehicle-id").text == vehicle
+    assert field(browser, "vehicle-table", "role") == "traffic"
+    assert field(browser, "vehicle-table", "speed") == f"{float(frame['vehicle_state'][k, 3]):.2f} m/s"
+    assert browser.find_element("id", "agent-panel").get_attribute("hidden") is not None
+
+
+def test_jump_to_the_next_event(browser, finished):
+    from selenium.webdriver.support.ui import Select
+
+    rec = read_recording(finished)
+    goal = rec.meta["events"].index("reached_goal")
+    first = {a: int(np.flatnonzero(rec.arrays["agent_events"][:, j, goal])[0]) for j, a in enumerate(rec.agent_ids)}
+    with BackgroundServer(finished) as srv:
+        open_episode(browser, srv.url, "0")
+        Select(browser.find_element("id", "event")).select_by_visible_text("reached_goal")
+        browser.find_element("id", "next-event").click()
+        agent, step = min(first.items(), key=lambda item: item[1])
+        assert browser.execute_script("return window.viz.cur") == step
+        assert browser.find_element("id", "agent-id").text == agent
+        assert "reached_goal" in field(browser, "agent-table", "events")
+        browser.find_element("id", "next-event").click()  # the other agent's arrival comes next
+        other = max(first.items(), key=lambda item: item[1])
+        assert browser.execute_script("return window.viz.cur") == other[1]
+        assert browser.find_element("id", "agent-id").text == other[0]

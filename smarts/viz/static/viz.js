@@ -17,6 +17,7 @@ const state = {
   follow: true,       // live: stay on the newest frame
   view: { cx: 0, cy: 0, scale: 2 },  // world centre and pixels per metre
   selectedAgent: null,
+  selectedVehicle: null,  // a road user that is not an agent
   selectedLane: null,
   roles: new Set([0, 1, 2, 3, 4, 5]),
   trails: true,
@@ -83,6 +84,7 @@ function setEpisode(ep) {
   state.cur = 0;
   state.indexCache.clear();
   state.selectedAgent = null;
+  state.selectedVehicle = null;
   state.selectedLane = null;
   state.lanes = ep.scene.lanes.map((lane, i) => ({ ...lane, i, ...boundaries(lane.points, lane.width) }));
   fitView();
@@ -260,7 +262,7 @@ function drawObservation(f) {
 }
 
 function drawVehicles(f) {
-  const selected = state.selectedAgent && f.agents[state.selectedAgent] ? f.agents[state.selectedAgent].vehicle : null;
+  const selected = state.selectedAgent && f.agents[state.selectedAgent] ? f.agents[state.selectedAgent].vehicle : state.selectedVehicle;
   for (let i = 0; i < f.ids.length; i++) {
     if (!visible(f, i)) continue;
     path(vehicleCorners(f, i), true);
@@ -334,6 +336,20 @@ function showPanels() {
     $("agent-metrics").innerHTML = costs ? "<h3>Benchmark costs (lower is better)</h3><table>" +
       Object.entries(costs).map(([k, v]) => `<tr><td>${k}</td><td>${fmt(v, 3)}</td></tr>`).join("") + "</table>" : "";
   }
+  const vp = $("vehicle-panel");
+  const vid = state.selectedVehicle;
+  vp.hidden = vid === null;
+  if (vid !== null) {
+    $("vehicle-id").textContent = vid;
+    const i = f ? frameIndex(state.cur).get(vid) : undefined;
+    if (i === undefined) rows($("vehicle-table"), [["state", "not on the road at this step"]]);
+    else {
+      const lane = f.lane[i] >= 0 ? state.ep.scene.lanes[f.lane[i]] : null;
+      rows($("vehicle-table"), [["role", ROLE_NAMES[f.role[i]] || "?"], ["speed", `${fmt(f.speed[i])} m/s`],
+        ["position", `${fmt(f.x[i], 1)}, ${fmt(f.y[i], 1)}`], ["heading", `${fmt(f.h[i], 3)} rad`],
+        ["lane", lane ? lane.id : "–"], ["size", `${fmt(f.length[i], 1)} x ${fmt(f.width[i], 1)} m`]]);
+    }
+  }
   const lp = $("lane-panel");
   lp.hidden = state.selectedLane === null;
   if (state.selectedLane !== null) {
@@ -393,11 +409,9 @@ function click(px, py) {
   const vid = pickVehicle(w);
   const f = state.ep.frames[state.cur];
   const agent = vid === null ? null : Object.keys(f.agents).find((a) => f.agents[a].vehicle === vid);
-  if (agent) { state.selectedAgent = agent; state.selectedLane = null; }
-  else {
-    state.selectedAgent = null;
-    state.selectedLane = pickLane(w);
-  }
+  state.selectedAgent = agent || null;
+  state.selectedVehicle = vid !== null && !agent ? vid : null;
+  state.selectedLane = vid === null ? pickLane(w) : null;
   showPanels(); state.dirty = true;
 }
 
@@ -460,7 +474,7 @@ $("next-event").onclick = () => {
   const frames = state.ep ? state.ep.frames : [];
   for (let k = state.cur + 1; k < frames.length; k++) {
     for (const [id, a] of Object.entries(frames[k].agents)) {
-      if (a.events.includes(name)) { state.selectedAgent = id; state.selectedLane = null; goTo(k); $("status").textContent = `${name}: ${id} at step ${frames[k].step}`; return; }
+      if (a.events.includes(name)) { state.selectedAgent = id; state.selectedVehicle = null; state.selectedLane = null; goTo(k); $("status").textContent = `${name}: ${id} at step ${frames[k].step}`; return; }
     }
   }
   $("status").textContent = `no ${name} after this step`;
