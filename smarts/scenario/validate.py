@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from smarts.core.errors import MapError, NetconvertError, ScenarioError
+from smarts.core.errors import MapError, NetconvertError, ReplayError, ScenarioError
+from smarts.core.spec.replay import REPLAY_MAP
 from smarts.scenario.library import load_scenario
 from smarts.scenario.map_check import map_problems
 from smarts.scenario.spec import ScenarioSpec
@@ -83,10 +84,15 @@ def validate_spec(
 
     try:
         result.map_file = spec.map_path(cache_dir)
-        from smarts.maps import load_map
+        if spec.map == REPLAY_MAP and spec.replay is not None:  # the recording's own lanes
+            from smarts.replay import replay_road_map
 
-        result.road_map = load_map(result.map_file)
-    except (MapError, NetconvertError, ScenarioError, OSError) as exc:
+            result.road_map = replay_road_map(spec.replay, spec.base_dir, source)
+        else:
+            from smarts.maps import load_map
+
+            result.road_map = load_map(result.map_file)
+    except (MapError, NetconvertError, ScenarioError, ReplayError, OSError) as exc:
         add("map: ", exc, one=True)
         return result
     road_map = result.road_map
@@ -97,12 +103,25 @@ def validate_spec(
             _engine_check(spec, road_map, result.map_file)
         except (ScenarioError, MapError) as exc:
             add("", exc)
+    taken: dict = {}
+    if spec.replay is not None:  # ids, window and take-overs against the recording
+        from smarts.replay import plan_replay
+
+        try:
+            taken = {t.agent_id: t for t in plan_replay(spec.replay, spec.base_dir, source).take_overs}
+        except (ReplayError, ScenarioError) as exc:
+            add("", exc)
     if not result.problems:  # a safety net: plan each route exactly as a reset will
         from smarts.core.missions import resolve_mission
 
         for i, agent in enumerate(spec.agents):
             try:
-                resolve_mission(road_map, agent.id, agent.mission, f"agents[{i}].mission", spec.traffic)
+                mission = agent.mission
+                if agent.id in taken:
+                    from smarts.replay import take_over_mission
+
+                    mission = take_over_mission(road_map, taken[agent.id], f"replay.take_over.{agent.id}")
+                resolve_mission(road_map, agent.id, mission, f"agents[{i}].mission", spec.traffic)
             except MapError as exc:  # the simulation could not plan what the checks passed
                 add("", exc)
     return result

@@ -333,3 +333,36 @@ def test_always_reactive_hands_every_vehicle_over_as_it_enters(tmp_path, csv_fil
     assert replay.handed_over == ["replay-1", "replay-2", "replay-3"]
     t = sim.table
     assert all(t.role[r] == Role.TRAFFIC for r in t.alive_rows if t.ids[r].startswith("replay-"))
+
+
+# ---------------------------------------------------------------------------- env and validate
+def test_replayed_vehicles_are_neighbours_in_the_agents_observation(tmp_path, csv_file):
+    from smarts.env import DrivingParallelEnv
+
+    agents = [{"id": "ego", "mission": {"start": {"road": "main", "lane": 1, "offset": 40.0}, "goal": {"endless": True}}}]
+    env = DrivingParallelEnv(str(scenario(tmp_path, {"vehicles": ["1"]}, agents=agents)))
+    try:
+        obs, _ = env.reset(seed=0)
+        for _ in range(5):
+            obs, *_ = env.step({"ego": np.zeros(3, np.float32)})
+        neighbours = obs["ego"]["neighbours"]
+        # vehicle 1 at 25 m in lane 0 (3.2 m to the right), 15 m behind the agent at 40 m
+        assert env.observation_space("ego").contains(obs["ego"])
+        rows = neighbours[np.abs(neighbours).sum(axis=1) > 0]
+        assert len(rows) == 1
+    finally:
+        env.close()
+
+
+def test_scenario_validate_checks_the_replay_section(tmp_path, csv_file):
+    import subprocess
+    import sys
+
+    good = scenario(tmp_path, {"take_over": {"ego": "2"}}, agents=[{"id": "ego"}])
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(good.read_text().replace("ego: '2'", "ego: '77'"))
+    done = subprocess.run([sys.executable, "-m", "smarts", "scenario", "validate", str(good), str(bad)],
+                          capture_output=True, text=True, check=False)  # fmt: skip
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert f"{good}: valid" in done.stdout
+    assert f"{bad}: replay.take_over.ego: no vehicle '77' in" in done.stdout + done.stderr
