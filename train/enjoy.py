@@ -95,15 +95,43 @@ def write_tensorboard_video(writer, tag: str, frames: list[np.ndarray], step: in
     writer.flush()
 
 
-def enjoy(args: argparse.Namespace) -> int:
+def policy_env(agent: str, scenario: str, seed: int = 0):
+    """(policy, env, spec): the policy ``agent`` names, loaded as the benchmark loads it, and a
+    rendering env of ``scenario`` whose learning agents act in the policy's action space."""
     from smarts.benchmark.runner import load_policy, policy_setup, scenario_for
     from smarts.env import DrivingParallelEnv
 
-    policy = load_policy(args.agent, args.seed)
-    setup = policy_setup(policy, args.agent)
-    spec = scenario_for(scenario_spec(args.scenario), setup)
+    policy = load_policy(agent, seed)
+    setup = policy_setup(policy, agent)
+    spec = scenario_for(scenario_spec(scenario), setup)
     env = DrivingParallelEnv(spec, observation=setup.interface, lane_relative=setup.lane_relative,
                              render_mode="rgb_array")  # fmt: skip
+    return policy, env, spec
+
+
+def act(policy, env, obs: dict) -> dict:
+    """One batched policy call for every live agent."""
+    batch = {k: np.stack([obs[a][k] for a in env.agents]) for k in obs[env.agents[0]]}
+    return dict(zip(env.agents, np.asarray(policy.act(batch))))
+
+
+def episode_frames(agent: str, scenario: str, seed: int = 0, max_steps: int | None = None) -> list[np.ndarray]:
+    """The top-down frames of one episode of ``agent`` on ``scenario`` (for an evaluation video:
+    ``write_tensorboard_video(writer, tag, episode_frames(checkpoint, "adaptive:a01_straight_free"), step)``)."""
+    policy, env, _ = policy_env(agent, scenario, seed)
+    frames = []
+    try:
+        obs, _ = env.reset(seed=seed)
+        while env.agents and (max_steps is None or len(frames) < max_steps):
+            frames.append(env.render())
+            obs, *_ = env.step(act(policy, env, obs))
+    finally:
+        env.close()
+    return frames
+
+
+def enjoy(args: argparse.Namespace) -> int:
+    policy, env, spec = policy_env(args.agent, args.scenario, args.seed)
     server = None
     if args.viz or args.record:
         from smarts.viz.watch import WatchedEnv
@@ -138,9 +166,7 @@ def enjoy(args: argparse.Namespace) -> int:
                     video.add(frame)
                 if writer:
                     tb_frames.append(frame)
-                batch = {k: np.stack([obs[a][k] for a in env.agents]) for k in obs[env.agents[0]]}
-                actions = np.asarray(policy.act(batch))
-                obs, rewards, *_ = env.step(dict(zip(env.agents, actions)))
+                obs, rewards, *_ = env.step(act(policy, env, obs))
                 total += sum(rewards.values())
                 steps += 1
                 if args.viz and args.realtime:

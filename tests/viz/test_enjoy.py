@@ -42,3 +42,19 @@ def test_enjoy_refuses_bad_options(tmp_path):
     cmd[-1] = "adaptive:a01_straight_free"
     done = subprocess.run(cmd + ["--video", "x.avi"], capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert done.returncode == 2 and "expected a .mp4" in done.stderr
+
+
+def test_evaluation_video_in_tensorboard(tmp_path):
+    from torch.utils.tensorboard import SummaryWriter
+
+    from train.enjoy import episode_frames, write_tensorboard_video
+
+    frames = episode_frames("zoo:keep-lane", "adaptive:a01_straight_free", seed=3000, max_steps=20)
+    assert len(frames) == 20 and frames[0].dtype == np.uint8 and frames[0].ndim == 3
+    assert not np.array_equal(frames[0], frames[-1])  # the vehicles moved
+    with SummaryWriter(log_dir=str(tmp_path)) as writer:
+        write_tensorboard_video(writer, "eval_video/a01_straight_free", frames, step=128)
+    events = EventAccumulator(str(tmp_path))
+    events.Reload()
+    (image,) = events.Images("eval_video/a01_straight_free")
+    assert image.step == 128 and (image.width, image.height) == (frames[0].shape[1], frames[0].shape[0])
