@@ -235,13 +235,12 @@ def _replay_rows(cases: list[tuple[int, bool]], steps: int, warmup: int, console
     rows = [replay_step_benchmark(n, steps, warmup, take_over) for n, take_over in
             track(cases, description="timing replay", console=console)]  # fmt: skip
     table = Table(title=f"NGSIM replay, {steps} timed steps per case (ms per step; 0: no replay, the reference)")
-    for col in ("replayed", "agent", "env step median [95% CI]", "env step mean", "env step p90", "sim step median",
-                "replay provider median"):  # fmt: skip
+    for col in ("replayed", "agent", "env median [95% CI]", "env mean", "env p90", "sim median", "replay median"):
         table.add_column(col, justify="right", no_wrap=True)
     for r in rows:
         lo, hi = r["env_step_ms_median_ci95"]
         table.add_row(
-            f"{r['replayed_mean']:.0f}", "takes one over" if r["take_over"] else "stands aside",
+            f"{r['replayed_mean']:.0f}", "takes one over" if r["take_over"] else "aside",
             f"{r['env_step_ms_median']:.3f} [{lo:.3f}, {hi:.3f}]", f"{r['env_step_ms_mean']:.3f}",
             f"{r['env_step_ms_p90']:.3f}", f"{r['sim_step_ms_median']:.3f}", f"{r['provider_ms_median']:.3f}",
         )  # fmt: skip
