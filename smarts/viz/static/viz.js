@@ -91,7 +91,7 @@ function setEpisode(ep) {
   const events = new Set();
   for (const f of ep.frames) for (const a of Object.values(f.agents)) a.events.forEach((e) => events.add(e));
   const sel = $("event");
-  const names = ["collision", "off_road", "wrong_way", "reached_goal", ...(ep.meta.events || [])];
+  const names = ["collision", "off_road", "wrong_way", "reached_goal", ...events, ...(ep.meta.events || [])];
   sel.innerHTML = [...new Set(names)].map((e) => `<option>${e}</option>`).join("");
   updateSeek();
   showEpisode();
