@@ -5,6 +5,7 @@ const ROLE_NAMES = ["none", "agent", "social agent", "traffic", "replay", "pedes
 const ROLE_COLOURS = ["#aaaaaa", "#e63c32", "#f0a028", "#4682e6", "#a05adc", "#fafafa"];
 const SIGNAL_COLOURS = [null, "#e53935", "#fdd835", "#43a047"];
 const TRAIL_STEPS = 30;
+const LIVE_FRAMES = 20000;  // most steps of a live episode kept in the page
 
 const $ = (id) => document.getElementById(id);
 const canvas = $("canvas");
@@ -132,8 +133,14 @@ function connectLive() {
       state.follow = true;
       $("status").textContent = `live: ${data.meta.scenario} (seed ${data.meta.seed})`;
     } else if (data.type === "frame" && state.ep) {
-      state.ep.frames.push(data.frame);
-      if (state.follow) state.cur = state.ep.frames.length - 1;
+      const frames = state.ep.frames;
+      frames.push(data.frame);
+      if (frames.length > LIVE_FRAMES) {  // a long live episode keeps its newest steps
+        frames.splice(0, frames.length - LIVE_FRAMES + 1000);
+        state.indexCache.clear();
+        state.cur = Math.max(0, state.cur - 1000);
+      }
+      if (state.follow) state.cur = frames.length - 1;
       updateSeek();
       showPanels();
       state.dirty = true;
