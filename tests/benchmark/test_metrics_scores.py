@@ -295,6 +295,16 @@ def test_s_bench_weights_collaborative_and_adaptive():
     assert s["S_bench"] == pytest.approx((0.5 + 3 * 0.5) / 4)
 
 
+def test_s_bench_puts_each_weight_on_its_own_metric():
+    """Four different values, so a weight on the wrong metric changes the result."""
+    metrics = {"PR": 0.9, "RC": 0.7, "Humanness": 0.4, "MTE": 0.2, "SFD": 0.6}
+    assert s_bench(metrics, "collaborative", P) == pytest.approx(0.1 * 0.9 + 0.45 * 0.7 + 0.15 * 0.4 + 0.3 * 0.2)
+    assert s_bench(metrics, "adaptive", P) == pytest.approx(0.1 * 0.9 + 0.45 * 0.7 + 0.15 * 0.4 + 0.3 * 0.6)
+    params = MetricParams(weights=Weights(pr=1.0, rc=2.0, humanness=3.0, mte=4.0, sfd=5.0))
+    assert s_bench(metrics, "collaborative", params) == pytest.approx((0.9 + 1.4 + 1.2 + 0.8) / 10)
+    assert s_bench(metrics, "adaptive", params) == pytest.approx((0.9 + 1.4 + 1.2 + 3.0) / 11)
+
+
 def _progress_episode(scenario: str, episode: int, left: float) -> object:
     trace = make_trace(3, route_distance_to_goal=np.full(3, left))
     return make_episode(
