@@ -136,9 +136,10 @@ function connectLive() {
       const frames = state.ep.frames;
       frames.push(data.frame);
       if (frames.length > LIVE_FRAMES) {  // a long live episode keeps its newest steps
-        frames.splice(0, frames.length - LIVE_FRAMES + 1000);
+        const removed = frames.length - LIVE_FRAMES + 1000;
+        frames.splice(0, removed);
         state.indexCache.clear();
-        state.cur = Math.max(0, state.cur - 1000);
+        state.cur = Math.max(0, state.cur - removed);
       }
       if (state.follow) state.cur = frames.length - 1;
       updateSeek();
