@@ -115,9 +115,11 @@ def _replay_plan(spec: ScenarioSpec):
     """The scenario's replay section checked against its recording (None without one)."""
     if spec.replay is None:
         return None
-    from smarts.replay import plan_replay
+    from smarts.replay.load import check_capacity, plan_replay
 
-    return plan_replay(spec.replay, spec.base_dir, spec.source)
+    plan = plan_replay(spec.replay, spec.base_dir, spec.source)
+    check_capacity(plan, spec.vehicle_capacity, len(spec.agents), spec.source)
+    return plan
 
 
 def _replay_mission(road_map: RoadMap, taken: dict, agent, where: str):

@@ -12,6 +12,7 @@ import numpy as np
 from smarts.core.errors import MapError, ReplayError
 from smarts.core.spec.replay import COORDINATES, REPLAY_FORMATS
 from smarts.core.vehicle_table import VehicleType
+from smarts.replay.load import most_at_once
 
 
 def add_commands(subparsers: argparse._SubParsersAction) -> None:
@@ -70,20 +71,11 @@ def summary(rec) -> dict:
         "samples": int(rec.count.sum()),
         "extent": {"xmin": xmin, "ymin": ymin, "xmax": xmax, "ymax": ymax},
         "types": types,
-        "max_at_once": _most_at_once(rec),
+        "max_at_once": most_at_once(rec),
     }
     if rec.road_map is not None:
         out["map_lanes"] = len(rec.road_map.lane_ids)
     return out
-
-
-def _most_at_once(rec) -> int:
-    if rec.num_vehicles == 0:
-        return 0
-    delta = np.zeros(rec.frames + 1, dtype=np.int64)
-    np.add.at(delta, rec.first - rec.start_frame, 1)
-    np.add.at(delta, rec.last - rec.start_frame + 1, -1)
-    return int(np.cumsum(delta).max())
 
 
 def _info(args: argparse.Namespace) -> int:

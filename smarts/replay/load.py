@@ -160,6 +160,34 @@ def plan_replay(replay: ReplaySpec, base_dir: Path | None, source: str = "<dict>
     return ReplayPlan(rec, float(start), replay.duration, take_overs)
 
 
+def most_at_once(rec: Recording, start: float = 0.0, duration: float | None = None) -> int:
+    """The most vehicles recorded at one frame between ``start`` and ``start + duration`` s."""
+    if rec.num_vehicles == 0:
+        return 0
+    lo = rec.start_frame + int(np.floor(start / rec.dt + FRAME_EPS))
+    hi = rec.last.max() if duration is None else min(rec.last.max(), lo + int(np.ceil(duration / rec.dt - FRAME_EPS)))
+    first = np.maximum(rec.first, lo)
+    last = np.minimum(rec.last, hi)
+    inside = first <= last
+    if not inside.any():
+        return 0
+    delta = np.zeros(int(hi - lo) + 2, dtype=np.int64)
+    np.add.at(delta, first[inside] - lo, 1)
+    np.add.at(delta, last[inside] - lo + 1, -1)
+    return int(np.cumsum(delta).max())
+
+
+def check_capacity(plan: ReplayPlan, capacity: int, agents: int, source: str = "<dict>") -> None:
+    """A scenario's vehicle table must hold its agents and the most recorded vehicles at once."""
+    peak = most_at_once(plan.recording, plan.start, plan.duration)
+    need = peak + agents - len(plan.take_overs)  # a taken-over vehicle is its agent's row
+    if need > capacity:
+        raise ScenarioError(
+            f"{source}: vehicle_capacity: the replay has up to {peak} vehicles at once and the scenario "
+            f"{agents} agent(s): expected at least {need}, got {capacity}"
+        )
+
+
 def _some(ids: list[str], n: int = 8) -> str:
     head = ", ".join(ids[:n])
     return f"vehicles: {head}{', ...' if len(ids) > n else ''} ({len(ids)} in all)"

@@ -59,3 +59,19 @@ def test_show_draws_the_vehicles_where_they_are(tmp_path, capsys):
     assert (tmp_path / "v.mp4").stat().st_size > 1000
     assert main(["replay", "show", str(path), "--format", "ngsim", "--out", str(tmp_path / "v.txt")]) == 1
     assert "expected a .png image" in capsys.readouterr().err
+
+
+def test_show_draws_a_datasets_own_lanes(tmp_path, capsys):
+    from tests.replay.files import write_av2, write_waymo
+
+    folder = write_av2(tmp_path / "scn")
+    out = tmp_path / "av2.png"
+    assert main(["replay", "show", str(folder), "--format", "argoverse2", "--time", "3", "--out", str(out)]) == 0
+    image = np.asarray(Image.open(out).convert("RGB")).astype(int)
+    grey = (np.abs(image - [96, 100, 108]).sum(axis=2) < 10).sum()
+    blue = (np.abs(image - [80, 170, 255]).sum(axis=2) < 30).sum()
+    assert grey > 500 and blue > 50  # four 100 m lane centres and three vehicles
+    tf = write_waymo(tmp_path / "s.tfrecord")
+    assert main(["replay", "info", str(tf), "--format", "waymo", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out.splitlines()[-1])
+    assert info["vehicles"] == 2 and info["frames"] == 91 and info["map_lanes"] == 4
