@@ -141,6 +141,9 @@ class BatchedDriving:
         self._obs = {k: np.zeros((n, *s.shape), dtype=s.dtype) for k, s in self.observation_space.spaces.items()}
         self._first = {k: np.zeros_like(v) for k, v in self._obs.items()}
         self._next_seed: list[int | None] = [None] * len(self.specs)
+        self.seed_schedule: Callable[[int], int | None] | None = None
+        """When set, ``seed_schedule(copy)`` gives each new episode's seed instead (adapters with
+        their own seeding convention)."""
         self._terminal = self.groups[0].sim.event_config.terminate_on.copy()
         self._terminal[Event.MAX_STEPS] = False
 
@@ -168,6 +171,8 @@ class BatchedDriving:
         self._next_seed = [None if seed is None else derived_seed(seed, i * COPY_SEED_STRIDE) for i in range(len(self.specs))]
 
     def _take_seed(self, copy: int) -> int | None:
+        if self.seed_schedule is not None:
+            return self.seed_schedule(copy)
         seed = self._next_seed[copy]
         if seed is not None:
             self._next_seed[copy] = derived_seed(seed, 1)

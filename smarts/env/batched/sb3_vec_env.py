@@ -5,8 +5,8 @@ same thing from either): a finishing agent's slot reports ``done`` once, with
 ``terminal_observation``, ``TimeLimit.truncated`` and the ``episode`` record; while the rest of
 its copy drives on, the slot is inactive (zero observation, reward 0, ``info["inactive"]``); a
 copy whose agents have all finished restarts within the same step and its slots get the new
-episode's first observations. Seeds follow ``BatchedDriving.set_seed`` (copy ``i`` at
-``seed + i * 100_003``, counting up per episode).
+episode's first observations. Seeds also follow ``SmartsVecEnv`` (see ``seed``), so both play
+the same episodes.
 """
 
 from __future__ import annotations
@@ -21,9 +21,12 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
-from smarts.core.simulation import check_seed
+from smarts.core.simulation import check_seed, derived_seed
 from smarts.env.batched.driving import BatchedDriving
 from smarts.scenario import ScenarioSpec
+
+
+SEED_STREAM_LIMIT = 2**31 - 1  # later episodes' seeds are drawn below this, as SmartsVecEnv draws them
 
 
 class BatchedVecEnv(VecEnv):
@@ -60,8 +63,27 @@ class BatchedVecEnv(VecEnv):
             self.seed(check_seed(seed, "BatchedVecEnv(seed=...)"))
 
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
-        self.driving.set_seed(seed)
-        return [seed] * self.num_envs
+        """Seed the next reset as ``SmartsVecEnv`` does: slot ``i``'s seed is ``seed + i``, copy
+        ``k`` starts from that of its first slot and draws each later episode's seed from a stream
+        seeded by it (None: a random seed). Returns the slots' seeds."""
+        if seed is None:
+            seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
+        seed = check_seed(seed, "BatchedVecEnv.seed(seed)")
+        first_slot: dict[int, int] = {}
+        for j, (copy, _) in enumerate(self.slot_agents):
+            first_slot.setdefault(copy, j)
+        self._pending = {copy: derived_seed(seed, j) for copy, j in first_slot.items()}
+        self._streams: dict[int, np.random.Generator] = {}
+        self.driving.seed_schedule = self._episode_seed
+        return [derived_seed(seed, i) for i in range(self.num_envs)]
+
+    def _episode_seed(self, copy: int) -> int | None:
+        if copy in self._pending:
+            seed = self._pending.pop(copy)
+            self._streams[copy] = np.random.default_rng(seed)
+            return seed
+        stream = self._streams.get(copy)
+        return None if stream is None else int(stream.integers(SEED_STREAM_LIMIT))
 
     def reset(self) -> VecEnvObs:
         obs = self.driving.reset()
