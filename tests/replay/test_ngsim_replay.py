@@ -366,3 +366,23 @@ def test_scenario_validate_checks_the_replay_section(tmp_path, csv_file):
     assert done.returncode == 2, done.stdout + done.stderr
     assert f"{good}: valid" in done.stdout
     assert f"{bad}: replay.take_over.ego: no vehicle '77' in" in done.stdout + done.stderr
+
+
+def test_reactive_vehicles_go_to_sumo_when_sumo_drives_the_traffic(tmp_path, csv_file):
+    agents = [{"id": "ego", "mission": {"start": {"road": "main", "lane": 0, "offset": 60.0}, "goal": {"endless": True}}}]
+    path = scenario(tmp_path, {"reactive": "interaction", "reactive_distance": 15.0}, agents=agents,
+                    traffic={"engine": "sumo"})  # fmt: skip
+    sim = build_simulation(load_scenario(path))
+    try:
+        replay, sumo = sim.providers[1], sim.providers[2]
+        assert sumo.name != "replay" and type(sumo).__name__ == "SumoTrafficProvider"
+        sim.reset()
+        from smarts.core.events import Event
+
+        for _ in range(100):
+            sim.step(_stand_still(sim))
+            assert not sim.agent_events[0, Event.COLLISION]
+        assert replay.handed_over[0] == "replay-1"
+        assert sim.table.owner[sim.table.row_of["replay-1"]] == sumo.provider_id
+    finally:
+        sim.close()
