@@ -105,12 +105,20 @@ def read_waymo(
 def read_map(msg, where: str, *, swap_xy: bool, flip_y: bool, offset: tuple[float, float]) -> DatasetMap | None:
     """Lane centres (not bike lanes) and stop signs of a scenario's map features."""
     ids, lines, speeds, internal, succ, left, right, stops = [], [], [], [], [], [], [], []
+    widths = []
+    boundaries = {}  # road line and road edge polylines by feature id, for lane widths
+    for feature in msg.map_features:
+        if feature.HasField("road_line") or feature.HasField("road_edge"):
+            line = feature.road_line if feature.HasField("road_line") else feature.road_edge
+            if len(line.polyline) >= 2:
+                boundaries[feature.id] = np.array([(p.x, p.y) for p in line.polyline], dtype=np.float64)
     for feature in msg.map_features:
         if feature.HasField("lane"):
             lane = feature.lane
             if lane.type == LANE_BIKE or len(lane.polyline) < 2:
                 continue
             xy = np.array([(p.x, p.y) for p in lane.polyline], dtype=np.float64)
+            widths.append(lane_width(xy, lane.left_boundaries, lane.right_boundaries, boundaries))
             ids.append(str(feature.id))
             lines.append(np.stack(align(xy[:, 0], xy[:, 1], swap_xy=swap_xy, flip_y=flip_y, offset=offset), axis=1))
             speeds.append(lane.speed_limit_mph * MPH if lane.speed_limit_mph > 0 else DEFAULT_SPEED_LIMIT)
@@ -128,7 +136,7 @@ def read_map(msg, where: str, *, swap_xy: bool, flip_y: bool, offset: tuple[floa
         source=where,
         lane_ids=ids,
         polylines=lines,
-        widths=np.zeros(len(ids)),  # not in the dataset: the compiler's default width
+        widths=np.array(widths),  # 0 where no boundary is known: the compiler's default width
         speed_limits=np.array(speeds),
         internal=np.array(internal, dtype=bool),
         successors=succ,
@@ -136,3 +144,44 @@ def read_map(msg, where: str, *, swap_xy: bool, flip_y: bool, offset: tuple[floa
         right=right,
         stop_signs=np.array(stops, dtype=np.float64).reshape(-1, 2),
     )
+
+
+MAX_HALF_WIDTH = 3.0
+"""m: a boundary farther than this from the lane centre is not the lane's edge (a gap, a median)."""
+
+
+def lane_width(centre: np.ndarray, left_segments, right_segments, boundaries: dict) -> float:
+    """A lane's width from its boundary segments (road lines and edges beside it): the median
+    distance from its centre points to each side's boundary, summed; one side known counts twice;
+    0 when neither is (the dataset gives no width of its own)."""
+    sides = []
+    for segments in (left_segments, right_segments):
+        distances = []
+        for seg in segments:
+            line = boundaries.get(seg.boundary_feature_id)
+            if line is None:
+                continue
+            lo, hi = max(seg.lane_start_index, 0), min(seg.lane_end_index, len(centre) - 1)
+            if hi < lo:
+                continue
+            distances.append(_point_polyline_distance(centre[lo : hi + 1], line))
+        if distances:
+            d = float(np.median(np.concatenate(distances)))
+            sides.append(d if d <= MAX_HALF_WIDTH else None)
+        else:
+            sides.append(None)
+    known = [d for d in sides if d is not None and d > 0.5]
+    if not known:
+        return 0.0
+    return float(sum(known)) if len(known) == 2 else 2.0 * known[0]
+
+
+def _point_polyline_distance(points: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """Distance from each point to the nearest segment of a polyline (vectorised)."""
+    a, b = line[:-1], line[1:]
+    ab = b - a
+    denom = np.maximum((ab * ab).sum(axis=1), 1e-12)
+    ap = points[:, None, :] - a[None, :, :]
+    t = np.clip((ap * ab[None]).sum(axis=2) / denom[None], 0.0, 1.0)
+    closest = a[None] + t[..., None] * ab[None]
+    return np.sqrt(((points[:, None, :] - closest) ** 2).sum(axis=2)).min(axis=1)

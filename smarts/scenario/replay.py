@@ -33,7 +33,14 @@ def _path(value: Any) -> str:
     return value
 
 
+def _scenario_id(value: Any) -> str:
+    if isinstance(value, bool) or not isinstance(value, (str, int)) or not str(value).strip():
+        raise ValueError("expected a scenario id or a 0-based record index")
+    return str(value).strip()
+
+
 VehicleId = Annotated[str, PlainValidator(_vehicle_id, json_schema_input_type=str | int)]
+ScenarioId = Annotated[str, PlainValidator(_scenario_id, json_schema_input_type=str | int)]
 Seconds = Annotated[float, Field(ge=0, le=1e7, allow_inf_nan=False)]
 
 
@@ -67,7 +74,7 @@ class ReplayFile(Schema):
     offset: Annotated[list[Annotated[float, Field(allow_inf_nan=False)]], Field(min_length=2, max_length=2)] = Field(
         default_factory=lambda: [0.0, 0.0], description="[x, y] m added after swapping and flipping."
     )
-    scenario: VehicleId | None = Field(None, description="Waymo: scenario id or record index in the file; null: the first.")
+    scenario: ScenarioId | None = Field(None, description="Waymo: scenario id or record index in the file; null: the first.")
 
     def to_spec(self) -> ReplaySpec:
         return ReplaySpec(

@@ -177,10 +177,23 @@ def waymo_scenario(scenario_id: str = WAYMO_ID):
         for x in np.linspace(x0, x0 + 100.0, 11):
             f.lane.polyline.add(x=float(x), y=y, z=0.0)
         f.lane.exit_lanes.extend(exits)
+        if feature_id % 2:  # the right lanes know both boundaries, the left lanes only the right one
+            f.lane.right_boundaries.add(lane_start_index=0, lane_end_index=10, boundary_feature_id=3001, boundary_type=0)
+            f.lane.left_boundaries.add(lane_start_index=0, lane_end_index=10, boundary_feature_id=3002, boundary_type=1)
+        else:
+            f.lane.right_boundaries.add(lane_start_index=0, lane_end_index=10, boundary_feature_id=3002, boundary_type=1)
         for side, other in ((f.lane.left_neighbors, left), (f.lane.right_neighbors, right)):
             if other is not None:
                 side.add(feature_id=other, self_start_index=0, self_end_index=10, neighbor_start_index=0,
                          neighbor_end_index=10)  # fmt: skip
+
+    # road lines: the right edge of lanes 1001/1003 (y = -1.85) and the line between the lanes (y = 1.85)
+    for line_id, y in ((3001, -1.85), (3002, 1.85)):
+        f = msg.map_features.add(id=line_id)
+        kind = f.road_edge if line_id == 3001 else f.road_line
+        kind.type = 1
+        for x in (0.0, 200.0):
+            kind.polyline.add(x=x, y=y, z=0.0)
 
     lane(1001, 0.0, [1003], left=1002)
     lane(1002, 0.0, [1004], right=1001)
@@ -189,10 +202,6 @@ def waymo_scenario(scenario_id: str = WAYMO_ID):
     stop = msg.map_features.add(id=2001)
     stop.stop_sign.lane.append(1003)
     stop.stop_sign.position.x, stop.stop_sign.position.y = 195.0, -2.0
-    edge = msg.map_features.add(id=3001)
-    edge.road_edge.type = 1
-    for x in (0.0, 200.0):
-        edge.road_edge.polyline.add(x=x, y=-1.85, z=0.0)
     return msg
 
 

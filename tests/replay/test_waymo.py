@@ -54,6 +54,8 @@ def test_tracks_and_map_are_read(tmp_path):
     assert m.lane_left.tolist() == [1, -1, 3, -1]
     assert [m.succ[m.succ_offsets[i] : m.succ_offsets[i + 1]].tolist() for i in range(4)] == [[2], [3], [], []]
     np.testing.assert_allclose(m.lane_speed_limit, 25 * 0.44704)
+    # widths from the road edge and line beside each lane (the left lanes: twice the one side known)
+    np.testing.assert_allclose(m.lane_width, 3.7)
 
 
 def test_a_scenario_is_picked_by_id_or_index(tmp_path):
