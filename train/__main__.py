@@ -138,10 +138,12 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     _ppo_options(ppo, argv)
     ppo.set_defaults(run=_ppo)
 
-    from train import aid_predictor, trajectories
+    from train import aid_predictor, tf_bc, trajectories, vcr_classifier
 
     trajectories.add_parser(sub)
     aid_predictor.add_parser(sub)
+    tf_bc.add_parser(sub)
+    vcr_classifier.add_parser(sub)
 
     from train.enjoy import add_parser as add_enjoy
 

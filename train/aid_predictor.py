@@ -81,6 +81,8 @@ def build_set(files: list[Path], per_episode: int, seed: int) -> dict[str, torch
         with np.load(path) as data:
             for key in sorted(data.files):
                 rows += samples_from_episode(data[key], per_episode, rng)
+    if not rows:
+        raise ValueError(f"no samples in {[f.name for f in files]}: episodes need 26+ steps and 2+ vehicles")
     names = ("ego", "neighbours", "future", "mask")
     return {n: torch.from_numpy(np.stack([r[i] for r in rows])) for i, n in enumerate(names)}
 
@@ -88,8 +90,11 @@ def build_set(files: list[Path], per_episode: int, seed: int) -> dict[str, torch
 def split(files: list[Path], every: int = 5) -> tuple[list[Path], list[Path]]:
     """Held-out scenarios: every ``every``-th file by name (the rest train)."""
     files = sorted(files)
-    held = files[every - 1 :: every]
-    return [f for f in files if f not in held], held
+    held = files[every - 1 :: every] or files[-1:]
+    rest = [f for f in files if f not in held]
+    if not rest:
+        raise ValueError(f"need at least 2 scenario files to hold some out, got {len(files)}")
+    return rest, held
 
 
 def loss_fn(trajs: torch.Tensor, scores: torch.Tensor, future: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:

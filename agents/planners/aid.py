@@ -41,6 +41,7 @@ MAX_SPEED = 16.0
 LATERAL_RATE = 1.5
 MIN_LATERAL_TIME = 1.0
 REPLAN_EVERY = 3
+HISTORY = 11
 NEAREST = 5
 EMERGENCY_DECEL = 9.0
 MAX_YAW_RATE = 1.2
@@ -57,6 +58,8 @@ class AIDState(AgentState):
         self.queue: list[np.ndarray] = []
         self.since_plan = REPLAN_EVERY
         self.emergency = False
+        self.ego_history: list[np.ndarray] = []  # odometry (x, y, heading, speed), oldest first
+        self.ids = np.zeros(0, dtype=np.int64)
 
 
 class Candidate:
@@ -151,6 +154,47 @@ class ConstantVelocity:
         return nb[:, None, :2] + vel[:, None, :] * t[None, :, None]
 
 
+def in_frame(states: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Odometry states [..., >=4] (x, y, heading, speed) -> predictor features (x, y, relative
+    heading, vx, vy) in the frame of ``pose``; all-zero rows (unseen) stay zero."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    dx, dy = states[..., 0] - pose[0], states[..., 1] - pose[1]
+    rel = wrap(states[..., 2] - pose[2])
+    v = states[..., 3]
+    out = np.stack([c * dx + s * dy, -s * dx + c * dy, rel, v * np.cos(rel), v * np.sin(rel)], axis=-1)
+    return np.where((np.abs(states[..., :4]).sum(-1) > 0)[..., None], out, 0.0)
+
+
+class LearnedPredictor:
+    """AID's learned predictor: 11-step histories of the ego (odometry) and of the picked
+    neighbours (tracker), in the current ego frame -> the highest-scored of 3 modes."""
+
+    def __init__(self, path):
+        import torch
+
+        from agents.planners.nets import load_net
+
+        self.torch = torch
+        self.net, self.metrics = load_net(path, "aid-predictor")
+        self.path = str(path)
+
+    def __call__(self, state: AIDState, row: dict[str, np.ndarray], picked: np.ndarray) -> np.ndarray:
+        torch = self.torch
+        pose = state.odometry.pose
+        ego = np.zeros((HISTORY, 4))
+        hist = np.array(state.ego_history)
+        ego[HISTORY - len(hist):] = hist
+        nb = np.zeros((5, HISTORY, 4))
+        for j, r in enumerate(picked[:5]):
+            nb[j] = state.tracker.history(int(state.ids[r]), HISTORY)[:, :4]
+        with torch.no_grad():
+            trajs, scores = self.net(torch.as_tensor(in_frame(ego, pose)[None], dtype=torch.float32),
+                                     torch.as_tensor(in_frame(nb, pose)[None], dtype=torch.float32))  # fmt: skip
+        best = scores[0].argmax(-1)  # [5]
+        out = trajs[0, torch.arange(5), best, :, :2].numpy().astype(np.float64)
+        return out[: len(picked)]
+
+
 class AIDPlanner(StatefulPlanner):
     """Frenet sampling over lane paths x 11 accelerations; ``predictor`` maps (state, row, picked
     neighbour rows) to predicted ego-frame points [N, 30, 2]."""
@@ -168,7 +212,8 @@ class AIDPlanner(StatefulPlanner):
 
     def decide(self, state: AIDState, row: dict[str, np.ndarray]) -> np.ndarray:
         ego = row["ego"]
-        state.tracker.update(state.odometry.pose, float(ego[0]), row["neighbours"], row["neighbour_mask"])
+        state.ids = state.tracker.update(state.odometry.pose, float(ego[0]), row["neighbours"], row["neighbour_mask"])
+        state.ego_history = (state.ego_history + [np.array([*state.odometry.pose, float(ego[0])])])[-HISTORY:]
         if state.queue and state.since_plan < REPLAN_EVERY:
             state.since_plan += 1
             return state.queue.pop(0)

@@ -4,6 +4,7 @@
   rounds of temporal then social self-attention, 3 trajectory modes with scores per neighbour),
   reduced in width and depth to train on a CPU.
 - :class:`StopMoveNet`: TF's stop/move behaviour-cloning MLP (53 -> hidden^3 -> 2).
+- :class:`VCRClassifier`: VCR's CNN + MLP event classifier over rasters, with a reduced head.
 
 Checkpoints are ``{"format": "planner-net", "kind": ..., "config": {...}, "state_dict": ...,
 "metrics": {...}}`` read with ``torch.load(..., weights_only=True)``.
@@ -120,7 +121,31 @@ class StopMoveNet(nn.Module):
         return self.net(x)
 
 
-KINDS: dict[str, type[nn.Module]] = {"aid-predictor": AIDPredictor, "tf-stop-move": StopMoveNet}
+class VCRClassifier(nn.Module):
+    """VCR's event classifier with a reduced head: rasters uint8 [B, C, 64, 64] and 18 numbers
+    (candidate step and the next 5 path points, ego frame) -> 6 event logits (0 collision ... 5 safe)."""
+
+    def __init__(self, channels: int = 3, size: int = 64, numbers: int = 18, classes: int = 6):
+        super().__init__()
+        self.config = {"channels": channels, "size": size, "numbers": numbers, "classes": classes}
+        blocks: list[nn.Module] = []
+        width, side = channels, size
+        for _ in range(4):
+            blocks += [nn.Conv2d(width, 32, 3, stride=2), nn.BatchNorm2d(32), nn.ReLU()]
+            width, side = 32, (side - 3) // 2 + 1
+        self.image = nn.Sequential(*blocks, nn.Flatten())
+        self.numbers = nn.Sequential(nn.Linear(numbers, 64), nn.ReLU(), nn.Dropout(0.5))
+        self.head = nn.Sequential(nn.Linear(32 * side * side + 64, 256), nn.ReLU(), nn.Dropout(0.5),
+                                  nn.Linear(256, 64), nn.ReLU(), nn.Linear(64, classes))  # fmt: skip
+
+    def forward(self, rasters: torch.Tensor, numbers: torch.Tensor) -> torch.Tensor:
+        image = (rasters.float() - 0.5) / 0.5  # layers are 0/1 masks
+        return self.head(torch.cat([self.image(image), self.numbers(numbers)], dim=-1))
+
+
+KINDS: dict[str, type[nn.Module]] = {
+    "aid-predictor": AIDPredictor, "tf-stop-move": StopMoveNet, "vcr-classifier": VCRClassifier,
+}  # fmt: skip
 
 
 def save_net(path: str | Path, kind: str, net: nn.Module, metrics: dict[str, Any] | None = None) -> None:

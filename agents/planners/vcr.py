@@ -28,6 +28,9 @@ from agents.planners.geometry import bezier_length, bezier_points, bezier_tangen
 from agents.planners.paths import from_ego, valid_path
 
 INTERFACE = {"waypoints": {"count": 20, "spacing": 1}, "neighbours": {"count": 10, "radius": 50.0}}
+RASTERS = {"size": 64, "resolution": 0.8, "layers": ["drivable", "route", "occupancy"]}
+"""What the learned classifier sees (64 x 64 at 0.8 m: about 51 m across)."""
+LEARNED_INTERFACE = {**INTERFACE, "rasters": RASTERS}
 HISTORY = 10
 DECAY = 0.6
 PATH_POINTS = 18

@@ -1,0 +1,72 @@
+"""The planner zoo entries with their learned parts: the weights shipped under ``checkpoints/``.
+
+``zoo:tf``, ``zoo:vcr`` and ``zoo:aid`` load their small networks here (weights only); the rule
+forms (``zoo:tf-rules``, ``zoo:vcr-ttc``, ``zoo:aid-cv``) are the planner classes themselves.
+Model cards: ``cards/tf.md``, ``cards/vcr.md``, ``cards/aid.md``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
+
+
+def aid(checkpoint: str | Path | None = None):
+    """AID over its learned motion predictor."""
+    from agents.planners.aid import AIDPlanner, LearnedPredictor
+
+    return AIDPlanner(predictor=LearnedPredictor(checkpoint or CHECKPOINTS / "aid-predictor.pt"))
+
+
+class StopMoveVote:
+    """TF's learned vote: 53 features -> True to move."""
+
+    def __init__(self, path: str | Path):
+        import torch
+
+        from agents.planners.nets import load_net
+
+        self.torch = torch
+        self.net, self.metrics = load_net(path, "tf-stop-move")
+
+    def __call__(self, features: np.ndarray) -> bool:
+        with self.torch.no_grad():
+            logits = self.net(self.torch.as_tensor(features[None], dtype=self.torch.float32))
+        return bool(logits[0].argmax() == 1)
+
+
+def tf(checkpoint: str | Path | None = None):
+    """TF's rules with the behaviour-cloned stop/move veto."""
+    from agents.planners.tf import TFPlanner
+
+    return TFPlanner(stop_move=StopMoveVote(checkpoint or CHECKPOINTS / "tf-stop-move.pt"))
+
+
+class EventRisk:
+    """VCR's learned collision probability: rasters and the candidate's 18 numbers -> P(collision)."""
+
+    def __init__(self, path: str | Path):
+        import torch
+
+        from agents.planners.nets import load_net
+
+        self.torch = torch
+        self.net, self.metrics = load_net(path, "vcr-classifier")
+
+    def __call__(self, row: dict[str, np.ndarray], front: np.ndarray, plan: np.ndarray) -> float:
+        torch = self.torch
+        numbers = np.zeros((6, 3), dtype=np.float32)
+        numbers[: min(6, len(plan))] = plan[:6]
+        with torch.no_grad():
+            logits = self.net(torch.as_tensor(row["rasters"][None]), torch.as_tensor(numbers.reshape(1, -1)))
+        return float(torch.softmax(logits[0], -1)[0])
+
+
+def vcr(checkpoint: str | Path | None = None):
+    """VCR's follower with the learned event classifier over rasters."""
+    from agents.planners.vcr import LEARNED_INTERFACE, VCRPlanner
+
+    return VCRPlanner(risk=EventRisk(checkpoint or CHECKPOINTS / "vcr-classifier.pt"), interface=LEARNED_INTERFACE)
