@@ -150,6 +150,15 @@ def test_periodic_evaluation_selects_best_by_s_bench_and_logs_it(tmp_path):
     assert all(0.0 <= v <= 1.0 for v in s_bench.values())
     assert "eval/PR" in acc.Tags()["scalars"] and "eval/MTE" in acc.Tags()["scalars"]
     assert any(t.startswith("eval_trajectories/") for t in acc.Tags()["images"])
+    # An evaluation video of the suite's first scenario at every evaluation: an animated GIF.
+    videos = acc.Images("eval_video/t1_left")
+    assert [v.step for v in videos] == [128, 256]
+    from io import BytesIO
+
+    from PIL import Image
+
+    gif = Image.open(BytesIO(videos[0].encoded_image_string))
+    assert gif.format == "GIF" and gif.n_frames > 10
     best = torch.load(out / "best.pt", weights_only=True)
     assert s_bench[best["step"]] == max(s_bench.values())
     assert len(acc.Scalars("eval/S_bench")) == 2

@@ -321,4 +321,12 @@ def _evaluate(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int, 
     for figure in sorted((out / "plots").glob("trajectories_*.png"))[:3]:
         image = np.asarray(Image.open(figure).convert("RGB"))
         writer.add_image(f"eval_trajectories/{figure.stem[len('trajectories_'):]}", image, step, dataformats="HWC")
+    # A video of the first scenario (its first held-out seed), played by TensorBoard's Images tab.
+    from train.enjoy import episode_frames, write_tensorboard_video
+
+    entry = suite.scenarios[0]
+    steps = int(round(entry.time_limit / entry.spec.step_length))
+    frames = episode_frames(str(frozen), f"{cfg.eval_suite or TASK_SUITE[cfg.task]}:{entry.name}", seed=cfg.eval_seed,
+                            max_steps=steps)  # fmt: skip
+    write_tensorboard_video(writer, f"eval_video/{entry.name}", frames, step)
     return {k: v for k, v in overall.items() if isinstance(v, (int, float))}

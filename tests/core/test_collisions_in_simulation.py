@@ -83,3 +83,24 @@ def test_an_agent_collides_with_every_traffic_row_it_touches():
         assert not env.sim.agent_events[0, Event.COLLISION]
         checked += 1
     assert checked == len(traffic)
+
+
+def test_partial_off_road_sees_each_corner():
+    """A parked car 0.9 m inside the right road edge, turned so that one corner sticks about 0.9 m
+    over the edge while its centre and other corners stay on; four headings put each of its four
+    corners (front/rear, left/right) over the edge in turn."""
+    seen = set()
+    for heading in (0.45, -0.45, np.pi + 0.45, np.pi - 0.45):
+        env = DrivingParallelEnv(make_spec([agent(offset=30.0, speed=0.0)], events={"terminate_on": []}))
+        env.reset(seed=0)
+        t, row = env.sim.table, env.sim.agent_row[0]
+        t.y[row], t.heading[row], t.speed[row] = -6.4 + 0.9, heading, 0.0
+        env.step({"agent_0": np.zeros(3)})  # stays where it is
+        corners = t.corners(np.array([row]))[0]
+        out = corners[:, 1] < -6.4
+        assert out.sum() == 1 and corners[out, 1][0] < -6.4 - 0.8, heading  # one corner, clearly over
+        ev = env.sim.agent_events[0]
+        assert ev[Event.PARTIAL_OFF_ROAD] and not ev[Event.OFF_ROAD], heading
+        seen.add(int(np.flatnonzero(out)[0]))
+        env.close()
+    assert seen == {0, 1, 2, 3}
