@@ -12,10 +12,12 @@ per row or per agent therefore runs once for the whole batch:
   call walks the episodes and hands each one's rows to the single-episode kernel
   (``smarts.core.events.agent_events``), so the per-episode rules are literally the same code.
 
-What remains per episode are the providers that keep per-episode state beyond rows (built-in
-traffic with its departures, fixed-time signals). They step on an :class:`EpisodeView`: the
-episode's block of the table as a ``VehicleTable`` of ``capacity`` rows (views, no copies), its
-clock and its seed, so they run unchanged and give the same vehicles as in a single simulation.
+Each episode also has providers of its own (built-in traffic with its departures and random
+stream, fixed-time signals). They see an :class:`EpisodeView`: the episode's block of the table as
+a ``VehicleTable`` of ``capacity`` rows (views, no copies), its clock and its seed, so they run
+unchanged and give the same vehicles as in a single simulation. They step one episode at a time,
+unless a *batch stage* (``add_batch_stage``) steps a kind of them for all episodes at once (the
+env layer's built-in traffic stage does).
 
 Each episode keeps its own clock, step count and seed and is reset on its own
 (:meth:`BatchedSimulation.reset_episodes`) while the others go on; episode ``b`` reset with seed
@@ -151,6 +153,15 @@ class BatchedSimulation(Simulation):
                 p.provider_id = len(self.providers) + k  # as in a single simulation of the episode
         self.action_array: np.ndarray | None = None
         self._all_episodes = np.arange(n_episodes, dtype=np.int64)
+        self.batch_stages: list = []
+        self._stepped = [list(p) for p in self.episode_providers]  # stepped one episode at a time
+
+    def add_batch_stage(self, stage) -> None:
+        """Let ``stage`` step some episode providers of all episodes at once: ``stage.steps(p)``
+        says which, ``stage.step(sim, dt)`` runs after the per-episode providers and
+        ``stage.after_reset(sim, episodes)`` after episodes are reset."""
+        self.batch_stages.append(stage)
+        self._stepped = [[p for p in provs if not stage.steps(p)] for provs in self._stepped]
 
     # ------------------------------------------------------------------ episodes
     def episode_agents(self, b: int) -> np.ndarray:
@@ -197,6 +208,8 @@ class BatchedSimulation(Simulation):
             self.agent_active[agents] = True
             rows.append(np.flatnonzero(view.table.alive) + b * self.episode_capacity)
         self._refresh_active()
+        for stage in self.batch_stages:
+            stage.after_reset(self, episodes)
         rows = np.concatenate(rows) if rows else np.zeros(0, dtype=np.int64)
         self.not_moving.reset_rows(rows, self.table.x[rows], self.table.y[rows], 0.0)
         self.alive = self.table.alive_rows
@@ -222,13 +235,15 @@ class BatchedSimulation(Simulation):
         self.time = float(self.step_count * self.dt)
         for p in self.providers:
             p.step(self, self.dt)
-        for b, provs in enumerate(self.episode_providers):
+        for b, provs in enumerate(self._stepped):
             if provs:
                 view = self.views[b]
                 view.step_count = int(self.episode_step[b])
                 view.time = float(self.episode_time[b])
                 for p in provs:
                     p.step(view, self.dt)
+        for stage in self.batch_stages:
+            stage.step(self, self.dt)
         self.alive = self.table.alive_rows
         self._project(self.alive)
         self._route_progress_of(self._active, first=False)

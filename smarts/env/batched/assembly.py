@@ -140,9 +140,11 @@ def build_batched_simulation(
     limits: ReachLimits | None = None,
     road_map: RoadMap | None = None,
     lane_relative: LaneRelativeParams | None = None,
+    batch_traffic: bool = True,
 ) -> BatchedSimulation:
     """One ``BatchedSimulation`` of ``len(specs)`` episodes (all on the same map), episode ``b``
-    of ``specs[b]`` with seed ``seeds[b]``."""
+    of ``specs[b]`` with seed ``seeds[b]``. ``batch_traffic``: step the built-in traffic of all
+    episodes in one call (``smarts.env.batched.traffic``); False steps it episode by episode."""
     for spec in specs:
         check_batchable(spec)
     first = specs[0]
@@ -183,4 +185,10 @@ def build_batched_simulation(
         seeds=[check_seed(s, f"seeds[{b}]") for b, s in enumerate(seeds)], signals=signals,
     )  # fmt: skip
     agents.vehicles = [dataclasses.replace(v, agent_id=aid) for v, aid in zip(vehicles, sim.agent_ids)]
+    if batch_traffic:
+        from smarts.env.batched.traffic import BatchedBuiltinTraffic
+
+        stage = BatchedBuiltinTraffic(sim)
+        if stage.provider:
+            sim.add_batch_stage(stage)
     return sim

@@ -1,0 +1,172 @@
+"""Built-in traffic of every episode of a batch in one compiled call per traffic spec.
+
+Each episode keeps its own ``BuiltinTrafficProvider`` (its departures, random stream, vehicle
+ids), but the provider's per-row state arrays are views into stacked ``[episodes, ...]`` blocks
+owned here, so one step of all of them is: one map projection of every other road user of every
+episode, one compiled loop that hands each episode's rows to the provider's own kernels
+(``build_occupancy``, ``step_vehicles``) on its block of the table, then Python only for the few
+episodes where a vehicle arrives or a departure is due. Episodes with equal traffic specs share
+route tables (built alike, so equal), and one call covers each such set.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+import smarts.traffic.builtin.kernels as K
+from smarts.core.batched import BatchedSimulation
+from smarts.core.vehicle_table import COLUMN
+from smarts.maps import project
+from smarts.traffic.builtin.provider import BuiltinTrafficProvider
+
+_XY = [COLUMN["x"], COLUMN["y"]]
+
+
+class BatchedBuiltinTraffic:
+    """The batch stage that steps the built-in traffic providers of ``sim``'s episodes."""
+
+    def __init__(self, sim: BatchedSimulation):
+        members = [(b, p) for b, provs in enumerate(sim.episode_providers) for p in provs
+                   if isinstance(p, BuiltinTrafficProvider)]  # fmt: skip
+        self.providers = {id(p) for _, p in members}
+        self.episode = np.array([b for b, _ in members], dtype=np.int64)
+        self.provider = [p for _, p in members]
+        m, cap, lanes = len(members), sim.episode_capacity, sim.road_map.num_lanes
+        self.si = np.zeros((m, K.NUM_INT_STATE, cap), dtype=np.int64)
+        self.st = np.zeros((m, K.NUM_FLOAT_STATE, cap))
+        self.pa = np.zeros((m, K.NUM_PARAMS, cap))
+        self.mine = np.zeros((m, cap), dtype=bool)
+        self.arrived = np.zeros((m, cap), dtype=bool)
+        self.acc = np.zeros((m, cap))
+        self.guard = np.zeros((m, cap))
+        self.change = np.zeros((m, cap), dtype=np.int64)
+        self.turn = np.zeros((m, cap), dtype=np.int64)
+        self.raw_lane = np.zeros((m, 3 * cap), dtype=np.int64)
+        self.raw_row = np.zeros((m, 3 * cap), dtype=np.int64)
+        self.raw_kind = np.zeros((m, 3 * cap), dtype=np.int64)
+        self.raw_f = np.zeros((m, 3, 3 * cap))
+        self.e_row = np.zeros((m, 3 * cap), dtype=np.int64)
+        self.e_kind = np.zeros((m, 3 * cap), dtype=np.int64)
+        self.e_f = np.zeros((m, 3, 3 * cap))
+        self.lane_off = np.zeros((m, lanes + 1), dtype=np.int64)
+        for k, p in enumerate(self.provider):
+            p.capacity = cap  # its reset keeps these views instead of allocating
+            for name in ("si", "st", "pa", "mine", "arrived", "acc", "guard", "change", "turn", "raw_lane",
+                         "raw_row", "raw_kind", "raw_f", "e_row", "e_kind", "e_f", "lane_off"):  # fmt: skip
+                setattr(p, name, getattr(self, name)[k])
+        # One call per set of episodes with equal traffic specs (their route tables are equal).
+        sets: dict[int, list[int]] = {}
+        specs: list = []
+        for k, p in enumerate(self.provider):
+            for s, spec in enumerate(specs):
+                if spec == p.traffic:
+                    sets[s].append(k)
+                    break
+            else:
+                sets[len(specs)] = [k]
+                specs.append(p.traffic)
+        self.sets = [np.array(v, dtype=np.int64) for v in sets.values()]
+        self.next_due = np.zeros(m)  # earliest departure time of each provider (inf: none)
+        self.waiting = np.zeros(m, dtype=bool)  # a departure waits for room
+        self.member_of = np.full(sim.episodes, -1, dtype=np.int64)
+        self.member_of[self.episode] = np.arange(m)
+        self._union_mine = np.zeros(sim.episodes * cap, dtype=bool)
+        self._rows_of_members = np.zeros(sim.episodes * cap, dtype=bool)
+        self._rows_of_members.reshape(sim.episodes, cap)[self.episode] = True
+
+    def steps(self, provider) -> bool:
+        return id(provider) in self.providers
+
+    def after_reset(self, sim: BatchedSimulation, episodes: np.ndarray) -> None:
+        for k in self.member_of[episodes]:
+            if k >= 0:
+                self._note_departures(k)
+
+    def _note_departures(self, k: int) -> None:
+        p = self.provider[k]
+        self.next_due[k] = p.next_time.min() if p.next_time.size else np.inf
+        self.waiting[k] = bool(p.pending.any())
+
+    def step(self, sim: BatchedSimulation, dt: float) -> None:
+        cap = sim.episode_capacity
+        table = sim.table
+        union_mine = self._union_mine
+        union_mine.reshape(sim.episodes, cap)[self.episode] = self.mine
+        foreign = np.flatnonzero(table.alive & ~union_mine & self._rows_of_members)
+        if foreign.size:
+            proj = project(sim.road_map, table.data[_XY][:, foreign].T, table.heading[foreign])
+            f_lane, f_s, f_t = proj.lane.astype(np.int64), proj.s, proj.t
+            f_dh = table.heading[foreign] - proj.lane_heading
+        else:
+            f_lane, f_s, f_t, f_dh = np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros(0)
+        own = np.flatnonzero(union_mine)
+        starts = self.episode * cap
+        f_lo, f_hi = np.searchsorted(foreign, starts), np.searchsorted(foreign, starts + cap)
+        o_lo, o_hi = np.searchsorted(own, starts), np.searchsorted(own, starts + cap)
+        f_local = foreign - np.repeat(starts, f_hi - f_lo)
+        own_local = own - np.repeat(starts, o_hi - o_lo)
+        arrivals = np.zeros(len(self.provider), dtype=bool)
+        for members in self.sets:
+            p = self.provider[members[0]]
+            jt = p.junctions
+            _step_episodes(
+                members, self.episode, cap, o_lo, o_hi, own_local, f_lo, f_hi, f_local, f_lane, f_s, f_t, f_dh,
+                table.data, self.si, self.st, self.pa, self.mine, self.arrived, self.acc, self.guard, self.change,
+                self.turn, self.lane_off, self.raw_lane, self.raw_f, self.raw_row, self.raw_kind, self.e_f,
+                self.e_row, self.e_kind, p.routes.slot_int, p.routes.slot_cost, p.lane_f, p.lane_lr, p.pred_off,
+                p.pred, p.point_off, p.point_s, p.points, p.seg_heading, p.conn_int, jt.conn_length,
+                jt.lanes_offsets, jt.lanes, jt.conn_of_lane, jt.offset_of_lane, jt.foe_offsets, jt.foe,
+                jt.foe_kind, jt.zone, sim.via_colour, dt, sim.episode_step, arrivals,
+            )  # fmt: skip
+        for k in np.flatnonzero(arrivals).tolist():
+            b, p = int(self.episode[k]), self.provider[k]
+            mine_rows = own_local[o_lo[k]:o_hi[k]]
+            gone = mine_rows[self.arrived[k, : mine_rows.size]]
+            sim.views[b].table.remove(gone)
+            self.mine[k, gone] = False
+        time = sim.episode_time[self.episode]
+        due = np.flatnonzero((self.next_due <= time + 1e-9) | self.waiting)
+        for k in due.tolist():
+            b, p = int(self.episode[k]), self.provider[k]
+            view = sim.views[b]
+            view.time = float(sim.episode_time[b])
+            lo, hi = f_lo[k], f_hi[k]
+            p._depart(view, view.time, f_local[lo:hi], f_lane[lo:hi], f_s[lo:hi])
+            self._note_departures(k)
+        # (each provider's own step_count is not kept: its kernels get the episode's step here)
+
+
+@numba.njit(cache=True, nogil=True)
+def _step_episodes(
+    members, episode, cap, o_lo, o_hi, own_local, f_lo, f_hi, f_local, f_lane, f_s, f_t, f_dh,
+    data, si, st, pa, mine, arrived, acc, guard, change, turn, lane_off, raw_lane, raw_f, raw_row, raw_kind,
+    e_f, e_row, e_kind, slot_int, slot_cost, lane_f, lane_lr, pred_off, pred, point_off, point_s, points,
+    seg_heading, conn_int, conn_length, lanes_offsets, lanes, conn_of_lane, offset_of_lane, foe_offsets, foe,
+    foe_kind, zone, via_colour, dt, episode_step, arrivals,
+):  # pragma: no cover - compiled
+    """``BuiltinTrafficProvider.step``'s compiled part for each member, on its block of rows."""
+    for q in range(members.shape[0]):
+        k = members[q]
+        if o_hi[k] == o_lo[k]:
+            continue
+        b = episode[k]
+        own = own_local[o_lo[k]:o_hi[k]]
+        lo, hi = f_lo[k], f_hi[k]
+        block = data[:, b * cap:(b + 1) * cap]
+        K.build_occupancy(
+            own, f_local[lo:hi], f_lane[lo:hi], f_s[lo:hi], f_t[lo:hi], f_dh[lo:hi], block, si[k], st[k],
+            slot_int, lane_f, lane_lr, pred_off, pred, lane_off[k], raw_lane[k], raw_f[k, 0], raw_f[k, 1],
+            raw_f[k, 2], raw_row[k], raw_kind[k], e_f[k, 0], e_f[k, 1], e_f[k, 2], e_row[k], e_kind[k],
+        )  # fmt: skip
+        K.step_vehicles(
+            own, block, si[k], st[k], pa[k], mine[k], arrived[k], acc[k], guard[k], change[k], turn[k],
+            lane_off[k], e_f[k, 0], e_f[k, 1], e_f[k, 2], e_row[k], e_kind[k], lane_f, lane_lr, point_off,
+            point_s, points, seg_heading, pred_off, pred, slot_int, slot_cost, conn_int, conn_length,
+            lanes_offsets, lanes, conn_of_lane, offset_of_lane, foe_offsets, foe, foe_kind, zone, via_colour[b],
+            dt, episode_step[b],
+        )  # fmt: skip
+        for i in range(own.shape[0]):
+            if arrived[k, i]:
+                arrivals[k] = True
+                break
