@@ -58,6 +58,9 @@ class EventRisk:
 
     def __call__(self, row: dict[str, np.ndarray], front: np.ndarray, plan: np.ndarray) -> float:
         torch = self.torch
+        if "rasters" not in row:
+            raise ValueError("zoo:vcr reads rasters: give the agent the interface of agents.planners.vcr.LEARNED_INTERFACE "
+                             "(rasters: {size: 64, resolution: 0.8, layers: [drivable, route, occupancy]})")  # fmt: skip
         numbers = np.zeros((6, 3), dtype=np.float32)
         numbers[: min(6, len(plan))] = plan[:6]
         with torch.no_grad():

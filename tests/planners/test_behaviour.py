@@ -71,3 +71,18 @@ def test_empty_road_reaches_cruise_speed_smoothly(locator, cruise, tolerance):
     assert trace[-1, 0] == pytest.approx(cruise, rel=tolerance)
     assert np.abs(trace[:, 1]).max() <= 4.0 + 1e-3  # within the acceleration limit, no braking spikes
     assert np.diff(trace[:, 0]).min() > -0.3  # no slowing down on the way
+
+
+@pytest.mark.parametrize("locator", ["zoo:tf-rules", "zoo:vcr-ttc", "zoo:aid-cv"])
+def test_planner_drives_as_a_social_agent(locator):
+    # Social agents observe through the scenario's interface (here the default one: 20 waypoints
+    # 2 m apart), not the policy's; the planners read whatever spacing they are given.
+    spec = make_spec([agent(offset=20, speed=8), {**agent(lane=1, offset=30, speed=8), "policy": locator}])
+    env = DrivingParallelEnv(spec)
+    obs, _ = env.reset(seed=0)
+    start = env.sim.table.x[env.sim.table.row_of["agent_1"]]
+    for _ in range(50):
+        obs, *_ = env.step({"agent_0": np.array([0.8, 0.0, 0.0], dtype=np.float32)})
+    moved = env.sim.table.x[env.sim.table.row_of["agent_1"]] - start
+    env.close()
+    assert moved > 30.0  # about 5 s at 8 m/s or more
