@@ -96,3 +96,26 @@ def test_malformed_scenarios_name_file_and_field(tmp_path):
     with pytest.raises(ReplayError, match=r"scenario_.*\.parquet: not a readable parquet file"):
         read_recording("argoverse2", folder)
     json.loads((tmp_path / "b" / f"log_map_archive_{AV2_ID}.json").read_text())  # the broken map is JSON
+
+
+def test_env_drives_an_agent_among_the_recorded_vehicles(tmp_path):
+    from smarts.env import DrivingParallelEnv
+
+    write_av2(tmp_path / "scn")
+    path = tmp_path / "scenario.yaml"
+    path.write_text(yaml.safe_dump({
+        "map": "replay",
+        "replay": {"format": "argoverse2", "path": "scn", "take_over": {"ego": "AV"}},
+        "agents": [{"id": "ego"}],
+    }))  # fmt: skip
+    env = DrivingParallelEnv(str(path))
+    try:
+        obs, _ = env.reset(seed=0)
+        seen = 0
+        for _ in range(40):
+            obs, rewards, terminations, truncations, _ = env.step({"ego": np.array([1.0, 0.0, 0.0], np.float32)})
+            assert env.observation_space("ego").contains(obs["ego"]) and not terminations["ego"]
+            seen = max(seen, int((np.abs(obs["ego"]["neighbours"]).sum(axis=1) > 0).sum()))
+        assert seen == 2 and rewards["ego"] > 0  # the bus and vehicle 11 around it; progress on its route
+    finally:
+        env.close()

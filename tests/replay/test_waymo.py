@@ -115,3 +115,24 @@ def test_agent_takes_over_a_vehicle_on_the_scenario_map(tmp_path):
         if row8 is not None:
             assert t.x[row8] == pytest.approx(20.0 + 0.8 * step) and t.role[row8] == Role.REPLAY
     assert t.x[row] == pytest.approx(45.0, abs=0.1) and sim.road_map.lane_ids[t.lane[row]] == "1001"
+
+
+def test_env_drives_an_agent_among_the_recorded_vehicles(tmp_path):
+    from smarts.env import DrivingParallelEnv
+
+    write_waymo(tmp_path / "womd.tfrecord")
+    path = tmp_path / "scenario.yaml"
+    path.write_text(yaml.safe_dump({
+        "map": "replay",
+        "replay": {"format": "waymo", "path": "womd.tfrecord", "take_over": {"ego": 7}, "reactive": "interaction"},
+        "agents": [{"id": "ego"}],
+    }))  # fmt: skip
+    env = DrivingParallelEnv(str(path))
+    try:
+        obs, _ = env.reset(seed=0)
+        for _ in range(30):
+            obs, rewards, terminations, *_ = env.step({"ego": np.array([1.0, 0.0, 0.0], np.float32)})
+            assert env.observation_space("ego").contains(obs["ego"]) and not terminations["ego"]
+        assert (np.abs(obs["ego"]["neighbours"]).sum(axis=1) > 0).sum() == 1 and rewards["ego"] > 0
+    finally:
+        env.close()
