@@ -41,6 +41,7 @@ def test_episode_with_seed_s_follows_the_single_env_with_seed_s():
     end flags equal bit for bit over whole episodes, through the batch's auto-resets."""
     specs = _adaptive("a02_straight_two_followers_low", "a09_lead_turns_right_at_signal_medium") * 2
     batch = BatchedDriving(specs, observation=PLATOON, reward_factory=_platoon_reward())
+    assert all(group.sim.batch_stages for group in batch.groups)  # traffic stepped in one call per spec
     batch.set_seed(7)
     first = batch.reset()
     singles = [DrivingParallelEnv(s, observation=PLATOON, reward=_platoon_reward()()) for s in specs]

@@ -1,0 +1,30 @@
+"""`python -m smarts.diagnostic --batched` on a tiny budget: rows, JSON, bad flags."""
+
+import json
+import subprocess
+import sys
+
+
+def test_batched_rows_are_written_as_json(tmp_path):
+    out = tmp_path / "batched.json"
+    done = subprocess.run(
+        [sys.executable, "-m", "smarts.diagnostic", "--batched", "--batches", "1,4", "--cases", "free_direct,lead_lane",
+         "--steps", "10", "--warmup", "2", "--per-env-agent-steps", "20", "--out", str(out)],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    rows = json.loads(out.read_text())["rows"]
+    assert [(r["case"], r["batch"]) for r in rows] == [("free_direct", 1), ("free_direct", 4), ("lead_lane", 1), ("lead_lane", 4)]
+    for r in rows:
+        assert r["agent_steps_per_s"] > 0 and r["per_env_agent_steps_per_s"] > 0 and r["memory_per_episode_kb"] > 0
+        assert r["speedup"] == r["agent_steps_per_s"] / r["per_env_agent_steps_per_s"]
+    assert "speed-up" in done.stdout
+
+
+def test_bad_flags_name_the_flag():
+    done = subprocess.run([sys.executable, "-m", "smarts.diagnostic", "--batched", "--batches", "0,4"],
+                          capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert done.returncode == 2 and "--batches: expected comma-separated positive integers" in done.stderr
+    done = subprocess.run([sys.executable, "-m", "smarts.diagnostic", "--batched", "--cases", "fast"],
+                          capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert done.returncode == 2 and "--cases: unknown case(s) ['fast']" in done.stderr
