@@ -91,10 +91,19 @@ def read_ngsim(
     else:
         vtype = np.full(len(vid), int(VehicleType.PASSENGER), np.int8)
     x, y = align(x, y, swap_xy=swap_xy, flip_y=flip_y, offset=offset)
-    rec = from_samples(
-        str(path), "ngsim", vid, frame, x, y, None, None, length, width, vtype, FRAME_SECONDS,
-        smooth_frames=smooth_frames,
-    )  # fmt: skip
+    try:
+        rec = from_samples(
+            str(path), "ngsim", vid, frame, x, y, None, None, length, width, vtype, FRAME_SECONDS,
+            smooth_frames=smooth_frames,
+        )  # fmt: skip
+    except ReplayError as err:
+        if "two samples" in str(err) and "Location" in header:  # the combined file of every site
+            places = pacsv.read_csv(path, convert_options=pacsv.ConvertOptions(include_columns=["Location"]))
+            names = sorted(set(places.column("Location").cast(pa.string()).to_pylist()) - {None})
+            if len(names) > 1:
+                raise ReplayError(f"{err}; the file holds several NGSIM sites (column Location: {', '.join(names)}), "
+                                  "whose vehicle ids repeat: keep one site's rows") from None  # fmt: skip
+        raise
     # the recorded point is the front edge's middle: the box centre is half a length behind it
     half = np.repeat(rec.length * 0.5, rec.count)
     rec.x -= half * np.cos(rec.heading)

@@ -386,3 +386,18 @@ def test_reactive_vehicles_go_to_sumo_when_sumo_drives_the_traffic(tmp_path, csv
         assert sim.table.owner[sim.table.row_of["replay-1"]] == sumo.provider_id
     finally:
         sim.close()
+
+
+def test_the_combined_file_of_several_sites_is_named_as_such(tmp_path):
+    import csv
+
+    rows = list(csv.reader(write_ngsim(tmp_path / "one.csv", three_vehicles()).read_text().splitlines()))
+    path = tmp_path / "all.csv"
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow([*rows[0], "Location"])
+        for site in ("i-80", "us-101"):
+            w.writerows([*r, site] for r in rows[1:])
+    with pytest.raises(ReplayError, match=r"all.csv: vehicle '1' has two samples at frame 100; the file holds several "
+                                          r"NGSIM sites \(column Location: i-80, us-101\)"):  # fmt: skip
+        read_recording("ngsim", path)
