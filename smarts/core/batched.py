@@ -57,6 +57,15 @@ def block_view(table: VehicleTable, start: int, stop: int) -> VehicleTable:
     return view
 
 
+def gather_xy(table: VehicleTable, rows: np.ndarray) -> np.ndarray:
+    """float64[n, 2] positions of ``rows`` (gathered per column: indexing ``data`` by column first
+    would copy the whole columns of every episode)."""
+    xy = np.empty((len(rows), 2))
+    xy[:, 0] = table.x[rows]
+    xy[:, 1] = table.y[rows]
+    return xy
+
+
 @dataclasses.dataclass
 class EpisodeView:
     """What an episode's own providers see of the batch: the attributes of ``Simulation`` they
@@ -287,9 +296,11 @@ class BatchedSimulation(Simulation):
         if rows.size == 0:
             return
         t = self.table
-        proj = project(self.road_map, t.data[_XY][:, rows].T, t.heading[rows])
+        proj = project(self.road_map, gather_xy(t, rows), t.heading[rows])
         t.lane[rows] = proj.lane
-        t.data[_LANE_STATE[:, None], rows] = (proj.s, proj.t, proj.lane_heading, proj.distance)
+        t.s[rows], t.t[rows], t.lane_heading[rows], t.lane_distance[rows] = (
+            proj.s, proj.t, proj.lane_heading, proj.distance
+        )
 
     def _route_progress_of(self, agents: np.ndarray, first: bool) -> None:
         self.route_progress_delta[agents] = 0.0
@@ -343,5 +354,3 @@ def _episode_events(
         )  # fmt: skip
 
 
-_XY = [COLUMN["x"], COLUMN["y"]]
-_LANE_STATE = np.array([COLUMN[c] for c in ("s", "t", "lane_heading", "lane_distance")])

@@ -45,7 +45,8 @@ __all__ = ["BatchedDriving", "BatchedSetupError", "StepResult"]
 class StepResult:
     """One step of every slot (arrays over slots)."""
 
-    obs: dict[str, np.ndarray]  # observation after the step (zeros for slots that did not act)
+    obs: dict[str, np.ndarray]  # observation after the step (zeros for slots that did not act);
+    # valid until the next step
     reward: np.ndarray  # float32[S]
     terminated: np.ndarray  # bool[S] a terminal event ended the slot's agent
     truncated: np.ndarray  # bool[S] the step limit ended it
@@ -140,6 +141,7 @@ class BatchedDriving:
         n = len(self.slots)
         self._obs = {k: np.zeros((n, *s.shape), dtype=s.dtype) for k, s in self.observation_space.spaces.items()}
         self._first = {k: np.zeros_like(v) for k, v in self._obs.items()}
+        self._arange: np.ndarray | None = None
         self._next_seed: list[int | None] = [None] * len(self.specs)
         self.seed_schedule: Callable[[int], int | None] | None = None
         """When set, ``seed_schedule(copy)`` gives each new episode's seed instead (adapters with
@@ -213,8 +215,7 @@ class BatchedDriving:
         truncated = np.zeros(n, dtype=bool)
         acted = np.zeros(n, dtype=bool)
         restarted = np.zeros(n, dtype=bool)
-        for v in self._obs.values():
-            v[:] = 0
+        out = self._obs
         stepped = []
         for group in self.groups:
             sim = group.sim
@@ -228,8 +229,11 @@ class BatchedDriving:
             agents = sim.active_agents
             slots = group.agent_slot[agents]
             obs = self.observer.build(sim, agents)
-            for key, value in obs.items():
-                self._obs[key][slots] = value
+            if len(self.groups) == 1 and len(slots) == n and self._identity(slots):
+                out = obs  # every slot acted, in slot order: the built arrays are the result
+            else:
+                for key, value in obs.items():
+                    out[key][slots] = value
             if group.reward is not None:
                 r = group.reward(_StepView(sim, agents), agents)
             else:
@@ -245,7 +249,15 @@ class BatchedDriving:
             over = sim.episodes_over()
             if over.size:
                 restarted[self._restart(group, over, self._first)] = True
-        return StepResult(self._obs, reward, terminated, truncated, acted, restarted, self._first)
+        if out is self._obs and not acted.all():
+            for v in out.values():
+                v[~acted] = 0
+        return StepResult(out, reward, terminated, truncated, acted, restarted, self._first)
+
+    def _identity(self, slots: np.ndarray) -> bool:
+        if self._arange is None or len(self._arange) != len(slots):
+            self._arange = np.arange(len(slots))
+        return bool((slots == self._arange).all())
 
     def close(self) -> None:
         for group in self.groups:

@@ -15,12 +15,9 @@ import numba
 import numpy as np
 
 import smarts.traffic.builtin.kernels as K
-from smarts.core.batched import BatchedSimulation
-from smarts.core.vehicle_table import COLUMN
+from smarts.core.batched import BatchedSimulation, gather_xy
 from smarts.maps import project
 from smarts.traffic.builtin.provider import BuiltinTrafficProvider
-
-_XY = [COLUMN["x"], COLUMN["y"]]
 
 
 class BatchedBuiltinTraffic:
@@ -95,7 +92,7 @@ class BatchedBuiltinTraffic:
         union_mine.reshape(sim.episodes, cap)[self.episode] = self.mine
         foreign = np.flatnonzero(table.alive & ~union_mine & self._rows_of_members)
         if foreign.size:
-            proj = project(sim.road_map, table.data[_XY][:, foreign].T, table.heading[foreign])
+            proj = project(sim.road_map, gather_xy(table, foreign), table.heading[foreign])
             f_lane, f_s, f_t = proj.lane.astype(np.int64), proj.s, proj.t
             f_dh = table.heading[foreign] - proj.lane_heading
         else:
