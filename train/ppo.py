@@ -327,6 +327,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
     buffer = ReplayBuffer(storage=LazyTensorStorage(frames, ndim=1), sampler=SamplerWithoutReplacement(),
                           batch_size=cfg.minibatch_size)  # fmt: skip
     metrics, start, first_step = {}, time.perf_counter(), step
+    collecting_s, batch_end = 0.0, start  # time spent collecting (env steps and policy inference)
 
     def save(path: Path) -> Path:
         return save_checkpoint(path, actor=actor_net, critic=critic_net, normalizer=normalizer, layout=layout,
@@ -341,6 +342,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
             task = bar.add_task(f"PPO {cfg.task}", total=cfg.total_steps)
             for data in collector:
                 collect_time = time.perf_counter()
+                collecting_s += collect_time - batch_end
                 data = data.reshape(-1, data.shape[-1])  # [slots (of every collector), time]
                 flat = data.reshape(-1)
                 ended = flat["next", "done"].reshape(-1) & flat["valid"].reshape(-1)
@@ -396,12 +398,14 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                     "train/valid_fraction": float(real.numel() / max(flat.numel(), 1)),
                     "perf/env_steps_per_s": (step - first_step) / (time.perf_counter() - start),
                     "perf/update_s": time.perf_counter() - collect_time,
+                    "perf/collect_steps_per_s": (step - first_step) / max(collecting_s, 1e-9),
                 }
                 if len(returns):
                     metrics["episode/return"] = float(returns.mean())
                     metrics["episode/length"] = float(lengths.float().mean())
                 # TensorBoard, last.pt and, every eval_every steps, a held-out evaluation (best.pt).
                 run.end_of_batch(step, data.numel(), metrics, save)
+                batch_end = time.perf_counter()
                 bar.update(task, completed=min(step, cfg.total_steps),
                            description=f"PPO {cfg.task} return {metrics.get('episode/return', float('nan')):.1f}")  # fmt: skip
     except KeyboardInterrupt:

@@ -15,7 +15,8 @@ chunks with 95% confidence intervals. Cases:
   follow, whose traffic provider steps per episode) with lane-relative commands.
 
 ``--ppo-steps N`` adds end-to-end rows: ``python -m train ppo --task platoon`` on each backend
-(run as users run it; the env-steps/s it records).
+(run as users run it; the env-steps/s it records over the whole run and over its collection
+phases alone: env steps and policy inference, without the PPO updates).
 """
 
 from __future__ import annotations
@@ -201,6 +202,7 @@ def ppo_rate(backend: str, envs: int, steps: int, out_dir: Path, frames: int, mi
         "backend": backend, "envs": envs, "total_steps": steps, "frames_per_batch": frames,
         "minibatch_size": minibatch, "epochs": epochs,
         "env_steps_per_s": float(metrics["perf/env_steps_per_s"]),
+        "collect_steps_per_s": float(metrics.get("perf/collect_steps_per_s", float("nan"))),
         "episode_return": float(metrics.get("episode/return", float("nan"))),
     }  # fmt: skip
 
@@ -268,11 +270,12 @@ def main(argv: list[str] | None = None) -> int:
                                      args.ppo_minibatch, args.ppo_epochs))  # fmt: skip
         ptable = Table(title=f"PPO platoon end to end ({args.ppo_envs} copies, {args.ppo_steps} steps, frames "
                              f"{args.ppo_frames}, minibatch {args.ppo_minibatch}, {args.ppo_epochs} epochs)")  # fmt: skip
-        for col in ("backend", "env-steps/s", "ratio"):
+        for col in ("backend", "env-steps/s end to end", "ratio", "collection env-steps/s", "ratio "):
             ptable.add_column(col, justify="right")
-        base = ppo_rows[0]["env_steps_per_s"]
+        base, base_collect = ppo_rows[0]["env_steps_per_s"], ppo_rows[0]["collect_steps_per_s"]
         for r in ppo_rows:
-            ptable.add_row(r["backend"], f"{r['env_steps_per_s']:,.0f}", f"{r['env_steps_per_s'] / base:.2f}x")
+            ptable.add_row(r["backend"], f"{r['env_steps_per_s']:,.0f}", f"{r['env_steps_per_s'] / base:.2f}x",
+                           f"{r['collect_steps_per_s']:,.0f}", f"{r['collect_steps_per_s'] / base_collect:.2f}x")  # fmt: skip
         console.print(ptable)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     report = {
