@@ -83,7 +83,9 @@ def read_ngsim(
     for name, values in (("v_Length", length), ("v_Width", width)):
         if not (values > 0).all():
             row = int(np.flatnonzero(~(values > 0))[0])
-            raise ReplayError(f"{path}: column {name}: expected a positive size in feet, got {values[row] / FEET:g} in data row {row + 1}")
+            raise ReplayError(
+                f"{path}: column {name}: expected a positive size in feet, got {values[row] / FEET:g} in data row {row + 1}"
+            )
     if optional:
         cls = table.column("v_Class").to_numpy()
         vtype = np.array([VEHICLE_CLASSES.get(int(c), VehicleType.PASSENGER) for c in np.unique(cls)], np.int8)

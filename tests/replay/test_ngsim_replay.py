@@ -14,7 +14,7 @@ from smarts.core.vehicle_table import Role, VehicleType
 from smarts.env.assembly import build_simulation
 from smarts.replay import read_recording
 from smarts.scenario import load_scenario
-from tests.replay.files import FEET, GLOBAL_SHIFT, LANE0_Y, LANE1_Y, NGSIM_HEADER, straight, three_vehicles, write_ngsim
+from tests.replay.files import FEET, GLOBAL_SHIFT, LANE0_Y, NGSIM_HEADER, straight, three_vehicles, write_ngsim
 
 ALIGN = {"swap_xy": True, "flip_y": True}
 
