@@ -103,8 +103,10 @@ class BatchedSimulation(Simulation):
     union's ids are ``"<b>/<agent id>"``). ``providers``: providers of the whole batch (the agent
     provider), whose reset is per episode (``reset_episode(sim, b, agents)``). ``episode_providers[b]``:
     episode ``b``'s other providers (traffic, signals), stepped on its :class:`EpisodeView`.
-    ``signal_colours[b]``: the array episode ``b``'s signals write their colours into (a row of
-    ``self.via_colour``, so observations read every episode's signals in one call).
+    ``signals[b]``: episode ``b``'s ``SignalState`` (None without signals); its colours are moved
+    into row ``b`` of ``self.via_colour``, so observations read every episode's signals in one call.
+    ``step`` takes the actions of all agents as one array (``action_array``); an episode whose
+    agents have all finished stays as it is until ``reset_episodes`` starts it again.
     """
 
     def __init__(
