@@ -119,8 +119,12 @@ MUTATIONS: tuple[Mutation, ...] = (
              '            writer.add_scalar(f"eval/{name}", value, step)', "            pass",
              TRAIN, "evaluation metrics never reach TensorBoard"),
     Mutation("best-checkpoint-not-saved", "train/run.py",
-             '                save(self.out / "best.pt")', "                pass",
-             TRAIN, "best.pt is never written"),
+             '                save(self.out / "best.pt")\n                self.writer.add_scalar(',
+             "                self.writer.add_scalar(",
+             TRAIN, "best.pt is not written at periodic evaluations"),
+    Mutation("best-is-the-latest", "train/run.py",
+             'if scores.get("S_bench", -np.inf) > self.best_score:  # selection on held-out seeds',
+             "if True:", TRAIN, "best.pt is the latest evaluated checkpoint, not the best"),
 )  # fmt: skip
 
 

@@ -171,3 +171,41 @@ def test_evaluations_in_the_training_process_do_not_change_an_sb3_run(tmp_path):
     assert (tmp_path / "a" / "evals" / "step_256" / "report.md").is_file()
     for name, tensor in without["policy"].items():
         assert torch.equal(with_eval["policy"][name], tensor), name
+
+
+def test_best_pt_holds_the_highest_held_out_score_so_far(tmp_path, monkeypatch):
+    """Stopped right after the first periodic evaluation: that evaluation is the best so far, so
+    best.pt holds that step's weights and its held-out S_bench (as logged to TensorBoard)."""
+    end_of_batch = Run.end_of_batch
+
+    def stop_after_the_first_batch(self, step, *args):
+        end_of_batch(self, step, *args)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Run, "end_of_batch", stop_after_the_first_batch)
+    out = tmp_path / "run"
+    code = main(["ppo", "--task", "drive", "--scenarios", f"{TINY_SUITE}:t1_left", *SMALL, "--total-steps", "256",
+                 "--eval-every", "64", "--eval-episodes", "1", "--eval-workers", "1", "--eval-suite", str(TINY_SUITE),
+                 "--out-dir", str(out)])  # fmt: skip
+    assert code == 130
+    best = torch.load(out / "best.pt", weights_only=True)
+    last = torch.load(out / "last.pt", weights_only=True)
+    assert best["step"] == last["step"] == 64
+    for name, tensor in last["actor"].items():
+        assert torch.equal(best["actor"][name], tensor), name
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    acc = EventAccumulator(str(out / "tensorboard"), size_guidance={"scalars": 0})
+    acc.Reload()
+    logged = [(e.step, e.value) for e in acc.Scalars("eval/best_S_bench")]
+    assert logged == [(64, pytest.approx(best["metrics"]["eval/S_bench"]))]
+    # Resumed, later evaluations replace best.pt only when they score higher: with the recorded
+    # score raised to the maximum (1.0), neither the periodic nor the final evaluation may.
+    best["metrics"]["eval/S_bench"] = 1.0
+    torch.save(best, out / "best.pt")
+    monkeypatch.setattr(Run, "end_of_batch", end_of_batch)
+    assert main(["ppo", "--task", "drive", "--scenarios", f"{TINY_SUITE}:t1_left", *SMALL, "--total-steps", "192",
+                 "--eval-every", "64", "--eval-episodes", "1", "--eval-workers", "1", "--eval-suite", str(TINY_SUITE),
+                 "--out-dir", str(out), "--resume", str(out / "last.pt")]) == 0  # fmt: skip
+    assert (out / "evals" / "step_128" / "results.json").is_file() and (out / "eval" / "results.json").is_file()
+    assert torch.load(out / "best.pt", weights_only=True)["step"] == 64
