@@ -153,7 +153,7 @@ def per_env_rate(case: str, batch: int, steps: int, warmup: int, seed: int = 0) 
     return {"agent_steps_per_s": mean, "ci95": ci}
 
 
-def batched_rows(batches=DEFAULT_BATCHES, cases=tuple(CASES), steps: int = 100, warmup: int = 10,
+def batched_rows(batches=DEFAULT_BATCHES, cases=tuple(CASES), steps: int = 300, warmup: int = 10,
                  per_env_agent_steps: int = 5000, progress=None) -> list[dict]:  # fmt: skip
     """One row per (case, batch). The per-env path is timed on about ``per_env_agent_steps``
     agent-steps (at least ``CHUNKS`` steps of the whole batch: it is slow at large B), the batched
@@ -225,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--batches", default=",".join(map(str, DEFAULT_BATCHES)), help="episode counts B")
     parser.add_argument("--cases", default=",".join(CASES), help=f"cases among {', '.join(CASES)}")
-    parser.add_argument("--steps", type=int, default=100, help="timed steps of the whole batch per row (batched backend)")
+    parser.add_argument("--steps", type=int, default=300, help="timed steps of the whole batch per row (batched backend)")
     parser.add_argument("--per-env-agent-steps", type=int, default=5000, help="timed agent-steps per row on the per-env path")
     parser.add_argument("--warmup", type=int, default=10, help="untimed steps first")
     parser.add_argument("--ppo-steps", type=int, default=0, help="env steps of each end-to-end PPO run (0: no PPO rows)")
