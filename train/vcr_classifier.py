@@ -10,7 +10,9 @@ the next 8 steps, else safe. Safe samples are capped at 8 per collision sample p
 (at least 200). The classifier (``agents.planners.nets.VCRClassifier``: 4 conv blocks of 32
 channels, a 18 -> 64 numeric branch, a 352 -> 256 -> 64 -> 6 head) trains with cross-entropy,
 Adam lr 3e-4 and weight decay 1e-3 for 15 epochs; scenarios are split by name and the held-out
-collision precision and recall are reported. Writes TensorBoard logs and ``final.pt``.
+collision precision and recall are reported. Classes weigh 1 / sqrt(frequency) in the loss
+(``--no-balance``: equal). ``--data FILE`` keeps the generated samples. Writes TensorBoard logs
+and ``final.pt``.
 """
 
 from __future__ import annotations
@@ -114,7 +116,18 @@ def train(args: argparse.Namespace) -> dict:
     torch.set_num_threads(args.threads)
     started = time.time()
     scenarios = [e for name in args.suite or ["collaborative", "adaptive"] for e in load_suite(name).scenarios]
-    data = generate(scenarios, args.seeds, not args.quiet)
+    cache = Path(args.data) if args.data else None
+    if cache is not None and cache.is_file():
+        with np.load(cache) as saved:
+            data = {}
+            for key in saved.files:
+                name, field = key.rsplit("/", 1)
+                data.setdefault(name, {})[field] = saved[key]
+    else:
+        data = generate(scenarios, args.seeds, not args.quiet)
+        if cache is not None:
+            cache.parent.mkdir(parents=True, exist_ok=True)
+            np.savez_compressed(cache, **{f"{n}/{k}": v for n, d in data.items() for k, v in d.items()})
     names = sorted(data)
     held = names[4::5] or names[-1:]
     if len(held) == len(names):
@@ -129,6 +142,10 @@ def train(args: argparse.Namespace) -> dict:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     writer = SummaryWriter(out / "tensorboard")
+    # Collisions are rare (a few % of the samples): classes weigh 1 / sqrt(frequency), so the
+    # one class the policy reads is not drowned by "safe" (the original had no weights).
+    weights = torch.tensor(1.0 / np.sqrt(np.maximum(counts, 1) / counts.sum()), dtype=torch.float32)
+    weights = weights / weights[5] if args.balance else torch.ones(6)
     net = VCRClassifier()
     opt = torch.optim.Adam(net.parameters(), lr=args.lr, weight_decay=1e-3)
     gen = torch.Generator().manual_seed(args.seed)
@@ -148,7 +165,7 @@ def train(args: argparse.Namespace) -> dict:
         perm = torch.randperm(len(tr[2]), generator=gen)
         for i in range(0, len(perm), args.batch):
             idx = perm[i : i + args.batch]
-            loss = torch.nn.functional.cross_entropy(net(tr[0][idx], tr[1][idx]), tr[2][idx])
+            loss = torch.nn.functional.cross_entropy(net(tr[0][idx], tr[1][idx]), tr[2][idx], weight=weights)
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -157,7 +174,7 @@ def train(args: argparse.Namespace) -> dict:
                 writer.add_scalar("train/loss", loss.item(), step)
         for k, v in held_metrics().items():
             writer.add_scalar(f"heldout/{k}", v, epoch)
-    metrics = {**held_metrics(), "train_samples": len(tr[2]), "train_classes": dict(zip(CLASSES, counts.tolist())),
+    metrics = {**held_metrics(), "balanced": bool(args.balance), "train_samples": len(tr[2]), "train_classes": dict(zip(CLASSES, counts.tolist())),
                "heldout_samples": len(ho[2]), "heldout_collisions": int((ho[2] == 0).sum()),
                "heldout_scenarios": held, "epochs": args.epochs, "steps": step,
                "parameters": sum(p.numel() for p in net.parameters()), "threads": args.threads,
@@ -174,6 +191,9 @@ def add_parser(sub) -> None:
     p.add_argument("--suite", action="append", default=None, help="suites whose scenarios are explored (default: both)")
     p.add_argument("--seeds", type=int, default=3, help="episodes per scenario")
     p.add_argument("--out", default="runs/train/vcr-classifier", help="output folder (TensorBoard, final.pt)")
+    p.add_argument("--data", default=None, help="an .npz of generated samples: read when it exists, else written")
+    p.add_argument("--balance", action=argparse.BooleanOptionalAction, default=True,
+                   help="weigh classes by 1 / sqrt(frequency) in the loss")  # fmt: skip
     p.add_argument("--epochs", type=int, default=15, help="passes over the training samples")
     p.add_argument("--batch", type=int, default=100, help="samples per gradient step")
     p.add_argument("--lr", type=float, default=3e-4, help="Adam learning rate")
