@@ -36,7 +36,7 @@ import numpy as np
 from smarts.core.events import agent_events
 from smarts.core.missions import ResolvedMission
 from smarts.core.provider import Provider
-from smarts.core.simulation import EventConfig, Simulation, _route_progress, check_seed
+from smarts.core.simulation import EventConfig, Simulation, _route_progress, check_seed, derived_seed
 from smarts.core.vehicle_table import COLUMN, VehicleTable
 from smarts.maps import RoadMap, project
 from smarts.maps.drivable import raster_lookup
@@ -180,7 +180,7 @@ class BatchedSimulation(Simulation):
 
     def reset(self, seed: int | None = None) -> None:
         """Reset every episode (seeds ``seed + b``, or each episode's last seed)."""
-        seeds = None if seed is None else [seed + b for b in range(self.episodes)]
+        seeds = None if seed is None else [derived_seed(seed, b) for b in range(self.episodes)]
         self.reset_episodes(self._all_episodes, seeds)
 
     def reset_episodes(self, episodes: np.ndarray, seeds: Sequence[int | None] | None = None) -> None:
