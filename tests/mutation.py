@@ -43,7 +43,7 @@ class Mutation:
 
 BENCH = ("tests/benchmark",)
 ENV = ("tests/env", "tests/core")
-TRAIN = ("tests/test_train_ppo.py", "tests/test_train_run.py", "tests/test_learning.py")
+TRAIN = ("tests/test_train_run.py", "tests/test_train_ppo.py", "tests/test_learning.py")
 
 MUTATIONS: tuple[Mutation, ...] = (
     # The recorder: the log columns the metrics score.
