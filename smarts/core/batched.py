@@ -87,13 +87,66 @@ class _EpisodeRows:
     def __init__(self, sim: "BatchedSimulation"):
         self.sim = sim
 
-    def get(self, key, default=-1):
+    def get(self, key, default=None):
         b, vid = key
         row = self.sim.views[b].table.row_of.get(vid)
         return default if row is None else row + b * self.sim.episode_capacity
 
     def __len__(self) -> int:
         return sum(len(v.table.row_of) for v in self.sim.views)
+
+
+class _OffsetRows:
+    """An episode's id -> row map in stacked rows."""
+
+    def __init__(self, rows: dict, offset: int):
+        self.rows, self.offset = rows, offset
+
+    def get(self, vid, default=None):
+        row = self.rows.get(vid)
+        return default if row is None else row + self.offset
+
+    def __contains__(self, vid) -> bool:
+        return vid in self.rows
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+
+class _EpisodeTable:
+    """The stacked table with episode ``b``'s id map (rows are stacked rows)."""
+
+    def __init__(self, sim: "BatchedSimulation", b: int):
+        self._table = sim.table
+        self.row_of = _OffsetRows(sim.views[b].table.row_of, b * sim.episode_capacity)
+
+    def __getattr__(self, name: str):
+        return getattr(self._table, name)
+
+
+class EpisodeSim:
+    """Episode ``b`` of a batch as a single simulation, for per-episode readers of a simulation
+    (the benchmark's ``EpisodeRecorder``): the episode's clock, its agents by their own ids
+    (``agent_index`` maps them to the batch's agent indices), their leads by vehicle id, and the
+    stacked arrays. Everything else is the batch's."""
+
+    def __init__(self, sim: "BatchedSimulation", b: int):
+        self._sim, self._b = sim, b
+        agents = sim.episode_agents(b).tolist()
+        self.agent_index = {sim.local_agent_ids[a]: a for a in agents}
+        self.lead_ids = [m.follow for m in sim.missions]
+        self.table = _EpisodeTable(sim, b)
+
+    @property
+    def time(self) -> float:
+        return float(self._sim.episode_time[self._b])
+
+    @property
+    def step_count(self) -> int:
+        return int(self._sim.episode_step[self._b])
+
+    def __getattr__(self, name: str):
+        return getattr(self._sim, name)
 
 
 class BatchedSimulation(Simulation):

@@ -167,3 +167,47 @@ def test_sb3_vec_env_reports_each_end_once_and_restarts_copies_in_the_step():
                 assert rewards[j] == 0 and not dones[j] and not obs["ego"][j].any()
     assert ends >= 3
     vec.close()
+
+
+def test_episode_recorder_logs_the_same_episode_on_both_backends():
+    """The benchmark's EpisodeRecorder on one copy of a batch (``episode_sim``) writes the log a
+    single env gives for the same seed and actions, so the metrics score both alike."""
+    from smarts.benchmark.recorder import EpisodeRecorder
+
+    specs = _adaptive("a02_straight_two_followers_low", "a08_lead_turns_left_at_junction")
+    batch = BatchedDriving(specs, observation=PLATOON)
+    batch.set_seed(5)
+    batch.reset()
+    singles = [DrivingParallelEnv(s, observation=PLATOON) for s in specs]
+    for i, env in enumerate(singles):
+        env.reset(seed=5 + i * 100_003)
+    meta = dict(task="adaptive", episode=0, seed=5, time_limit=25.0)
+    recorders = [
+        EpisodeRecorder(batch.episode_sim(i), env.possible_agents, scenario=s.name, **meta)
+        for i, (s, env) in enumerate(zip(specs, singles))
+    ]  # fmt: skip
+    reference = [EpisodeRecorder(env.sim, env.possible_agents, scenario=s.name, **meta) for s, env in zip(specs, singles)]
+    open_copies = [True] * len(specs)
+    batch.add_step_listener(lambda: [r.record() for r, live in zip(recorders, open_copies) if live])
+    for env, rec in zip(singles, reference):
+        env.add_step_listener(lambda sim, rec=rec: rec.record())
+    slot = {key: j for j, key in enumerate(batch.slots)}
+    rng = np.random.default_rng(1)
+    for _ in range(300):
+        commands = rng.uniform(-1.0, 1.0, size=(batch.num_slots, 2))
+        res = batch.step(commands)
+        for i, env in enumerate(singles):
+            if env.agents:
+                env.step({a: commands[slot[(i, a)]] for a in env.agents})
+            if res.restarted[[slot[(i, a)] for a in env.possible_agents]].any():
+                open_copies[i] = False
+        if not any(open_copies):
+            break
+    for mine, theirs in zip(recorders, reference):
+        a, b = mine.finish(), theirs.finish()
+        assert set(a.agents) == set(b.agents) and a.agents
+        assert a.initial_route_distance == b.initial_route_distance and a.end_time == b.end_time
+        for agent in a.agents:
+            for field in dataclasses.fields(a.agents[agent]):
+                x, y = getattr(a.agents[agent], field.name), getattr(b.agents[agent], field.name)
+                np.testing.assert_array_equal(x, y, err_msg=f"{agent} {field.name}")

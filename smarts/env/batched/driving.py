@@ -21,7 +21,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from smarts.core.batched import BatchedSimulation
+from smarts.core.batched import BatchedSimulation, EpisodeSim
 from smarts.core.events import Event
 from smarts.core.simulation import check_seed, derived_seed
 from smarts.dynamics.action_spaces import agent_action_space
@@ -143,11 +143,25 @@ class BatchedDriving:
         self._first = {k: np.zeros_like(v) for k, v in self._obs.items()}
         self._arange: np.ndarray | None = None
         self._next_seed: list[int | None] = [None] * len(self.specs)
+        self._listeners: list[Callable[[], Any]] = []
         self.seed_schedule: Callable[[int], int | None] | None = None
         """When set, ``seed_schedule(copy)`` gives each new episode's seed instead (adapters with
         their own seeding convention)."""
         self._terminal = self.groups[0].sim.event_config.terminate_on.copy()
         self._terminal[Event.MAX_STEPS] = False
+
+    # ------------------------------------------------------------------ per-episode readers
+    def episode_sim(self, copy: int) -> EpisodeSim:
+        """Copy ``copy``'s current episode as a single simulation (its agents by their scenario
+        ids), for per-episode readers such as the benchmark's ``EpisodeRecorder``."""
+        g, b = self.copy_place[copy]
+        return EpisodeSim(self.groups[g].sim, b)
+
+    def add_step_listener(self, listener: Callable[[], Any]) -> None:
+        """Call ``listener()`` after every step, before finished agents leave and finished copies
+        restart (as ``DrivingParallelEnv.add_step_listener``: an ``EpisodeRecorder`` of each copy
+        records its final step there; ``StepResult.restarted`` says which copies start anew)."""
+        self._listeners.append(listener)
 
     def _interface(self, observation) -> AgentInterface:
         if observation is not None:
@@ -245,6 +259,10 @@ class BatchedDriving:
             terminated[slots] = term
             truncated[slots] = done & ~term
             acted[slots] = True
+        for listener in self._listeners:
+            listener()  # sees this step's state before finished agents leave
+        for group in self.groups:
+            sim = group.sim
             sim.remove_done_agents()
             over = sim.episodes_over()
             if over.size:
