@@ -159,7 +159,8 @@ class BatchedSimulation(Simulation):
     ``signals[b]``: episode ``b``'s ``SignalState`` (None without signals); its colours are moved
     into row ``b`` of ``self.via_colour``, so observations read every episode's signals in one call.
     ``step`` takes the actions of all agents as one array (``action_array``); an episode whose
-    agents have all finished stays as it is until ``reset_episodes`` starts it again.
+    agents have all finished keeps stepping its own providers (its traffic drives on) until
+    ``reset_episodes`` starts it again (``BatchedDriving`` resets such episodes at once).
     """
 
     def __init__(
