@@ -4,7 +4,7 @@ Generator (as VCR's): the suites' scenarios with every mission vehicle driven by
 VCR follower: every 8 steps it picks a uniformly random observed lane path and a per-step
 distance from {0, 1.0, 1.2} m (p = 0.3, 0.4, 0.3), and follows the Bezier curve over that path.
 Each step stores the ego-centred rasters (drivable, route, occupancy; 64 x 64 at 0.8 m) and the
-candidate (the path's first point, ego frame) with the next 5 path points; its label is the
+executed step (ego frame) with the next 5 path points; its label is the
 first event among collision, off_road, partial_off_road (on_shoulder), wrong_way, off_route in
 the next 8 steps, else safe. Safe samples are capped at 8 per collision sample per scenario
 (at least 200). The classifier (``agents.planners.nets.VCRClassifier``: 4 conv blocks of 32
@@ -30,9 +30,12 @@ CLASSES = ("collision", "off_road", "on_shoulder", "wrong_way", "off_route", "sa
 HORIZON = 8
 
 
-def _numbers(path: np.ndarray) -> np.ndarray:
+def _numbers(action: np.ndarray, path: np.ndarray) -> np.ndarray:
+    """The executed step (x, y, heading) and the next 5 path points, ego frame: 18 numbers."""
     pts = np.zeros((6, 3), dtype=np.float32)
-    pts[: min(6, len(path))] = path[:6]
+    pts[0] = action
+    k = min(5, len(path) - 1)
+    pts[1 : 1 + k] = path[1 : 1 + k]
     return pts.reshape(-1)
 
 
@@ -79,7 +82,7 @@ def generate(scenarios, seeds: int, progress: bool = True) -> dict[str, dict[str
                         continue
                     actions[a] = np.array([dist * plan[0, 0], dist * plan[0, 1], plan[0, 2] if dist > 0 else 0.0],
                                           dtype=np.float32)  # fmt: skip
-                    tracks.setdefault(a, []).append([row["rasters"], _numbers(plan), None])
+                    tracks.setdefault(a, []).append([row["rasters"], _numbers(actions[a], plan), None])
                 obs, _, _, _, infos = env.step(actions)
                 for a, steps in tracks.items():
                     if a in actions and a in infos and steps:

@@ -110,20 +110,29 @@ def kinematic_costs(xy: np.ndarray, yaw: np.ndarray) -> tuple[float, float]:
     return float(np.mean(np.abs(jerk)) / 10.0), float(np.mean(np.abs(lat)) / 10.0)
 
 
-def interaction_costs(cand: Candidate, ref: Reference, predicted: np.ndarray) -> tuple[float, float, float]:
+def project_predictions(ref: Reference, predicted: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(s, d, inner) [N, 30] of predicted points on a reference: the nearest 0.1 m sample, the
+    signed offset from it, and whether that sample is neither the first nor the last."""
+    flat = predicted.reshape(-1, 2)
+    k = np.argmin(((flat[:, None, :] - ref.xy[None]) ** 2).sum(-1), axis=1)
+    normal = np.stack([-np.sin(ref.yaw[k]), np.cos(ref.yaw[k])], axis=1)
+    shape = predicted.shape[:2]
+    d_nb = ((flat - ref.xy[k]) * normal).sum(1).reshape(shape)
+    return (ref.step * k).reshape(shape), d_nb, ((k > 0) & (k < len(ref.s) - 1)).reshape(shape)
+
+
+def interaction_costs(cand: Candidate, ref: Reference, predicted: np.ndarray,
+                      projected: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> tuple[float, float, float]:  # fmt: skip
     """(prox, ttc, coll) of a candidate against predicted neighbour points [N, 30, 2]: a fixed
-    5 m x 2.5 m Frenet window along the candidate's reference, a 5 m Euclidean prefilter."""
+    5 m x 2.5 m Frenet window along the candidate's reference, a 5 m Euclidean prefilter.
+    ``projected``: :func:`project_predictions` of the reference, shared by its candidates."""
     if len(predicted) == 0:
         return float(np.exp(-0.3 * min(100.0 - 3.0, 20.0) ** 2)), 0.0, 0.0
     T = len(cand.xy)
     pts = predicted[:, :T]  # [N, T, 2]
     near = np.linalg.norm(pts - cand.xy[None], axis=2) <= PREFILTER  # [N, T]
-    flat = pts.reshape(-1, 2)
-    k = np.argmin(((flat[:, None, :] - ref.xy[None]) ** 2).sum(-1), axis=1)
-    normal = np.stack([-np.sin(ref.yaw[k]), np.cos(ref.yaw[k])], axis=1)
-    d_nb = ((flat - ref.xy[k]) * normal).sum(1).reshape(pts.shape[:2])
-    s_nb = (ref.step * k).reshape(pts.shape[:2])
-    inner = ((k > 0) & (k < len(ref.s) - 1)).reshape(pts.shape[:2])
+    s_nb, d_nb, inner = projected if projected is not None else project_predictions(ref, predicted)
+    s_nb, d_nb, inner = s_nb[:, :T], d_nb[:, :T], inner[:, :T]
     ds = np.abs(cand.s[None, :T] - s_nb)
     dd = np.abs(cand.d[None, :T] - d_nb)
     checked = near & inner
@@ -258,6 +267,7 @@ class AIDPlanner(StatefulPlanner):
             d0 = float(d_ego[0])  # the ego's offset to the left of the path
             d = lateral_profile(d0, v_d)
             d2g = (goal_dist[i] - best_goal) if has_goal else 0.0
+            projected = project_predictions(ref, predicted) if len(predicted) else None
             for a in ACCELERATIONS:
                 v = longitudinal_profile(v_s, a_s, float(a))
                 s = max(float(s_ego[0]), 0.0) + np.cumsum(DT * v)
@@ -274,7 +284,7 @@ class AIDPlanner(StatefulPlanner):
                 target = np.minimum(v_lim, np.sqrt(CURVE_LAT_ACCEL / np.maximum(kappa, 1e-6)))
                 spd = float(np.mean(np.abs(v[:n] - target) / v_lim))
                 infeasible = float((v[:n] * kappa > MAX_YAW_RATE).any())
-                prox, ttc, coll = interaction_costs(cand, ref, predicted)
+                prox, ttc, coll = interaction_costs(cand, ref, predicted, projected)
                 terms = np.array([d2g, spd, jerk, lat, prox, ttc, coll])
                 candidates.append(cand)
                 refs_of.append(ref)
