@@ -26,7 +26,7 @@ from smarts.maps.opendrive import (
 from smarts.maps.road_map import RoadMap
 from smarts.maps.sumo_net import compile_sumo_net, read_map_bytes
 
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 """Version of the compiled arrays; bump it whenever compilation output changes meaning
 (3: the file records the SHA-256 of its arrays; 4: SUMO's lane lengths)."""
 

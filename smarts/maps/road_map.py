@@ -127,6 +127,10 @@ class RoadMap:
     tls_phase_state: np.ndarray = field(default_factory=lambda: np.zeros(0, "<U1"))
     """One SUMO state string per phase (a char per link index: r, y, g/G, o, ...)."""
 
+    # --- stop signs (N of them; from dataset maps such as Waymo's) ---
+    stop_sign_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # float64[N, 2] position
+    stop_sign_lane: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))  # lane it controls, -1 if none
+
     lane_index_of: dict[str, int] = field(default_factory=dict, repr=False)
     road_index_of: dict[str, int] = field(default_factory=dict, repr=False)
 

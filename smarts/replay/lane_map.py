@@ -14,6 +14,7 @@ import numpy as np
 
 from smarts.core.errors import ReplayError
 from smarts.maps.assemble import LaneSpec, assemble_road_map
+from smarts.maps.projection import project
 from smarts.maps.road_map import RoadMap
 from smarts.replay.recording import DatasetMap
 
@@ -58,7 +59,8 @@ def compile_lane_map(dm: DatasetMap, content_hash: str | None = None) -> RoadMap
         for line in dm.polylines:
             h.update(np.ascontiguousarray(line, dtype=np.float64).tobytes())
         h.update("\0".join(dm.lane_ids).encode())
-        h.update(repr((dm.successors, dm.left, dm.right)).encode())
+        h.update(repr((dm.successors, dm.left, dm.right, dm.stop_sign_lanes)).encode())
+        h.update(np.ascontiguousarray(dm.stop_signs, dtype=np.float64).tobytes())
         content_hash = h.hexdigest()
     cached = _compiled.get(content_hash)
     if cached is not None:
@@ -124,5 +126,29 @@ def compile_lane_map(dm: DatasetMap, content_hash: str | None = None) -> RoadMap
             if j is not None and j != k:
                 links.append((new_index[k], new_index[j]))
     road_map = assemble_road_map(dm.source, content_hash, lanes, sorted(set(links)), junction_shapes=dm.outlines)
+    road_map.stop_sign_xy, road_map.stop_sign_lane = _stop_signs(dm, road_map)
     _compiled[content_hash] = road_map
     return road_map
+
+
+def _stop_signs(dm: DatasetMap, road_map: RoadMap) -> tuple[np.ndarray, np.ndarray]:
+    """Stop sign positions and the lane each controls: the lane the dataset names, else the lane
+    nearest the sign (-1 when the named lane was dropped and none is near)."""
+    xy = np.asarray(dm.stop_signs, dtype=np.float64).reshape(-1, 2)
+    lanes = np.full(len(xy), -1, dtype=np.int32)
+    named = list(dm.stop_sign_lanes) + [None] * (len(xy) - len(dm.stop_sign_lanes))
+    unnamed = []
+    for k, lane_id in enumerate(named):
+        index = road_map.lane_index_of.get(lane_id) if lane_id is not None else None
+        if index is not None:
+            lanes[k] = index
+        else:
+            unnamed.append(k)
+    if unnamed:
+        near = project(road_map, xy[unnamed])
+        lanes[unnamed] = np.where(np.abs(near.t) <= MAX_STOP_SIGN_OFFSET, near.lane, -1)
+    return xy, lanes
+
+
+MAX_STOP_SIGN_OFFSET = 10.0
+"""m: a stop sign without a named lane controls the nearest lane within this distance."""

@@ -33,6 +33,8 @@ class DatasetMap:
     outlines: list[np.ndarray] = field(default_factory=list)
     """Drivable-area polygons (float64[k, 2]) drawn into the drivable raster."""
     stop_signs: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    stop_sign_lanes: list[str | None] = field(default_factory=list)
+    """The first lane each stop sign controls (a lane id of ``lane_ids``), None when not given."""
 
 
 @dataclass

@@ -5,7 +5,8 @@ Each record is one scenario: ``timestamps_seconds`` (91 frames of 0.1 s in the m
 flag) and ``map_features`` (lane centres with entry/exit lanes and left/right neighbours, road lines
 and edges, stop signs). Vehicles and cyclists are replayed with their recorded boxes; frames a track
 is not valid in are left out (a gap inside a track is interpolated). Lane centres become the map
-(``smarts.replay.lane_map``); stop sign positions are kept with it.
+(``smarts.replay.lane_map``), with the stop signs and the lanes they control
+(``RoadMap.stop_sign_xy``, ``stop_sign_lane``).
 """
 
 from __future__ import annotations
@@ -105,6 +106,7 @@ def read_waymo(
 def read_map(msg, where: str, *, swap_xy: bool, flip_y: bool, offset: tuple[float, float]) -> DatasetMap | None:
     """Lane centres (not bike lanes) and stop signs of a scenario's map features."""
     ids, lines, speeds, internal, succ, left, right, stops = [], [], [], [], [], [], [], []
+    stop_lanes: list[str | None] = []
     widths = []
     boundaries = {}  # road line and road edge polylines by feature id, for lane widths
     for feature in msg.map_features:
@@ -130,6 +132,7 @@ def read_map(msg, where: str, *, swap_xy: bool, flip_y: bool, offset: tuple[floa
             p = feature.stop_sign.position
             sx, sy = align(np.array([p.x]), np.array([p.y]), swap_xy=swap_xy, flip_y=flip_y, offset=offset)
             stops.append((float(sx[0]), float(sy[0])))
+            stop_lanes.append(str(feature.stop_sign.lane[0]) if len(feature.stop_sign.lane) else None)
     if not ids:
         return None
     return DatasetMap(
@@ -143,6 +146,7 @@ def read_map(msg, where: str, *, swap_xy: bool, flip_y: bool, offset: tuple[floa
         left=left,
         right=right,
         stop_signs=np.array(stops, dtype=np.float64).reshape(-1, 2),
+        stop_sign_lanes=stop_lanes,
     )
 
 

@@ -56,6 +56,11 @@ def test_tracks_and_map_are_read(tmp_path):
     np.testing.assert_allclose(m.lane_speed_limit, 25 * 0.44704)
     # widths from the road edge and line beside each lane (the left lanes: twice the one side known)
     np.testing.assert_allclose(m.lane_width, 3.7)
+    # the stop sign, with the lane it controls, is part of the compiled map and survives a save
+    assert m.stop_sign_xy.tolist() == [[195.0, -2.0]] and m.stop_sign_lane.tolist() == [m.lane_index_of["1003"]]
+    m.save(tmp_path / "map.npz")
+    again = type(m).load(tmp_path / "map.npz")
+    assert again.stop_sign_xy.tolist() == [[195.0, -2.0]] and again.stop_sign_lane.tolist() == [m.lane_index_of["1003"]]
 
 
 def test_a_scenario_is_picked_by_id_or_index(tmp_path):
@@ -136,3 +141,14 @@ def test_env_drives_an_agent_among_the_recorded_vehicles(tmp_path):
         assert (np.abs(obs["ego"]["neighbours"]).sum(axis=1) > 0).sum() == 1 and rewards["ego"] > 0
     finally:
         env.close()
+
+
+def test_a_stop_sign_without_a_named_lane_controls_the_nearest_lane(tmp_path):
+    import dataclasses
+
+    dm = read_recording("waymo", write_waymo(tmp_path / "s.tfrecord")).road_map
+    m = compile_lane_map(dataclasses.replace(dm, stop_signs=np.array([[195.0, -2.0], [195.0, -80.0]]),
+                                             stop_sign_lanes=[None, None]))  # fmt: skip
+    near = m.stop_sign_lane.tolist()
+    assert near[1] == -1  # 80 m from every lane: controls none
+    assert near[0] >= 0 and m.lane_road[near[0]] == m.lane_road[m.lane_index_of["1003"]]
