@@ -90,6 +90,18 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "python -m train benchmark --suite collaborative --agent zoo:drive --workers 2": (
         PARSE, "14 scenarios x 3 episodes x 4 agents, minutes",
     ),
+    "python -m train benchmark --suite collaborative --agent zoo:tf --agent zoo:vcr --agent zoo:aid --episodes 3 "
+    "--workers 2": (PARSE, "14 scenarios x 3 episodes x 6 agents, minutes"),
+    "python -m train trajectories": (
+        NOT_RUN, "minutes of simulation; tests/planners/test_training.py runs it on a two-scenario suite",
+    ),
+    "python -m train aid-predictor": (
+        NOT_RUN, "tens of minutes on 2 cores; tests/planners/test_training.py trains a few steps",
+    ),
+    "python -m train tf-bc": (NOT_RUN, "minutes; tests/planners/test_training.py runs it on a two-scenario suite"),
+    "python -m train vcr-classifier": (
+        NOT_RUN, "about 15 minutes; tests/planners/test_training.py runs it on a two-scenario suite",
+    ),
     "python -m smarts.benchmark.metrics runs/benchmark/collaborative/logs": (
         RUN, "on the logs of a one-scenario, one-episode collaborative benchmark of the reference agents",
     ),
