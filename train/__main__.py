@@ -6,6 +6,7 @@
     python -m train benchmark --agent zoo:keep-lane --agent zoo:random --suite collaborative
     python -m train enjoy --agent zoo:keep-lane --scenario adaptive:a01_straight_free --video out.mp4 [--viz]
     add --ray-address auto|local|HOST:PORT to run episodes (benchmark, eval) or collectors (ppo) on Ray
+    python -m train trajectories | aid-predictor | tf-bc | vcr-classifier   (the planners' learned parts)
 """
 
 from __future__ import annotations
