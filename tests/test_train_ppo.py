@@ -239,7 +239,7 @@ def test_ctrl_c_saves_interrupted_pt_and_exits_130_without_a_traceback(tmp_path)
         time.sleep(0.5)
     assert (out / "last.pt").is_file(), proc.stderr.read() if proc.poll() is not None else "no batch in 180 s"
     proc.send_signal(signal.SIGINT)
-    stdout, stderr = proc.communicate(timeout=120)
+    stdout, stderr = proc.communicate(timeout=300)  # a loaded machine: saving and shutting down can be slow
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr
     assert (out / "interrupted.pt").is_file() and "checkpoint saved to" in stdout

@@ -494,22 +494,33 @@ def _lost(job: Job, reasons: list[str]) -> dict:
 
 
 @contextlib.contextmanager
-def _sigint_ignored() -> Iterator[None]:
-    """Ignore Ctrl-C while starting a worker: the child inherits it, so only the parent handles
-    Ctrl-C (and stops the workers) instead of every worker printing a traceback."""
+def _sigint_deferred() -> Iterator[None]:
+    """Hold Ctrl-C back while starting a worker. Blocked, not ignored: the child is born with it
+    blocked (its loop then ignores it, so only the parent handles Ctrl-C and stops the workers
+    instead of every worker printing a traceback), and a Ctrl-C pressed meanwhile is not lost: it
+    reaches the parent as soon as the worker has started."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if not hasattr(signal, "pthread_sigmask"):  # no signal masks (Windows): ignore it meanwhile
+        before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            yield
+        finally:
+            signal.signal(signal.SIGINT, before)
+        return
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, before)
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
 
 def _worker_loop(conn, policy_resolver: PolicyResolver | None) -> None:
     """A worker process: run the jobs it is sent, one at a time, until told to stop."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked by the parent for the start
     while True:
         try:
             message = conn.recv()
@@ -527,7 +538,7 @@ class _Worker:
     def __init__(self, ctx, policy_resolver: PolicyResolver | None):
         self.conn, child = ctx.Pipe()
         self.process = ctx.Process(target=_worker_loop, args=(child, policy_resolver), name="smarts-benchmark-worker")
-        with _sigint_ignored():
+        with _sigint_deferred():
             self.process.start()
         child.close()
         self.job: int | None = None

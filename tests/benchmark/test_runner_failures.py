@@ -176,3 +176,18 @@ def test_ctrl_c_writes_what_finished_and_resume_finishes_the_run(tmp_path):
     doc = json.loads((out / "results.json").read_text())
     assert doc["complete"] and doc["episodes_not_run"] == 0
     assert sum(doc["agents"]["zoo:keep-lane"]["scores"]["episodes"].values()) == 2 * 12
+
+
+def test_a_ctrl_c_while_a_worker_starts_is_not_lost():
+    """Worker starts hold Ctrl-C back from the child (born with it blocked), but the parent still
+    gets it: it is never ignored and lost."""
+    from smarts.benchmark.runner import _sigint_deferred
+
+    probe = "import signal; print(signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, []))"
+    with pytest.raises(KeyboardInterrupt):
+        with _sigint_deferred():
+            child = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.1)
+    assert child.stdout.strip() == "True"
+    assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, [])  # the parent's mask is restored
