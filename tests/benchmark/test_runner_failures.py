@@ -143,15 +143,22 @@ def _overall(doc):
     return {a: v["scores"]["overall"] for a, v in doc["agents"].items()}
 
 
+def _as_from_a_terminal() -> None:
+    """In the child: Ctrl-C acts as in a terminal even when the tests themselves were started in
+    the background (a shell's background jobs ignore SIGINT, and children inherit that), and the
+    benchmark runs below the test's priority so that on a loaded machine it cannot play all its
+    episodes while the test waits for the CPU to look at the logs."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    os.nice(10)
+
+
 def test_ctrl_c_writes_what_finished_and_resume_finishes_the_run(tmp_path):
     out = tmp_path / "run"
     command = [sys.executable, "-m", "train", "benchmark", "--suite", TINY, "--agent", "zoo:keep-lane",
                "--episodes", "12", "--workers", "2", "--out", str(out)]  # fmt: skip
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    # The benchmark runs at a lower priority than this test, so that on a loaded machine it cannot
-    # play all its episodes while the test waits for the CPU to look at the logs.
     proc = subprocess.Popen(command, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, preexec_fn=lambda: os.nice(10))  # fmt: skip
+                            start_new_session=True, preexec_fn=_as_from_a_terminal)  # fmt: skip
     try:
         deadline = time.monotonic() + 120
         while len(list((out / "logs").rglob("*.npz"))) < 4 and proc.poll() is None and time.monotonic() < deadline:
