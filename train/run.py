@@ -25,6 +25,7 @@ value is not known, e.g. no episode ended in the last batch), then the final eva
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import math
@@ -105,9 +106,17 @@ def training_spec(name, action_space: str, controller: str = "direct"):
 
 
 def training_specs(cfg: TrainConfig) -> list:
-    """The ``envs`` scenario copies, cycling through the task's scenarios."""
+    """The ``envs`` scenario copies, cycling through the task's scenarios (each scenario read and
+    validated once; every copy gets its own deep copy of the spec)."""
     names = scenario_names(cfg.scenarios)
-    return [training_spec(names[i % len(names)], cfg.action_space, cfg.controller) for i in range(cfg.envs)]
+    built: dict[str, object] = {}
+    specs = []
+    for i in range(cfg.envs):
+        name = names[i % len(names)]
+        if name not in built:
+            built[name] = training_spec(name, cfg.action_space, cfg.controller)
+        specs.append(copy.deepcopy(built[name]))
+    return specs
 
 
 def interface_dict(cfg: TrainConfig) -> dict:
