@@ -329,3 +329,13 @@ def test_epochs_and_minibatches_set_the_number_of_updates(tmp_path):
     assert main(args) == 0
     state = torch.load(tmp_path / "run" / "final.pt", weights_only=True)["optimizer"]["state"]
     assert {int(s["step"]) for s in state.values()} == {3 * 64 // 16}  # every parameter: 12 Adam steps
+
+
+def test_workers_whose_copies_hold_different_agent_counts_are_refused_before_any_process_starts(tmp_path, capsys):
+    # adaptive's first two scenarios: one follower, then two; one copy each per worker.
+    args = ["ppo", "--task", "platoon", "--envs", "2", "--workers", "2", "--total-steps", "64",
+            "--out-dir", str(tmp_path / "run"), "--quiet"]  # fmt: skip
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "workers:" in err and "[1, 2] learning agents" in err and "multiple of workers x scenarios" in err
+    assert not (tmp_path / "run").exists()  # refused before the run folder was made

@@ -54,7 +54,7 @@ from smarts.env.task_rewards import reward_factory
 from smarts.env.batched.torchrl_env import BatchedTorchRLEnv
 from smarts.env.torchrl_env import SmartsBatchedEnv
 from train.config import ACTION_SPACES, TrainConfig
-from train.run import TRAIN_SEED_BASE, Run, check_resume, interface_dict, lane_relative_dict, training_specs
+from train.run import TRAIN_SEED_BASE, Run, check_resume, interface_dict, lane_relative_dict, scenario_names, training_specs
 
 def env_options(cfg: TrainConfig) -> dict:
     """What every training env copy gets besides its scenario: observation and task reward."""
@@ -65,13 +65,28 @@ def env_options(cfg: TrainConfig) -> dict:
     }
 
 
-def make_env(cfg: TrainConfig) -> TransformedEnv:
-    """``envs`` scenario copies (cycling through the task's scenarios) stepped as one batched env in
-    this process, or, with ``workers`` > 1, that many such batches in worker processes (needed for
-    SUMO traffic: one SUMO per process)."""
-    specs = training_specs(cfg)
+def check_env_split(cfg: TrainConfig, specs: list) -> None:
+    """Refuse, before anything is built or written, copies that cannot be split as configured."""
     if cfg.backend == "per_env" and any(s.traffic is not None and s.traffic.engine == "sumo" for s in specs) and cfg.workers < cfg.envs:
         raise ValueError("SUMO scenarios run one per process: set workers equal to envs")
+    if cfg.workers > 1:
+        per = [specs[w :: cfg.workers] for w in range(cfg.workers)]
+        slots = [sum(not a.is_social for spec in p for a in spec.agents) for p in per]
+        if len(set(slots)) > 1:  # torchrl's ParallelEnv stacks equal batches only
+            scenarios = len(scenario_names(cfg.scenarios))
+            raise ValueError(
+                f"workers: the {cfg.envs} env copies split over {cfg.workers} workers give them {slots} learning "
+                f"agents; every worker needs the same number (set envs to a multiple of workers x scenarios = "
+                f"{cfg.workers * scenarios}, or workers 1)"
+            )
+
+
+def make_env(cfg: TrainConfig, specs: list | None = None) -> TransformedEnv:
+    """``envs`` scenario copies (cycling through the task's scenarios; ``specs`` when already
+    built) stepped as one batched env in this process, or, with ``workers`` > 1, that many such
+    batches in worker processes (needed for SUMO traffic: one SUMO per process)."""
+    specs = training_specs(cfg) if specs is None else specs
+    check_env_split(cfg, specs)
     options = env_options(cfg)
     # backend batched: the copies of each map as one vectorised simulation (same keys and seeds)
     batch_env = BatchedTorchRLEnv if cfg.backend == "batched" else SmartsBatchedEnv
@@ -277,6 +292,9 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
     start_from = check_init_from(Path(cfg.init_from), cfg) if cfg.init_from else None
     if blob is not None and start_from is not None:
         raise ValueError("resume continues a run and init_from starts a new one from trained networks: give one")
+    specs = None if cfg.ray_address else training_specs(cfg)
+    if specs is not None:
+        check_env_split(cfg, specs)
     torch.manual_seed(cfg.seed)
     np.random.seed(cfg.seed)
     run = Run(cfg, out, resume, progress=progress)  # the run folder (never another run's), config.json, TensorBoard
@@ -288,7 +306,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
         env = factories[0]()  # only for the specs the networks are built from
         scale_out.enter_context(ray_session(cfg.ray_address, num_cpus=max(2, cfg.workers)))
     else:
-        env = make_env(cfg)
+        env = make_env(cfg, specs)
     layout, normalizer, actor_net, critic_net, actor, critic, low, high = build_modules(env, cfg)
     advantage, loss_module, optimizer = build_learner(cfg, actor, critic)
     scale_rewards = RewardScaler(cfg.gamma)
