@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from train.heldout import add_run_options, split_held_out
+
 HIST, FUT, NB = 11, 30, 5
 
 
@@ -87,16 +89,6 @@ def build_set(files: list[Path], per_episode: int, seed: int) -> dict[str, torch
     return {n: torch.from_numpy(np.stack([r[i] for r in rows])) for i, n in enumerate(names)}
 
 
-def split(files: list[Path], every: int = 5) -> tuple[list[Path], list[Path]]:
-    """Held-out scenarios: every ``every``-th file by name (the rest train)."""
-    files = sorted(files)
-    held = files[every - 1 :: every] or files[-1:]
-    rest = [f for f in files if f not in held]
-    if not rest:
-        raise ValueError(f"need at least 2 scenario files to hold some out, got {len(files)}")
-    return rest, held
-
-
 def loss_fn(trajs: torch.Tensor, scores: torch.Tensor, future: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     valid = mask.sum(-1) > 0  # [B, N]
     idx = torch.arange(4, FUT, 5)
@@ -155,7 +147,7 @@ def train(args: argparse.Namespace) -> dict:
     files = sorted(Path(args.data).glob("*.npz"))
     if not files:
         raise ValueError(f"{args.data}: no trajectory files (*.npz); log some with `python -m train trajectories`")
-    train_files, held_files = split(files)
+    train_files, held_files = split_held_out(files)
     started = time.time()
     train_set = build_set(train_files, args.per_episode, args.seed)
     held_set = build_set(held_files, max(args.per_episode // 4, 1), args.seed + 1)
@@ -222,7 +214,5 @@ def add_parser(sub) -> None:
     p.add_argument("--rounds", type=int, default=2, help="(temporal, social) attention rounds")
     p.add_argument("--per-episode", type=int, default=200, help="samples drawn per logged episode")
     p.add_argument("--eval-every", type=int, default=500, help="steps between held-out evaluations")
-    p.add_argument("--threads", type=int, default=1, help="torch CPU threads")
-    p.add_argument("--seed", type=int, default=0, help="sampling and initialisation seed")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_run_options(p)
     p.set_defaults(run=lambda args: (print(json.dumps(train(args), indent=2)), 0)[1])

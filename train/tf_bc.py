@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from train.heldout import add_run_options, split_held_out
+
 
 def demonstrations(scenarios, seeds: int, progress: bool = True) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """scenario name -> (features [n, 53], labels [n]) with TF's turn:cruise sampling."""
@@ -84,12 +86,9 @@ def train(args: argparse.Namespace) -> dict:
     started = time.time()
     scenarios = [e for name in args.suite or ["collaborative", "adaptive"] for e in load_suite(name).scenarios]
     data = demonstrations(scenarios, args.seeds, not args.quiet)
-    names = sorted(data)
-    held = names[4::5] or names[-1:]
-    if len(held) == len(names):
-        raise ValueError(f"need at least 2 scenarios to hold some out, got {names}")
-    train_x = torch.from_numpy(np.concatenate([data[n][0] for n in names if n not in held]))
-    train_y = torch.from_numpy(np.concatenate([data[n][1] for n in names if n not in held]))
+    names, held = split_held_out(list(data))
+    train_x = torch.from_numpy(np.concatenate([data[n][0] for n in names]))
+    train_y = torch.from_numpy(np.concatenate([data[n][1] for n in names]))
     held_x = torch.from_numpy(np.concatenate([data[n][0] for n in held]))
     held_y = torch.from_numpy(np.concatenate([data[n][1] for n in held]))
     print(f"samples: {len(train_y)} train ({float((train_y == 0).float().mean()):.1%} stop), {len(held_y)} held out "
@@ -146,7 +145,5 @@ def add_parser(sub) -> None:
     p.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate")
     p.add_argument("--beta", type=float, default=0.5, help="weight of the logit penalty mean(logits^2)")
     p.add_argument("--hidden", type=int, default=256, help="width of the 3 hidden layers (the original: 750)")
-    p.add_argument("--threads", type=int, default=1, help="torch CPU threads")
-    p.add_argument("--seed", type=int, default=0, help="sampling and initialisation seed")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_run_options(p)
     p.set_defaults(run=lambda args: (print(json.dumps(train(args), indent=2)), 0)[1])

@@ -26,6 +26,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from train.heldout import add_run_options, split_held_out
+
 CLASSES = ("collision", "off_road", "on_shoulder", "wrong_way", "off_route", "safe")
 HORIZON = 8
 
@@ -131,15 +133,12 @@ def train(args: argparse.Namespace) -> dict:
         if cache is not None:
             cache.parent.mkdir(parents=True, exist_ok=True)
             np.savez_compressed(cache, **{f"{n}/{k}": v for n, d in data.items() for k, v in d.items()})
-    names = sorted(data)
-    held = names[4::5] or names[-1:]
-    if len(held) == len(names):
-        raise ValueError(f"need at least 2 scenarios to hold some out, got {names}")
+    names, held = split_held_out(list(data))
 
     def stack(which):
         return [torch.from_numpy(np.concatenate([data[n][k] for n in which])) for k in ("rasters", "numbers", "labels")]
 
-    tr, ho = stack([n for n in names if n not in held]), stack(held)
+    tr, ho = stack(names), stack(held)
     counts = np.bincount(tr[2].numpy(), minlength=6)
     print(f"samples: {len(tr[2])} train {dict(zip(CLASSES, counts.tolist()))}, {len(ho[2])} held out from {held}")
     out = Path(args.out)
@@ -200,7 +199,5 @@ def add_parser(sub) -> None:
     p.add_argument("--epochs", type=int, default=15, help="passes over the training samples")
     p.add_argument("--batch", type=int, default=100, help="samples per gradient step")
     p.add_argument("--lr", type=float, default=3e-4, help="Adam learning rate")
-    p.add_argument("--threads", type=int, default=1, help="torch CPU threads")
-    p.add_argument("--seed", type=int, default=0, help="sampling and initialisation seed")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_run_options(p)
     p.set_defaults(run=lambda args: (print(json.dumps(train(args), indent=2)), 0)[1])

@@ -1,0 +1,26 @@
+"""What the planners' training commands share: the held-out split by scenario and their options."""
+
+from __future__ import annotations
+
+import argparse
+from typing import TypeVar
+
+T = TypeVar("T")
+
+
+def split_held_out(items: list[T], every: int = 5) -> tuple[list[T], list[T]]:
+    """``(train, held out)``: every ``every``-th item in sorted order is held out (the last one when
+    there are fewer), so no scenario is seen in both."""
+    items = sorted(items)
+    held = items[every - 1 :: every] or items[-1:]
+    rest = [item for item in items if item not in held]
+    if not rest:
+        raise ValueError(f"need at least 2 scenarios to hold some out, got {len(items)}")
+    return rest, held
+
+
+def add_run_options(p: argparse.ArgumentParser) -> None:
+    """``--threads``, ``--seed`` and ``--quiet``, as every training command takes them."""
+    p.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    p.add_argument("--seed", type=int, default=0, help="sampling and initialisation seed")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
