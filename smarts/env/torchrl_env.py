@@ -296,6 +296,16 @@ def _flags(done, terminated, truncated) -> dict[str, torch.Tensor]:
     return {k: torch.from_numpy(np.array(v, dtype=bool, ndmin=1)) for k, v in values.items()}
 
 
+def slot_observation(obs: dict, keys, live: np.ndarray, steps: np.ndarray) -> dict[str, Any]:
+    """The per-slot part of a batched env's output: observation arrays, ``valid`` and
+    ``agent_steps``, copied into fresh tensors (the env goes on updating its own arrays)."""
+    return {
+        "observation": {key: torch.from_numpy(obs[key].copy()) for key in keys},
+        "valid": torch.from_numpy(live[:, None].copy()),
+        "agent_steps": torch.from_numpy(steps[:, None].copy()),
+    }
+
+
 def _layout(space: gym.Space) -> Any:
     """What must match for agents to stack: the keys, shapes and dtypes (bounds may differ)."""
     if isinstance(space, gym.spaces.Dict):
@@ -511,11 +521,7 @@ class SmartsBatchedEnv(EnvBase):
         return TensorDict(out, batch_size=self.batch_size, device=self.device)
 
     def _observation(self) -> dict[str, Any]:
-        return {
-            "observation": {key: torch.from_numpy(self._obs[key].copy()) for key in self._keys},
-            "valid": torch.from_numpy(self._live[:, None].copy()),
-            "agent_steps": torch.from_numpy(self._steps[:, None].copy()),
-        }
+        return slot_observation(self._obs, self._keys, self._live, self._steps)
 
     def close(self, *, raise_if_closed: bool = True) -> None:
         for env in self.envs:

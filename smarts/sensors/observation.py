@@ -200,13 +200,11 @@ class ObservationBuilder:
             spaces.update(self.lidar.spaces())
         return gym.spaces.Dict(spaces)
 
-    def build(self, sim: Simulation, agents: np.ndarray) -> dict[str, np.ndarray]:
-        interface = self.interface
-        ma = sim.mission_arrays
-        n, k, w = len(agents), interface.neighbours.count, interface.waypoints.count
-        rows = sim.agent_row[agents]
-        shadows: Shadows | None = self.shadows.scan(sim, rows) if self.shadows is not None else None
-        obs = {
+    def empty_basic(self, n: int) -> dict[str, np.ndarray]:
+        """Uninitialised arrays of the basic keys for ``n`` agents, in the order the observation
+        kernels fill them."""
+        k, w = self.interface.neighbours.count, self.interface.waypoints.count
+        return {
             "ego": np.empty((n, self._ego_features), dtype=np.float32),
             "neighbours": np.empty((n, k, self._neighbour_features), dtype=np.float32),
             "neighbour_mask": np.empty((n, k), dtype=np.float32),
@@ -216,6 +214,14 @@ class ObservationBuilder:
             "signal": np.empty((n, SIGNAL_FEATURES), dtype=np.float32),
             "events": np.empty((n, NUM_EVENTS), dtype=np.float32),
         }
+
+    def build(self, sim: Simulation, agents: np.ndarray) -> dict[str, np.ndarray]:
+        interface = self.interface
+        ma = sim.mission_arrays
+        n = len(agents)
+        rows = sim.agent_row[agents]
+        shadows: Shadows | None = self.shadows.scan(sim, rows) if self.shadows is not None else None
+        obs = self.empty_basic(n)
         signals = getattr(sim, "signals", None)
         via_colour = signals.via_colour if signals is not None else self._no_signals(sim.road_map)
         if interface.ego.extended and self._yaw.shape[1] != len(sim.agent_ids):

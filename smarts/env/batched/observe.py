@@ -14,15 +14,7 @@ import numpy as np
 from smarts.core.batched import BatchedSimulation
 from smarts.core.following import LEAD_SIGHT, AheadState, _ahead_kernel
 from smarts.sensors.interface import AgentInterface
-from smarts.sensors.observation import (
-    GOAL_FEATURES,
-    NUM_PATHS,
-    SIGNAL_FEATURES,
-    ObservationBuilder,
-    _observe,
-    lead_features,
-)
-from smarts.core.events import NUM_EVENTS
+from smarts.sensors.observation import ObservationBuilder, _observe, lead_features
 
 UNSUPPORTED = ("rasters", "lidar")
 
@@ -52,18 +44,8 @@ class BatchedObserver:
         b = self.builder
         interface = self.interface
         ma = sim.mission_arrays
-        n, k, w = len(agents), interface.neighbours.count, interface.waypoints.count
         rows = sim.agent_row[agents]
-        obs = {
-            "ego": np.empty((n, b._ego_features), dtype=np.float32),
-            "neighbours": np.empty((n, k, b._neighbour_features), dtype=np.float32),
-            "neighbour_mask": np.empty((n, k), dtype=np.float32),
-            "waypoints": np.empty((n, NUM_PATHS, w, 3), dtype=np.float32),
-            "waypoint_mask": np.empty((n, NUM_PATHS, w), dtype=np.float32),
-            "goal": np.empty((n, GOAL_FEATURES), dtype=np.float32),
-            "signal": np.empty((n, SIGNAL_FEATURES), dtype=np.float32),
-            "events": np.empty((n, NUM_EVENTS), dtype=np.float32),
-        }
+        obs = b.empty_basic(len(agents))
         alive_lo, alive_hi, agent_lo, agent_hi = sim.episode_ranges(sim.alive, agents)
         _observe_episodes(
             alive_lo, alive_hi, agent_lo, agent_hi, sim.episode_step,

@@ -22,7 +22,7 @@ from torchrl.data import Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from smarts.env.batched.driving import BatchedDriving
-from smarts.env.torchrl_env import _done_specs, space_to_spec
+from smarts.env.torchrl_env import _done_specs, _flags, slot_observation, space_to_spec
 from smarts.scenario import ScenarioSpec
 
 
@@ -119,18 +119,12 @@ class BatchedTorchRLEnv(EnvBase):
         out = {
             **self._observation(),
             "reward": torch.from_numpy(res.reward[:, None].copy()),
-            "done": torch.from_numpy(ended[:, None].copy()),
-            "terminated": torch.from_numpy(res.terminated[:, None].copy()),
-            "truncated": torch.from_numpy(res.truncated[:, None].copy()),
+            **_flags(ended[:, None], res.terminated[:, None], res.truncated[:, None]),
         }
         return TensorDict(out, batch_size=self.batch_size, device=self.device)
 
     def _observation(self) -> dict[str, Any]:
-        return {
-            "observation": {key: torch.from_numpy(self._obs[key].copy()) for key in self._keys},
-            "valid": torch.from_numpy(self._live[:, None].copy()),
-            "agent_steps": torch.from_numpy(self._steps[:, None].copy()),
-        }
+        return slot_observation(self._obs, self._keys, self._live, self._steps)
 
     def close(self, *, raise_if_closed: bool = True) -> None:
         if not self.is_closed:
