@@ -16,20 +16,6 @@ from smarts import cache
 from tests.builders import PERMISSIONS_SKIP
 
 
-@pytest.fixture
-def fresh_fallback(monkeypatch: pytest.MonkeyPatch):
-    """A process state with no temporary cache and no warning given yet; removes what the test made."""
-    monkeypatch.setattr(cache, "_fallback", None)
-    monkeypatch.setattr(cache, "_warned", set())
-    yield
-    if cache._fallback is not None:
-        import shutil
-
-        shutil.rmtree(cache._fallback, ignore_errors=True)
-
-
-
-
 def unwritable_dir(tmp_path: Path) -> Path:
     """A cache folder nobody can create: it lies under a regular file (fails even for root)."""
     blocker = tmp_path / "not-a-folder"

@@ -117,17 +117,6 @@ def test_xodr_through_the_loader(tmp_path: Path, straight_xodr: Path) -> None:
 
 
 # ---------------------------------------------------------------- damaged and unwritable caches
-@pytest.fixture
-def fresh_fallback(monkeypatch: pytest.MonkeyPatch):
-    """No temporary cache and no warning given yet in this process; removes what the test made."""
-    monkeypatch.setattr(cache, "_fallback", None)
-    monkeypatch.setattr(cache, "_warned", set())
-    yield
-    if cache._fallback is not None:
-        shutil.rmtree(cache._fallback, ignore_errors=True)
-    clear_memory_cache()  # maps loaded from the removed folder
-
-
 def cached_npz(cache_dir: Path, source: Path) -> Path:
     digest = hashlib.sha256(source.read_bytes()).hexdigest()
     return cache_dir / f"{digest}-v{FORMAT_VERSION}.npz"

@@ -12,7 +12,6 @@ import sys
 import warnings
 import xml.etree.ElementTree as ET
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
 import pytest
 import sumolib
@@ -244,17 +243,6 @@ def test_unknown_map_name_lists_the_known_ones(tmp_path):
 
 
 # ---------------------------------------------------------------- damaged and unwritable caches
-@pytest.fixture
-def fresh_fallback(monkeypatch):
-    """No temporary cache and no warning given yet in this process; removes what the test made."""
-    monkeypatch.setattr(cache, "_fallback", None)
-    monkeypatch.setattr(cache, "_warned", set())
-    yield
-    if cache._fallback is not None:
-        shutil.rmtree(cache._fallback, ignore_errors=True)
-    clear_memory_cache()  # maps loaded from the removed folder
-
-
 def test_truncated_netconvert_output_in_the_cache_is_rebuilt(tmp_path, built_maps, caplog):
     net = compile_map(BUILTIN_MAPS["t_junction"], tmp_path)
     whole = net.read_bytes()
