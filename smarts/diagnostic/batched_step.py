@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import json
 import platform
 import time
@@ -88,6 +89,20 @@ def _mean_ci(values: list[float]) -> tuple[float, float]:
     return float(arr.mean()), float(stats.t.ppf(0.975, arr.size - 1) * arr.std(ddof=1) / np.sqrt(arr.size))
 
 
+def _timed(step, steps: int, warmup: int) -> tuple[float, float]:
+    """Agent-steps/s of ``step()`` (which returns the agent-steps it took): ``warmup`` untimed
+    calls, then ``steps`` calls in ``CHUNKS`` timed chunks; the mean rate and its 95% CI."""
+    for _ in range(warmup):
+        step()
+    rates = []
+    for _ in range(CHUNKS):
+        acted, t0 = 0, time.perf_counter()
+        for _ in range(max(1, steps // CHUNKS)):
+            acted += step()
+        rates.append(acted / (time.perf_counter() - t0))
+    return _mean_ci(rates)
+
+
 def batched_rate(case: str, batch: int, steps: int, warmup: int, seed: int = 0) -> dict:
     """Agent-steps/s (mean, 95% CI over chunks) of ``batch`` episodes in the batched backend, and
     the memory per episode."""
@@ -101,19 +116,9 @@ def batched_rate(case: str, batch: int, steps: int, warmup: int, seed: int = 0) 
     memory = tracemalloc.get_traced_memory()[0]
     tracemalloc.stop()
     rng = np.random.default_rng(seed)
-    actions = [_actions(case, rng, env.num_slots) for _ in range(8)]
-    for k in range(warmup):
-        env.step(actions[k % 8])
-    rates = []
-    per_chunk = max(1, steps // CHUNKS)
-    for _ in range(CHUNKS):
-        acted = 0
-        t0 = time.perf_counter()
-        for k in range(per_chunk):
-            acted += int(env.step(actions[k % 8]).acted.sum())
-        rates.append(acted / (time.perf_counter() - t0))
+    actions = itertools.cycle([_actions(case, rng, env.num_slots) for _ in range(8)])
+    mean, ci = _timed(lambda: int(env.step(next(actions)).acted.sum()), steps, warmup)
     env.close()
-    mean, ci = _mean_ci(rates)
     return {"agent_steps_per_s": mean, "ci95": ci, "memory_per_episode_kb": memory / batch / 1024.0}
 
 
@@ -137,19 +142,9 @@ def per_env_rate(case: str, batch: int, steps: int, warmup: int, seed: int = 0) 
             env.step({a: commands[i] for a in env.agents})
         return batch
 
-    for _ in range(warmup):
-        step_all()
-    rates = []
-    per_chunk = max(1, steps // CHUNKS)
-    for _ in range(CHUNKS):
-        acted = 0
-        t0 = time.perf_counter()
-        for _ in range(per_chunk):
-            acted += step_all()
-        rates.append(acted / (time.perf_counter() - t0))
+    mean, ci = _timed(step_all, steps, warmup)
     for env in envs:
         env.close()
-    mean, ci = _mean_ci(rates)
     return {"agent_steps_per_s": mean, "ci95": ci}
 
 
