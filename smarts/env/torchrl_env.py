@@ -296,6 +296,18 @@ def _flags(done, terminated, truncated) -> dict[str, torch.Tensor]:
     return {k: torch.from_numpy(np.array(v, dtype=bool, ndmin=1)) for k, v in values.items()}
 
 
+def slot_observation_spec(obs_space: gym.spaces.Dict, k: int, device) -> Composite:
+    """The spec of ``slot_observation`` for ``k`` slots of ``obs_space``."""
+    obs = Composite({key: space_to_spec(sp, (k,), device) for key, sp in obs_space.spaces.items()}, shape=(k,), device=device)
+    return Composite(
+        observation=obs,
+        valid=Categorical(2, shape=(k, 1), dtype=torch.bool, device=device),
+        agent_steps=Unbounded(shape=(k, 1), dtype=torch.float32, device=device),
+        shape=(k,),
+        device=device,
+    )
+
+
 def slot_observation(obs: dict, keys, live: np.ndarray, steps: np.ndarray) -> dict[str, Any]:
     """The per-slot part of a batched env's output: observation arrays, ``valid`` and
     ``agent_steps``, copied into fresh tensors (the env goes on updating its own arrays)."""
@@ -419,14 +431,7 @@ class SmartsBatchedEnv(EnvBase):
                     f"{first_env.scenario.source}'s {first_agent}; batched scenarios must share one"
                 )
         self._keys = list(obs_space.spaces)
-        obs = Composite({key: space_to_spec(sp, (k,), device) for key, sp in obs_space.spaces.items()}, shape=(k,), device=device)
-        self.observation_spec = Composite(
-            observation=obs,
-            valid=Categorical(2, shape=(k, 1), dtype=torch.bool, device=device),
-            agent_steps=Unbounded(shape=(k, 1), dtype=torch.float32, device=device),
-            shape=(k,),
-            device=device,
-        )
+        self.observation_spec = slot_observation_spec(obs_space, k, device)
         self.action_spec = space_to_spec(act_space, (k,), device)
         self.reward_spec = Unbounded(shape=(k, 1), dtype=torch.float32, device=device)
         self.full_done_spec = Composite(_done_specs((k, 1), device), shape=(k,), device=device)

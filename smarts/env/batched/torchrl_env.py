@@ -18,11 +18,11 @@ from typing import Any
 import numpy as np
 import torch
 from tensordict import TensorDict, TensorDictBase
-from torchrl.data import Categorical, Composite, Unbounded
+from torchrl.data import Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from smarts.env.batched.driving import BatchedDriving
-from smarts.env.torchrl_env import _done_specs, _flags, slot_observation, space_to_spec
+from smarts.env.torchrl_env import _done_specs, _flags, slot_observation, slot_observation_spec, space_to_spec
 from smarts.scenario import ScenarioSpec
 
 
@@ -43,14 +43,7 @@ class BatchedTorchRLEnv(EnvBase):
         super().__init__(device=device, batch_size=torch.Size([k]))
         obs_space = self.driving.observation_space
         self._keys = list(obs_space.spaces)
-        obs = Composite({key: space_to_spec(sp, (k,), device) for key, sp in obs_space.spaces.items()}, shape=(k,), device=device)
-        self.observation_spec = Composite(
-            observation=obs,
-            valid=Categorical(2, shape=(k, 1), dtype=torch.bool, device=device),
-            agent_steps=Unbounded(shape=(k, 1), dtype=torch.float32, device=device),
-            shape=(k,),
-            device=device,
-        )
+        self.observation_spec = slot_observation_spec(obs_space, k, device)
         self.action_spec = space_to_spec(self.driving.action_space, (k,), device)
         self.reward_spec = Unbounded(shape=(k, 1), dtype=torch.float32, device=device)
         self.full_done_spec = Composite(_done_specs((k, 1), device), shape=(k,), device=device)
