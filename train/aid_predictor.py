@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from train.heldout import add_run_options, split_held_out
+from train.heldout import add_run_options, apply_run_options, split_held_out
 
 HIST, FUT, NB = 11, 30, 5
 
@@ -142,8 +142,7 @@ def train(args: argparse.Namespace) -> dict:
 
     from agents.planners.nets import AIDPredictor, save_net
 
-    torch.manual_seed(args.seed)
-    torch.set_num_threads(args.threads)
+    apply_run_options(args)
     files = sorted(Path(args.data).glob("*.npz"))
     if not files:
         raise ValueError(f"{args.data}: no trajectory files (*.npz); log some with `python -m train trajectories`")

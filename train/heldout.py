@@ -1,4 +1,5 @@
-"""What the planners' training commands share: the held-out split by scenario and their options."""
+"""What the planners' training commands share: their options, the suites' scenarios and the
+held-out split by scenario."""
 
 from __future__ import annotations
 
@@ -24,3 +25,18 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     p.add_argument("--seed", type=int, default=0, help="sampling and initialisation seed")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def apply_run_options(args: argparse.Namespace) -> None:
+    """Seed torch and set its threads from ``add_run_options``' values."""
+    import torch
+
+    torch.manual_seed(args.seed)
+    torch.set_num_threads(args.threads)
+
+
+def suite_scenarios(suites: list[str] | None) -> list:
+    """Every scenario entry of ``suites`` (default: both benchmark suites), in suite order."""
+    from smarts.benchmark.suites import load_suite
+
+    return [e for name in suites or ["collaborative", "adaptive"] for e in load_suite(name).scenarios]

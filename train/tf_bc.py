@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from train.heldout import add_run_options, split_held_out
+from train.heldout import add_run_options, apply_run_options, split_held_out, suite_scenarios
 
 
 def demonstrations(scenarios, seeds: int, progress: bool = True) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -79,12 +79,10 @@ def train(args: argparse.Namespace) -> dict:
     from tqdm import tqdm
 
     from agents.planners.nets import StopMoveNet, save_net
-    from smarts.benchmark.suites import load_suite
 
-    torch.manual_seed(args.seed)
-    torch.set_num_threads(args.threads)
+    apply_run_options(args)
     started = time.time()
-    scenarios = [e for name in args.suite or ["collaborative", "adaptive"] for e in load_suite(name).scenarios]
+    scenarios = suite_scenarios(args.suite)
     data = demonstrations(scenarios, args.seeds, not args.quiet)
     names, held = split_held_out(list(data))
     train_x = torch.from_numpy(np.concatenate([data[n][0] for n in names]))

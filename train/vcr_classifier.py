@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from train.heldout import add_run_options, split_held_out
+from train.heldout import add_run_options, apply_run_options, split_held_out, suite_scenarios
 
 CLASSES = ("collision", "off_road", "on_shoulder", "wrong_way", "off_route", "safe")
 HORIZON = 8
@@ -115,12 +115,10 @@ def train(args: argparse.Namespace) -> dict:
     from tqdm import tqdm
 
     from agents.planners.nets import VCRClassifier, save_net
-    from smarts.benchmark.suites import load_suite
 
-    torch.manual_seed(args.seed)
-    torch.set_num_threads(args.threads)
+    apply_run_options(args)
     started = time.time()
-    scenarios = [e for name in args.suite or ["collaborative", "adaptive"] for e in load_suite(name).scenarios]
+    scenarios = suite_scenarios(args.suite)
     cache = Path(args.data) if args.data else None
     if cache is not None and cache.is_file():
         with np.load(cache) as saved:
