@@ -94,6 +94,7 @@ class LaneRelativeController:
         self.params = params or LaneRelativeParams()
         self.n = n_agents
         self.track = np.full(n_agents, -1, dtype=np.int64)  # the lane being followed
+        self.track_s = np.zeros(n_agents)  # where on it at the last step (the next search's hint)
         self.pending = np.zeros(n_agents, dtype=np.int64)  # -1 right, +1 left, 0 none
         self.profile_start = np.zeros(n_agents)  # lateral offset to the target lane when it began
         self.profile_age = np.full(n_agents, np.inf)  # s since the profile began
@@ -129,7 +130,7 @@ class LaneRelativeController:
             p.speed_time_constant, p.max_accel, p.max_decel, p.max_jerk, p.brake_jerk, p.comfort_decel, p.lane_change_time, p.lookahead_time, p.min_lookahead,
             p.threshold, rm.lane_left, rm.lane_right, rm.lane_width, rm.lane_length, rm.lane_speed_limit, rm.lane_road,
             rm.lane_internal, rm.succ_offsets, rm.succ, rm.lanepoint_offsets, rm.lanepoints, rm.lanepoint_s,
-            rm.lanepoint_heading, self._route_road, self.track, self.pending, self.profile_start,
+            rm.lanepoint_heading, self._route_road, self.track, self.track_s, self.pending, self.profile_start,
             self.profile_age, self.branch, accel, curvature, target,
         )  # fmt: skip
         return accel, curvature, target[:, 0], target[:, 1]
@@ -304,12 +305,51 @@ def _project_on_lane(offsets, points, point_s, lane, x, y):  # pragma: no cover 
     return best_s, best_t
 
 
+PROJECTION_WINDOW = 8
+"""Segments searched on each side of the hinted one before the whole lane is scanned."""
+
+
+@numba.njit(cache=True, nogil=True)
+def _project_near(offsets, points, point_s, lane, x, y, s_hint):  # pragma: no cover - compiled
+    """``_project_on_lane`` searched near arc length ``s_hint`` (where the car was, or where it
+    is on a parallel lane): ``PROJECTION_WINDOW`` segments either side, and the whole lane when
+    the nearest one lies on the window's edge (the hint was off). Lanes are sampled every metre,
+    so a full scan costs a few hundred segments per call; this costs about 17."""
+    a, b = offsets[lane], offsets[lane + 1]
+    last = b - 2  # the last segment
+    if last - a <= 2 * PROJECTION_WINDOW + 1:
+        return _project_on_lane(offsets, points, point_s, lane, x, y)
+    k0 = a + np.searchsorted(point_s[a:b], s_hint) - 1
+    k0 = min(max(k0, a), last)
+    lo, hi = max(a, k0 - PROJECTION_WINDOW), min(last, k0 + PROJECTION_WINDOW)
+    best_d2, best_s, best_t, best_k = np.inf, 0.0, 0.0, lo
+    for k in range(lo, hi + 1):
+        vx, vy = points[k + 1, 0] - points[k, 0], points[k + 1, 1] - points[k, 1]
+        rx, ry = x - points[k, 0], y - points[k, 1]
+        len2 = vx * vx + vy * vy
+        if len2 <= 0.0:
+            continue
+        raw = (rx * vx + ry * vy) / len2
+        u = min(max(raw, 0.0), 1.0)
+        if (k == a and raw < 0.0) or (k == last and raw > 1.0):
+            u = raw
+        dx, dy = rx - u * vx, ry - u * vy
+        d2 = dx * dx + dy * dy
+        if d2 < best_d2:
+            best_d2, best_k = d2, k
+            best_s = point_s[k] + u * math.sqrt(len2)
+            best_t = math.sqrt(d2) if vx * ry - vy * rx >= 0.0 else -math.sqrt(d2)
+    if (best_k == lo and lo > a) or (best_k == hi and hi < last):
+        return _project_on_lane(offsets, points, point_s, lane, x, y)
+    return best_s, best_t
+
+
 @numba.njit(cache=True, nogil=True)
 def _targets_kernel(
     data, lane_col, members, rows, cmd, dt, tau, max_accel, max_decel, max_jerk, brake_jerk, comfort_decel, lc_time, look_time,
     min_look, threshold, lane_left, lane_right, lane_width, lane_length, speed_limit, lane_road, internal,
-    succ_offsets, succ, lp_offsets, lp_points, lp_s, lp_heading, route_road, track, pending, profile_start,
-    profile_age, branch, accel_out, kappa_out, target_out,
+    succ_offsets, succ, lp_offsets, lp_points, lp_s, lp_heading, route_road, track, track_s, pending,
+    profile_start, profile_age, branch, accel_out, kappa_out, target_out,
 ):  # pragma: no cover - compiled
     for i in range(members.shape[0]):
         a, r = members[i], rows[i]
@@ -321,7 +361,7 @@ def _targets_kernel(
         # successor at its end, re-taken from the projection if the car has strayed from it.
         lane = track[a]
         if lane >= 0:
-            s, t = _project_on_lane(lp_offsets, lp_points, lp_s, lane, x, y)
+            s, t = _project_near(lp_offsets, lp_points, lp_s, lane, x, y, track_s[a] + v * dt)
             guard = 0
             while s > lane_length[lane] and guard < 16:
                 nxt = _next_lane(lane, branch[a], a, succ_offsets, succ, lane_road, internal, route_road, lp_offsets, lp_heading)
@@ -329,8 +369,9 @@ def _targets_kernel(
                     break
                 if succ_offsets[lane + 1] - succ_offsets[lane] > 1:
                     branch[a] = 0  # the fork is behind us
+                s_next = s - lane_length[lane]
                 lane = nxt
-                s, t = _project_on_lane(lp_offsets, lp_points, lp_s, lane, x, y)
+                s, t = _project_near(lp_offsets, lp_points, lp_s, lane, x, y, s_next)
                 guard += 1
             if abs(t) > 0.5 * lane_width[lane] + 2.0:
                 lane = -1
@@ -343,7 +384,7 @@ def _targets_kernel(
                 target_out[i, 0], target_out[i, 1] = x + math.cos(h), y + math.sin(h)
                 accel_out[i] = _accel(cmd[i, 0], DEFAULT_SPEED_LIMIT, v, data[_ACCEL, r], dt, tau, max_accel, max_decel, max_jerk, brake_jerk, comfort_decel)
                 continue
-            s, t = _project_on_lane(lp_offsets, lp_points, lp_s, lane, x, y)
+            s, t = _project_near(lp_offsets, lp_points, lp_s, lane, x, y, data[_S, r])
             if abs(t) > 0.1:  # settle onto this lane's centre smoothly
                 profile_start[a] = t
                 profile_age[a] = 0.0
@@ -354,11 +395,12 @@ def _targets_kernel(
                 profile_start[a] = t
                 profile_age[a] = 0.0
             else:
-                sn, tn = _project_on_lane(lp_offsets, lp_points, lp_s, neighbour, x, y)
+                sn, tn = _project_near(lp_offsets, lp_points, lp_s, neighbour, x, y, s)
                 if abs(tn) < abs(t):  # over the lane line: the change has arrived
                     lane, s, t = neighbour, sn, tn
                     pending[a] = 0
         track[a] = lane
+        track_s[a] = s
         accel_out[i] = _accel(cmd[i, 0], speed_limit[lane], v, data[_ACCEL, r], dt, tau, max_accel, max_decel, max_jerk, brake_jerk, comfort_decel)
 
         # A new lane-change request, once the last change is over.
@@ -367,14 +409,14 @@ def _targets_kernel(
             neighbour = lane_left[lane] if side > 0 else lane_right[lane]
             if neighbour >= 0:
                 pending[a] = side
-                profile_start[a] = _project_on_lane(lp_offsets, lp_points, lp_s, neighbour, x, y)[1]
+                profile_start[a] = _project_near(lp_offsets, lp_points, lp_s, neighbour, x, y, s)[1]
                 profile_age[a] = 0.0
             else:
                 branch[a] = side
         ref, s_ref = lane, s
         if pending[a] != 0:
             ref = lane_left[lane] if pending[a] > 0 else lane_right[lane]
-            s_ref = _project_on_lane(lp_offsets, lp_points, lp_s, ref, x, y)[0]
+            s_ref = _project_near(lp_offsets, lp_points, lp_s, ref, x, y, s)[0]
         offset = profile_start[a] * (1.0 - _smooth(profile_age[a] / lc_time))
 
         # The pursued point: lookahead metres along ref and its continuation, shifted by offset.
