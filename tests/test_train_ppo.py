@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 import torch
 
@@ -339,3 +340,40 @@ def test_workers_whose_copies_hold_different_agent_counts_are_refused_before_any
     err = capsys.readouterr().err
     assert "workers:" in err and "[1, 2] learning agents" in err and "multiple of workers x scenarios" in err
     assert not (tmp_path / "run").exists()  # refused before the run folder was made
+
+
+def test_the_update_reads_the_same_inputs_and_values_as_the_collection_modules():
+    """The update runs the networks on a flat observation normalised once per batch, and reuses a
+    step's value as the previous step's next value: both must equal what the collection modules
+    (which flatten and normalise on every call) and a critic pass over every next observation give,
+    also across episode ends (auto-resets) and the batch's last step."""
+    from torchrl.collectors import Collector
+
+    from train.config import load_config
+    from train.ppo import FLAT_OBSERVATION, ValueInputs, build_modules, make_env, update_modules
+
+    cfg = load_config("platoon", overrides={"envs": 2, "backend": "batched", "scenarios": "adaptive:a01_straight_free"})
+    env = make_env(cfg)
+    try:
+        layout, normalizer, actor_net, critic_net, actor, critic, _, _ = build_modules(env, cfg)
+        normalizer.update(torch.randn(256, layout.size) * 2.0 + 0.5)  # statistics that change inputs
+        slots = int(np.prod(env.batch_size))
+        collector = Collector(env, actor, frames_per_batch=slots * 300, total_frames=slots * 300,
+                              auto_register_policy_transforms=False)  # fmt: skip
+        data = next(iter(collector)).reshape(slots, -1)
+        collector.shutdown()
+        assert bool(data["next", "done"].any()), "the batch must hold an episode end"
+        inputs = ValueInputs(data, layout, normalizer)
+        inputs.write_values(data, critic_net)
+        with torch.no_grad():
+            expected = critic(data.clone())["state_value"]
+            expected_next = critic(data["next"].clone())["state_value"]
+            loss_actor, loss_critic = update_modules(actor, critic, env.action_spec)
+            dist_update = loss_actor.get_dist(data.select(FLAT_OBSERVATION))
+            dist_collect = actor.get_dist(data.select("observation"))
+    finally:
+        env.close()
+    assert torch.allclose(data["state_value"], expected, atol=1e-5)
+    assert torch.allclose(data["next", "state_value"], expected_next, atol=1e-5)
+    assert bool(inputs.own[:, -1].all()) and int(inputs.own.sum()) < inputs.own.numel() // 2
+    assert torch.allclose(dist_update.log_prob(data["action"]), dist_collect.log_prob(data["action"]), atol=1e-5)

@@ -33,8 +33,6 @@ import torch
 from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.collectors import Collector
-from torchrl.data import LazyTensorStorage, ReplayBuffer
-from torchrl.data.replay_buffers import SamplerWithoutReplacement
 from torchrl.envs import ParallelEnv, RewardSum, TransformedEnv
 from torchrl.modules import IndependentNormal, ProbabilisticActor, ValueOperator
 from torchrl.objectives import ClipPPOLoss
@@ -179,10 +177,22 @@ class _GaussianInActionUnits(nn.Module):
         self.actor = actor
         self.register_buffer("low", low.float())
         self.register_buffer("high", high.float())
+        self.last_mean: torch.Tensor | None = None
+        """The mean of the last pass with gradients (the loss's own actor pass), for the action-bound
+        penalty: it reuses that pass instead of running the actor again."""
 
     def forward(self, x: torch.Tensor):
         pre, std = self.actor(x)
-        return scale_action(pre, self.low, self.high), std * 0.5 * (self.high - self.low)
+        mean = scale_action(pre, self.low, self.high)
+        if torch.is_grad_enabled():
+            self.last_mean = mean
+        return mean, std * 0.5 * (self.high - self.low)
+
+    def take_last_mean(self) -> torch.Tensor:
+        mean, self.last_mean = self.last_mean, None
+        if mean is None:
+            raise RuntimeError("the PPO loss did not run the actor with gradients before the action-bound penalty")
+        return mean
 
 
 def raw_features(layout: ObservationLayout, obs_spec) -> torch.Tensor:
@@ -236,14 +246,62 @@ def build_modules(env, cfg: TrainConfig):
     return layout, normalizer, actor_net, critic_net, actor, critic, low.numpy(), high.numpy()
 
 
-def action_bound_loss(actor_net: Actor, normalizer: ObsNormalizer, layout: ObservationLayout, batch, low, high):
+FLAT_OBSERVATION = "flat_observation"
+"""Key of the normalised flat observation the PPO update works on (written once per batch)."""
+
+
+def update_modules(actor: ProbabilisticActor, critic: ValueOperator, action_spec) -> tuple[ProbabilisticActor, ValueOperator]:
+    """The policy and critic as the update runs them: the same networks (shared parameters) read
+    ``FLAT_OBSERVATION`` instead of flattening and normalising the observation on every call. The
+    statistics stay fixed during an update, so once per batch (``ValueInputs``) gives the same inputs."""
+    policy_head = next(m for m in actor.modules() if isinstance(m, _FlatNormalised)).head
+    critic_head = next(m for m in critic.modules() if isinstance(m, _FlatNormalised)).head
+    policy = TensorDictModule(policy_head, in_keys=[FLAT_OBSERVATION], out_keys=["loc", "scale"])
+    loss_actor = ProbabilisticActor(policy, in_keys=["loc", "scale"], spec=action_spec,
+                                    distribution_class=IndependentNormal, return_log_prob=True)  # fmt: skip
+    return loss_actor, ValueOperator(critic_head, in_keys=[FLAT_OBSERVATION])
+
+
+class ValueInputs:
+    """The critic's inputs of a [slots, time] batch, prepared once per batch: the normalised flat
+    observations (written into ``data`` as ``FLAT_OBSERVATION``, which the update's actor also
+    reads) and the few next observations that are not the slot's following observation (ends of
+    episodes, the last step of the batch). Every other next value is the following step's value,
+    so each epoch's values cost one critic pass over the batch instead of two."""
+
+    @torch.no_grad()
+    def __init__(self, data, layout: ObservationLayout, normalizer: ObsNormalizer):
+        obs = normalizer(layout.flatten({k: data["observation", k] for k in layout.keys}))
+        following = normalizer(layout.flatten({k: data["next", "observation", k] for k in layout.keys}))
+        self.own = torch.ones(obs.shape[:2], dtype=torch.bool)
+        self.own[:, :-1] = (following[:, :-1] != obs[:, 1:]).any(-1)
+        self.own_next = following[self.own]
+        data[FLAT_OBSERVATION] = obs
+
+    @torch.no_grad()
+    def write_values(self, data, critic_net: nn.Module) -> None:
+        """``state_value`` and ``("next", "state_value")`` of ``data`` with the critic as it is now."""
+        value = critic_net(data[FLAT_OBSERVATION])
+        next_value = torch.empty_like(value)
+        next_value[:, :-1] = value[:, 1:]
+        next_value[self.own] = critic_net(self.own_next)
+        data["state_value"] = value
+        data["next", "state_value"] = next_value
+
+
+def action_bound_loss(mean: torch.Tensor, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:
     """Squared distance of the Gaussian's mean outside the action box. Beyond the box the simulator
     clips every sample to the same action, so PPO's gradient there is noise and the mean drifts
     away (and a lane change requested at +3 means the same as at +0.6); this keeps it in reach."""
-    x = normalizer(layout.flatten({k: batch["observation", k] for k in layout.keys}))
-    pre, _ = actor_net(x)
-    mean = scale_action(pre, low, high)
     return ((mean - high).clamp(min=0.0) ** 2 + (low - mean).clamp(min=0.0) ** 2).sum(-1).mean()
+
+
+def minibatches(data, size: int, generator: torch.Generator | None = None):
+    """``data`` (a flat TensorDict) in random minibatches of ``size`` (the last one smaller), each
+    step once: one permutation and one gather per minibatch."""
+    order = torch.randperm(data.shape[0], generator=generator)
+    for start in range(0, data.shape[0], size):
+        yield data[order[start : start + size]]
 
 
 def check_init_from(path: Path, cfg: TrainConfig) -> dict:
@@ -272,8 +330,9 @@ def check_init_from(path: Path, cfg: TrainConfig) -> dict:
 
 
 def build_learner(cfg: TrainConfig, actor, critic) -> tuple[GAE, ClipPPOLoss, torch.optim.Adam]:
-    """torchrl's GAE and clipped PPO loss and the optimiser, with the config's settings."""
-    advantage = GAE(gamma=cfg.gamma, lmbda=cfg.gae_lambda, value_network=critic, average_gae=False)
+    """torchrl's GAE and clipped PPO loss and the optimiser, with the config's settings. GAE reads
+    the values ``ValueInputs.write_values`` writes."""
+    advantage = GAE(gamma=cfg.gamma, lmbda=cfg.gae_lambda, value_network=None, average_gae=False)
     loss_module = ClipPPOLoss(actor, critic, clip_epsilon=cfg.clip_epsilon, entropy_coeff=cfg.entropy_coeff,
                               critic_coeff=cfg.critic_coeff, loss_critic_type="l2",
                               normalize_advantage=True)  # fmt: skip
@@ -308,7 +367,8 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
     else:
         env = make_env(cfg, specs)
     layout, normalizer, actor_net, critic_net, actor, critic, low, high = build_modules(env, cfg)
-    advantage, loss_module, optimizer = build_learner(cfg, actor, critic)
+    advantage, loss_module, optimizer = build_learner(cfg, *update_modules(actor, critic, env.action_spec))
+    head = next(m for m in actor.modules() if isinstance(m, _GaussianInActionUnits))
     scale_rewards = RewardScaler(cfg.gamma)
     bound_low, bound_high = torch.as_tensor(low), torch.as_tensor(high)
     step = 0
@@ -342,8 +402,6 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
     else:
         collector = Collector(env, actor, frames_per_batch=frames, total_frames=remaining,
                               auto_register_policy_transforms=False)
-    buffer = ReplayBuffer(storage=LazyTensorStorage(frames, ndim=1), sampler=SamplerWithoutReplacement(),
-                          batch_size=cfg.minibatch_size)  # fmt: skip
     metrics, start, first_step = {}, time.perf_counter(), step
     collecting_s, batch_end = 0.0, start  # time spent collecting (env steps and policy inference)
 
@@ -368,25 +426,25 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                 lengths = flat["next", "agent_steps"].reshape(-1)[ended]
                 if cfg.reward_scaling:
                     scale_rewards(data)
-                # GAE runs on [slots, time] so advantages stop at each trajectory's end; steps of
-                # waiting slots are then dropped and the minibatches mix the real steps.
+                # GAE on [slots, time], so advantages stop at each trajectory's end, once per epoch
+                # with the critic as updated so far (once per batch learned markedly slower in short
+                # runs); steps of waiting slots are then dropped and the minibatches mix the real steps.
+                value_inputs = ValueInputs(data, layout, normalizer)
+                valid = data["valid"].reshape(-1)
                 stop = False
                 for _ in range(cfg.epochs):
-                    with torch.no_grad():
-                        advantage(data)
-                    flat = data.reshape(-1)
-                    buffer.empty()
-                    buffer.extend(flat[flat["valid"].reshape(-1)])
-                    for batch in buffer:
+                    value_inputs.write_values(data, critic_net)
+                    advantage(data)
+                    learn = data.exclude("observation", "next").reshape(-1)[valid]  # what the loss reads
+                    for batch in minibatches(learn, cfg.minibatch_size):
                         losses = loss_module(batch)
+                        mean = head.take_last_mean()  # the actor's mean from the loss's own pass
                         if cfg.target_kl and float(losses.get("kl_approx", torch.tensor(0.0))) > cfg.target_kl:
                             stop = True  # the policy has moved far enough on this batch (as SB3 does)
                             break
                         total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
                         if cfg.action_bound_coeff > 0:
-                            total = total + cfg.action_bound_coeff * action_bound_loss(
-                                actor_net, normalizer, layout, batch, bound_low, bound_high
-                            )
+                            total = total + cfg.action_bound_coeff * action_bound_loss(mean, bound_low, bound_high)
                         optimizer.zero_grad()
                         total.backward()
                         nn.utils.clip_grad_norm_(loss_module.parameters(), cfg.max_grad_norm)
@@ -395,8 +453,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                         break
                 # Refresh the observation statistics only now: during the update the policy must see
                 # its inputs exactly as it did when it acted, or PPO's probability ratios are off.
-                flat = data.reshape(-1)
-                real = flat[flat["valid"].reshape(-1)]
+                real = data.reshape(-1)[valid]
                 inputs = layout.flatten({k: real["observation", k] for k in layout.keys})
                 clipped = normalizer.clipped_fraction(inputs)
                 if cfg.obs_norm:
