@@ -271,12 +271,12 @@ class ValueInputs:
 
     @torch.no_grad()
     def __init__(self, data, layout: ObservationLayout, normalizer: ObsNormalizer):
-        obs = normalizer(layout.flatten({k: data["observation", k] for k in layout.keys}))
-        following = normalizer(layout.flatten({k: data["next", "observation", k] for k in layout.keys}))
-        self.own = torch.ones(obs.shape[:2], dtype=torch.bool)
-        self.own[:, :-1] = (following[:, :-1] != obs[:, 1:]).any(-1)
-        self.own_next = following[self.own]
-        data[FLAT_OBSERVATION] = obs
+        self.raw = layout.flatten({k: data["observation", k] for k in layout.keys})
+        following = layout.flatten({k: data["next", "observation", k] for k in layout.keys})
+        self.own = torch.ones(self.raw.shape[:2], dtype=torch.bool)
+        self.own[:, :-1] = (following[:, :-1] != self.raw[:, 1:]).any(-1)
+        self.own_next = normalizer(following[self.own])
+        data[FLAT_OBSERVATION] = normalizer(self.raw)
 
     @torch.no_grad()
     def write_values(self, data, critic_net: nn.Module) -> None:
@@ -453,8 +453,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                         break
                 # Refresh the observation statistics only now: during the update the policy must see
                 # its inputs exactly as it did when it acted, or PPO's probability ratios are off.
-                real = data.reshape(-1)[valid]
-                inputs = layout.flatten({k: real["observation", k] for k in layout.keys})
+                inputs = value_inputs.raw.reshape(-1, layout.size)[valid]
                 clipped = normalizer.clipped_fraction(inputs)
                 if cfg.obs_norm:
                     normalizer.update(inputs)
@@ -470,7 +469,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                     "policy/action_std": float(actor_net.log_std.detach().clamp(-3.0, 0.5).exp().mean()),
                     "obs/clipped_fraction": clipped,
                     "train/lr": optimizer.param_groups[0]["lr"],
-                    "train/valid_fraction": float(real.numel() / max(flat.numel(), 1)),
+                    "train/valid_fraction": float(inputs.shape[0] / max(flat.numel(), 1)),
                     "perf/env_steps_per_s": (step - first_step) / (time.perf_counter() - start),
                     "perf/update_s": time.perf_counter() - collect_time,
                     "perf/collect_steps_per_s": (step - first_step) / max(collecting_s, 1e-9),

@@ -50,8 +50,9 @@ def block_view(table: VehicleTable, start: int, stop: int) -> VehicleTable:
     view.data = table.data[:, start:stop]
     for i, name in enumerate(VehicleTable.FLOAT_COLUMNS):
         setattr(view, name, view.data[i])
-    for name in ("lane", "role", "vtype", "owner", "alive"):
+    for name in ("lane", "role", "vtype", "owner", "alive", "serial"):
         setattr(view, name, getattr(table, name)[start:stop])
+    view.serial_counter = table.serial_counter
     view.ids = [None] * view.capacity
     view.row_of = {}
     return view

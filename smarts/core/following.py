@@ -56,14 +56,31 @@ class LeadState:
 
 
 def lead_rows(sim, agents: np.ndarray) -> np.ndarray:
-    """Table row of each agent's lead vehicle, -1 where it follows none or the lead is gone."""
-    out = np.full(len(agents), -1, dtype=np.int64)
-    ids = sim.lead_ids
-    row_of = sim.table.row_of
-    for k, a in enumerate(np.asarray(agents).tolist()):
-        lead = ids[a]
-        if lead is not None:
-            out[k] = row_of.get(lead, -1)
+    """Table row of each agent's lead vehicle, -1 where it follows none or the lead is gone.
+
+    Rows are cached per agent (on ``sim``) with the row's serial: a cached row that is alive with
+    the same serial still holds the lead, so only agents whose lead came, went or was never found
+    look it up by id."""
+    agents = np.asarray(agents, dtype=np.int64)
+    table = sim.table
+    cache = sim.__dict__.get("_lead_row_cache")  # this object's own, also under wrappers
+    if cache is None:
+        n = len(sim.lead_ids)
+        cache = (np.full(n, -1, dtype=np.int64), np.zeros(n, dtype=np.int64),
+                 np.array([lead is not None for lead in sim.lead_ids], dtype=bool))  # fmt: skip
+        sim.__dict__["_lead_row_cache"] = cache
+    rows, serials, has_lead = cache
+    cached = rows[agents]
+    hit = (cached >= 0) & table.alive[cached] & (table.serial[cached] == serials[agents])
+    out = np.where(hit, cached, -1)
+    ids, row_of = sim.lead_ids, table.row_of
+    for k in np.flatnonzero(~hit & has_lead[agents]).tolist():
+        a = int(agents[k])
+        row = row_of.get(ids[a], -1)
+        out[k] = row
+        rows[a] = row
+        if row >= 0:
+            serials[a] = table.serial[row]
     return out
 
 

@@ -88,6 +88,10 @@ class VehicleTable:
         self.alive = np.zeros(capacity, dtype=bool)
         self.ids: list[str | None] = [None] * capacity
         self.row_of: dict[str, int] = {}
+        # A number per vehicle added, never reused: a row with the serial it had still holds the
+        # same vehicle (so per-agent caches of rows can be checked without looking ids up).
+        self.serial = np.zeros(capacity, dtype=np.int64)
+        self.serial_counter = np.zeros(1, dtype=np.int64)  # shared with block views of this table
 
     # ------------------------------------------------------------------ rows
     @property
@@ -135,6 +139,8 @@ class VehicleTable:
         self.alive[row] = True
         self.ids[row] = vehicle_id
         self.row_of[vehicle_id] = row
+        self.serial_counter[0] += 1
+        self.serial[row] = self.serial_counter[0]
         return row
 
     def remove(self, rows: np.ndarray | list[int] | int) -> None:

@@ -100,3 +100,27 @@ def test_follow_must_name_a_vehicle_of_the_scenario():
     agents = [{"mission": {"start": {"road": "main", "offset": 10}, "goal": {"endless": True}, "follow": "ghost"}}]
     with pytest.raises(ScenarioError, match=r"agents\[0\]\.mission\.follow: no vehicle 'ghost' to follow"):
         make_spec(agents)
+
+
+def test_lead_rows_follow_the_vehicle_not_the_cached_row():
+    """The per-agent row cache must notice a lead that left (its row reused by another vehicle),
+    came back in another row, or appeared for the first time."""
+    from types import SimpleNamespace
+
+    from smarts.core.following import lead_rows
+    from smarts.core.vehicle_table import Role, VehicleTable
+
+    table = VehicleTable(8)
+    sim = SimpleNamespace(table=table, lead_ids=["lead", None, "late"])
+    agents = np.arange(3)
+    table.add("lead", owner=0, role=Role.TRAFFIC, x=0.0, y=0.0, heading=0.0)
+    table.add("other", owner=0, role=Role.TRAFFIC, x=5.0, y=0.0, heading=0.0)
+    assert lead_rows(sim, agents).tolist() == [0, -1, -1]
+    assert lead_rows(sim, agents).tolist() == [0, -1, -1]  # from the cache
+    table.remove(0)
+    table.add("stranger", owner=0, role=Role.TRAFFIC, x=9.0, y=0.0, heading=0.0)  # takes row 0
+    assert lead_rows(sim, agents).tolist() == [-1, -1, -1]
+    table.add("lead", owner=0, role=Role.TRAFFIC, x=1.0, y=0.0, heading=0.0)
+    table.add("late", owner=0, role=Role.TRAFFIC, x=2.0, y=0.0, heading=0.0)
+    assert lead_rows(sim, agents).tolist() == [2, -1, 3]
+    assert lead_rows(sim, np.array([2, 0])).tolist() == [3, 2]
