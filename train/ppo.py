@@ -7,11 +7,13 @@ The whole algorithm in one readable loop:
    > 1; a ``Collector`` gathers ``frames_per_batch`` steps with the current stochastic policy.
    With ``ray_address``, each of the ``workers`` batches is stepped by its own collector running
    as a Ray actor instead.
-2. GAE computes advantages and value targets per slot trajectory; steps of slots that were
-   waiting for their scenario copy to restart (``valid`` false) are then dropped.
-3. ``epochs`` passes of minibatch updates of torchrl's ``ClipPPOLoss`` (clipped objective + value
-   loss + entropy bonus, normalised advantages), Adam, gradient clipping; then the observation
-   normaliser takes the batch's statistics for the next collection.
+2. The observations are flattened and normalised once for the whole update (``ValueInputs``).
+3. ``epochs`` passes, each starting with torchrl's GAE (advantages and value targets per slot
+   trajectory, with the critic as updated so far), then dropping the steps of slots that were
+   waiting for their scenario copy to restart (``valid`` false), then minibatch updates of
+   torchrl's ``ClipPPOLoss`` (clipped objective + value loss + entropy bonus, normalised
+   advantages), Adam, gradient clipping; then the observation normaliser takes the batch's
+   statistics for the next collection.
 4. TensorBoard: episode return/length, losses, entropy, KL, learning rate, env steps/s; a checkpoint
    after every batch (``last.pt``) and on Ctrl-C. Every ``eval_every`` steps the task's benchmark
    suite runs on the checkpoint with held-out seeds; ``best.pt`` is the one with the highest
@@ -267,7 +269,8 @@ class ValueInputs:
     observations (written into ``data`` as ``FLAT_OBSERVATION``, which the update's actor also
     reads) and the few next observations that are not the slot's following observation (ends of
     episodes, the last step of the batch). Every other next value is the following step's value,
-    so each epoch's values cost one critic pass over the batch instead of two."""
+    so each epoch's values cost one critic pass over the batch instead of two. ``raw`` keeps the
+    flat observations before normalising, for the statistics update after the epochs."""
 
     @torch.no_grad()
     def __init__(self, data, layout: ObservationLayout, normalizer: ObsNormalizer):
@@ -296,10 +299,10 @@ def action_bound_loss(mean: torch.Tensor, low: torch.Tensor, high: torch.Tensor)
     return ((mean - high).clamp(min=0.0) ** 2 + (low - mean).clamp(min=0.0) ** 2).sum(-1).mean()
 
 
-def minibatches(data, size: int, generator: torch.Generator | None = None):
+def minibatches(data, size: int):
     """``data`` (a flat TensorDict) in random minibatches of ``size`` (the last one smaller), each
     step once: one permutation and one gather per minibatch."""
-    order = torch.randperm(data.shape[0], generator=generator)
+    order = torch.randperm(data.shape[0])
     for start in range(0, data.shape[0], size):
         yield data[order[start : start + size]]
 
