@@ -17,6 +17,8 @@ import numpy as np
 from agents.planners.frames import Odometry
 
 RELATIVE_TARGET_POSE = "relative_target_pose"
+SPEED_CHANGE = (10.0, 5.0)
+"""(braking, accelerating) m/s^2 at most in one step, a little above the vehicle limits (9, 4)."""
 
 
 class AgentState:
@@ -28,6 +30,7 @@ class AgentState:
         self.last_action: np.ndarray | None = None
         self.expect_speed = 0.0
         self.expect_route = 0.0
+        self.speed = 0.0
 
     def mismatch(self, ego: np.ndarray, goal: np.ndarray) -> float:
         """How far this observation is from what the last action should have produced (0: as
@@ -41,6 +44,7 @@ class AgentState:
     def observe(self, ego: np.ndarray) -> None:
         """Integrate the executed last step into the odometry (its length scaled to the distance
         the observed speed allows when the limits cut the request short)."""
+        self.speed = max(float(ego[0]), 0.0)
         if self.last_action is None:
             return
         step = self.last_action.astype(np.float64).copy()
@@ -53,7 +57,9 @@ class AgentState:
     def acted(self, action: np.ndarray, goal: np.ndarray, dt: float) -> None:
         self.last_action = np.asarray(action, dtype=np.float64)
         travel = float(np.hypot(action[0], action[1]))
-        self.expect_speed = travel / dt
+        # the speed the step asks for, as far as the vehicle's limits let it change in one step: a
+        # stop commanded at speed is a brake, and the next observation still moves
+        self.expect_speed = float(np.clip(travel / dt, self.speed - SPEED_CHANGE[0] * dt, self.speed + SPEED_CHANGE[1] * dt))
         self.expect_route = float(goal[2]) - travel
         self.steps += 1
 

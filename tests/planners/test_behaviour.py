@@ -34,7 +34,9 @@ STOPPED_AHEAD = [agent(offset=20, speed=10, goal={"road": "main", "offset": 250}
 
 
 def test_tf_holds_behind_a_stopped_car():
-    trace, events = drive("zoo:tf-rules", STOPPED_AHEAD, 150)
+    # both lanes blocked: with one free, TF's lane-change utility takes it and passes
+    blocked = STOPPED_AHEAD + [{**agent(lane=1, offset=80, speed=0), "policy": "zoo:stand-still"}]
+    trace, events = drive("zoo:tf-rules", blocked, 150)
     assert "collision" not in events
     assert trace[-30:, 0].max() < 0.05  # stopped, and it stays
     assert np.abs(trace[:, 2]).max() < 0.2  # in its lane

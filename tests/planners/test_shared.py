@@ -125,6 +125,7 @@ def test_align_drops_the_agent_that_left():
     states = []
     for speed, route in [(10.0, 100.0), (5.0, 50.0), (12.0, 200.0)]:
         s = AgentState()
+        s.observe(np.r_[speed, np.zeros(11)])
         s.acted(np.array([speed * 0.1, 0.0, 0.0]), np.array([0, 0, route, 1.0]), 0.1)
         states.append(s)
     ego = np.zeros((2, 12))
@@ -134,3 +135,13 @@ def test_align_drops_the_agent_that_left():
     assert picked[0] is states[0] and picked[1] is states[2]
     ego[1, 0] = 3.0  # not anyone's next step: starts afresh
     assert align(states, {"ego": ego[:1].repeat(3, 0), "goal": goal[:1].repeat(3, 0)})[1] is None
+
+
+def test_align_keeps_an_agent_braking_for_a_stop():
+    # a zero step at 12 m/s is a brake (at most 9 m/s^2): the next observation at 11.1 m/s is
+    # this agent's, not a new one (its memory, e.g. TF's hold or VCR's scores, must survive)
+    s = AgentState()
+    s.observe(np.r_[12.0, np.zeros(11)])
+    s.acted(np.zeros(3), np.array([0, 0, 100.0, 1.0]), 0.1)
+    ego = np.r_[11.1, np.zeros(11)][None]
+    assert align([s], {"ego": ego, "goal": np.array([[0, 0, 98.8, 1.0]])})[0] is s
