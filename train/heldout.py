@@ -1,5 +1,5 @@
-"""What the planners' training commands share: their options, the suites' scenarios and the
-held-out split by scenario."""
+"""What the planners' training commands share: their options, the suites' scenarios, the
+held-out split by scenario and the cars of scripted situations."""
 
 from __future__ import annotations
 
@@ -40,3 +40,14 @@ def suite_scenarios(suites: list[str] | None) -> list:
     from smarts.benchmark.suites import load_suite
 
     return [e for name in suites or ["collaborative", "adaptive"] for e in load_suite(name).scenarios]
+
+
+def road_car(lane: int, offset: float, speed: float, policy: str | None = None, heading: float | None = None) -> dict:
+    """A car on the straight built-in maps' road ``main`` (endless mission): the explorer or
+    demonstrator when ``policy`` is None, else a social agent; ``heading`` (rad, world) turns it
+    away from the lane's direction (the road runs along heading 0)."""
+    start = {"road": "main", "lane": lane, "offset": round(offset, 1), "speed": round(speed, 2)}
+    if heading is not None:
+        start["heading"] = round(heading, 3)
+    car = {"action_space": "relative_target_pose", "mission": {"start": start, "goal": {"endless": True}}}
+    return {**car, "policy": policy} if policy else car

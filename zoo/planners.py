@@ -46,25 +46,32 @@ def tf(checkpoint: str | Path | None = None):
 
 
 class EventRisk:
-    """VCR's learned collision probability: rasters and the candidate's 18 numbers -> P(collision)."""
+    """VCR's learned collision probability: rasters and the candidate's numbers -> P(collision)."""
 
     def __init__(self, path: str | Path):
         import torch
 
         from agents.planners.nets import load_net
+        from agents.planners.vcr import NUMBERS
 
         self.torch = torch
         self.net, self.metrics = load_net(path, "vcr-classifier")
+        if self.net.config["numbers"] != NUMBERS:
+            from agents.checkpoint import CheckpointError
+
+            raise CheckpointError(f"{path}: the classifier reads {self.net.config['numbers']} numbers, "
+                                  f"agents.planners.vcr.classifier_numbers gives {NUMBERS}: retrain it")  # fmt: skip
 
     def __call__(self, row: dict[str, np.ndarray], front: np.ndarray, plan: np.ndarray) -> float:
+        from agents.planners.vcr import classifier_numbers
+
         torch = self.torch
         if "rasters" not in row:
             raise ValueError("zoo:vcr reads rasters: give the agent the interface of agents.planners.vcr.LEARNED_INTERFACE "
                              "(rasters: {size: 64, resolution: 0.8, layers: [drivable, route, occupancy]})")  # fmt: skip
-        numbers = np.zeros((6, 3), dtype=np.float32)
-        numbers[: min(6, len(plan))] = plan[:6]
+        numbers = classifier_numbers(row, plan[0], plan)  # the candidate step, as VCR scores it
         with torch.no_grad():
-            logits = self.net(torch.as_tensor(row["rasters"][None]), torch.as_tensor(numbers.reshape(1, -1)))
+            logits = self.net(torch.as_tensor(row["rasters"][None]), torch.as_tensor(numbers[None]))
         return float(torch.softmax(logits[0], -1)[0])
 
 

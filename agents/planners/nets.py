@@ -122,10 +122,11 @@ class StopMoveNet(nn.Module):
 
 
 class VCRClassifier(nn.Module):
-    """VCR's event classifier with a reduced head: rasters uint8 [B, C, 64, 64] and 18 numbers
-    (candidate step and the next 5 path points, ego frame) -> 6 event logits (0 collision ... 5 safe)."""
+    """VCR's event classifier with a reduced head: rasters uint8 [B, C, 64, 64] and 24 numbers
+    (``agents.planners.vcr.classifier_numbers``: the step, the next 5 path points, the ego's speed
+    and the nearest car ahead, ego frame) -> 6 event logits (0 collision ... 5 safe)."""
 
-    def __init__(self, channels: int = 3, size: int = 64, numbers: int = 18, classes: int = 6):
+    def __init__(self, channels: int = 3, size: int = 64, numbers: int = 24, classes: int = 6):
         super().__init__()
         self.config = {"channels": channels, "size": size, "numbers": numbers, "classes": classes}
         blocks: list[nn.Module] = []

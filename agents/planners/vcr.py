@@ -38,6 +38,8 @@ OBSTACLE_RANGE = 12.0
 FRONT, REAR = np.deg2rad(60.0), np.deg2rad(120.0)
 OPPOSITE = np.deg2rad(175.0)
 TTC_HORIZON = 3.0
+NUMBERS = 24
+"""The classifier's numeric input (``classifier_numbers``)."""
 
 
 def speed_factor(p_collision: float) -> float:
@@ -73,6 +75,28 @@ def ttc_risk(row: dict[str, np.ndarray], front: np.ndarray, plan: np.ndarray, dt
     closing = planned * np.cos(bearing) - (own[0] * np.cos(bearing) + own[1] * np.sin(bearing))
     ttc = np.where(gap <= 0, 0.0, np.where(closing > 1e-3, gap / np.maximum(closing, 1e-3), np.inf))
     return float(np.clip((TTC_HORIZON - ttc.min()) / TTC_HORIZON, 0.0, 1.0))
+
+
+def classifier_numbers(row: dict[str, np.ndarray], step: np.ndarray, path: np.ndarray) -> np.ndarray:
+    """The event classifier's 24 numbers, ego frame: the step (x, y, heading) and the next 5 path
+    points (VCR's 18), then what one raster frame cannot show: the ego's speed and the nearest
+    neighbour ahead (within +-60 deg: present, bumper gap, lateral offset, velocity relative to
+    the ego). Speeds and distances are divided by 10."""
+    out = np.zeros(NUMBERS, dtype=np.float32)
+    out[0:3] = step[:3]
+    k = min(5, len(path) - 1)
+    if k > 0:
+        out[3 : 3 + 3 * k] = np.asarray(path[1 : 1 + k, :3], dtype=np.float32).reshape(-1)
+    ego = row["ego"].astype(np.float64)
+    out[18] = ego[0] / 10.0
+    nb = row["neighbours"].astype(np.float64)
+    present = np.flatnonzero(row["neighbour_mask"] > 0)
+    ahead = present[(nb[present, 0] > 0) & (np.abs(np.arctan2(nb[present, 1], nb[present, 0])) <= FRONT)]
+    if ahead.size:
+        i = ahead[np.argmin(np.hypot(nb[ahead, 0], nb[ahead, 1]))]
+        gap = float(nb[i, 0]) - 0.5 * (float(nb[i, 6]) + float(ego[10]))
+        out[19:24] = [1.0, gap / 10.0, nb[i, 1] / 10.0, nb[i, 4] / 10.0, nb[i, 5] / 10.0]
+    return out
 
 
 class VCRState(AgentState):
