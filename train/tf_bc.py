@@ -1,13 +1,19 @@
 """``python -m train tf-bc``: behaviour-clone TF's stop/move network from this simulator's drivers.
 
-Demonstrations: the suites' scenarios with every mission vehicle driven by keep-lane (IDM: it
-stops behind leaders and at red lights), observed through TF's interface. Each agent step gives
-TF's 53 features (``agents.planners.tf.stop_move_features``, the first 5 route waypoints as the
-"outcome" input, as at test time) and the label move (1) when the next step's speed is at least
-0.2 x the lane speed limit, else stop (0). Samples near turns (|yaw rate| >= 0.5 deg per step,
-+-10 steps) are kept with half as many others, TF's 2:1 turn:cruise ratio. Loss: NLL + 0.5 x
-mean(logits^2) (d3rlpy's discrete BC), Adam lr 1e-3, batch 64. Scenarios are split by name;
-held-out accuracy and stop recall/precision are reported. Writes TensorBoard logs, ``final.pt``.
+Demonstrations: (1) the suites' scenarios with every mission vehicle driven by keep-lane (IDM:
+it stops behind leaders and at red lights), observed through TF's interface; label move (1) when
+the next step's speed is at least 0.2 x the lane speed limit, else stop (0); samples near turns
+(|yaw rate| >= 0.5 deg per step, +-10 steps) are kept with half as many others, TF's 2:1
+turn:cruise ratio. (2) Hindsight: scripted danger situations on straight roads (a stopped car
+ahead, often turned across the lane, where TF's corner-in-box forecast can miss it) driven by
+TF's own rules; every step from ``--horizon`` steps before a collision is labelled stop (moving
+on at the rules' speed led into it), the others with the rules' own stop/move decision (the speed
+label of (1) calls a braking car "move"). The rules' keep-lane demonstrators
+never showed a stop the rules do not already make; these do. Features: TF's 53
+(``agents.planners.tf.stop_move_features``, the first 5 route waypoints as the "outcome" input,
+as at test time). Loss: NLL + 0.5 x mean(logits^2) (d3rlpy's discrete BC), Adam lr 1e-3, batch
+64. Every 5th scenario and every 5th group of 10 situations is held out; accuracy and stop
+recall/precision are reported per held-out set. Writes TensorBoard logs, ``final.pt``.
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from train.heldout import add_run_options, apply_run_options, split_held_out, suite_scenarios
+from train.heldout import add_run_options, apply_run_options, road_car, split_held_out, suite_scenarios
 
 
 def demonstrations(scenarios, seeds: int, progress: bool = True) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -74,6 +80,71 @@ def demonstrations(scenarios, seeds: int, progress: bool = True) -> dict[str, tu
     return out
 
 
+def danger_situation(rng: np.random.Generator) -> dict:
+    """A scenario dict on a straight 2- or 3-lane road: the demonstrator at 0-14 m/s, a stopped car
+    3-45 m ahead in its lane (70 %) or the next one, along the lane (30 %) or across it (turned
+    by 75-110 deg either way: from about 90 to 96 deg no corner of it enters TF's alert box, so
+    the rules drive on), and maybe a car driving in another lane."""
+    lanes = int(rng.choice([2, 3]))
+    lane = int(rng.integers(lanes))
+    ego_at = 40.0
+    cars = [road_car(lane, ego_at, float(rng.uniform(0.0, 14.0)))]
+    sides = [s for s in (lane - 1, lane + 1) if 0 <= s < lanes]
+    where = lane if rng.random() < 0.7 else int(rng.choice(sides))
+    turn = 0.0 if rng.random() < 0.3 else float(rng.uniform(1.3, 1.9)) * float(rng.choice([-1.0, 1.0]))
+    cars.append(road_car(where, ego_at + 5.0 + float(rng.uniform(3.0, 45.0)), 0.0, "zoo:stand-still", heading=turn))
+    free = [s for s in range(lanes) if s not in (lane, where)]
+    if free and rng.random() < 0.5:
+        cars.append(road_car(int(rng.choice(free)), ego_at + float(rng.uniform(-20.0, 20.0)), float(rng.uniform(5.0, 12.0)),
+                             "zoo:keep-lane"))  # fmt: skip
+    return {"map": f"builtin:straight_{lanes}lane", "agents": cars}
+
+
+def hindsight(count: int, steps: int, horizon: int, progress: bool = True) -> dict[str, tuple[np.ndarray, ...]]:
+    """``count`` danger situations driven by TF's own rules (``TFPlanner`` without the network),
+    grouped 10 to a key ``situations_<k>``: (features, labels, hindsight flags). Labels: stop (0)
+    for every step from ``horizon`` steps before a collision on (moving on at the rules' speed
+    led into it; flagged), else the rules' own decision (stop when they stopped the car)."""
+    from tqdm import tqdm
+
+    from agents.planners.paths import valid_path
+    from agents.planners.tf import INTERFACE, TFPlanner, stop_move_features
+    from smarts.env import DrivingParallelEnv
+    from smarts.scenario import ScenarioSpec
+    from smarts.sensors.interface import interface_from_dict
+
+    interface = interface_from_dict(INTERFACE)
+    rng = np.random.default_rng(2)
+    groups: dict[str, tuple[list, list, list]] = {}
+    for k in tqdm(range(count), desc="hindsight", disable=not progress):
+        spec = ScenarioSpec.from_dict({"name": f"danger_{k}", **danger_situation(rng)}, source="tf-bc situations")
+        env = DrivingParallelEnv(spec, observation=interface)
+        obs, _ = env.reset(seed=k)
+        rules = TFPlanner()
+        track, crashed = [], False
+        for _ in range(steps):
+            if "agent_0" not in env.agents:
+                break
+            row = obs["agent_0"]
+            target = valid_path(row["waypoints"][0], row["waypoint_mask"][0])
+            batch = {key: v[None] for key, v in row.items()}
+            action = rules.act(batch)[0]
+            track.append((stop_move_features(row, target), rules._states[0].stopped_by != ""))
+            obs, _, _, _, infos = env.step({"agent_0": action})
+            if "collision" in infos.get("agent_0", {}).get("events", []):
+                crashed = True
+                break
+        env.close()
+        feats, labels, flags = groups.setdefault(f"situations_{k // 10:03d}", ([], [], []))
+        n = len(track)
+        for i in range(n):
+            feats.append(track[i][0])
+            flags.append(crashed and i >= n - horizon)
+            labels.append(0 if flags[-1] or track[i][1] else 1)
+    return {name: (np.array(f, dtype=np.float32), np.array(lab), np.array(fl, dtype=bool))
+            for name, (f, lab, fl) in groups.items()}  # fmt: skip
+
+
 def train(args: argparse.Namespace) -> dict:
     from torch.utils.tensorboard import SummaryWriter
     from tqdm import tqdm
@@ -83,14 +154,39 @@ def train(args: argparse.Namespace) -> dict:
     apply_run_options(args)
     started = time.time()
     scenarios = suite_scenarios(args.suite)
-    data = demonstrations(scenarios, args.seeds, not args.quiet)
+    cache = Path(args.data) if args.data else None
+    if cache is not None and cache.is_file():
+        with np.load(cache) as saved:
+            loaded: dict[str, list] = {}
+            for key in sorted(saved.files):
+                name, field = key.rsplit("/", 1)
+                loaded.setdefault(name, []).append(saved[key])
+        data = {n: tuple(v) for n, v in loaded.items() if not n.startswith("situations_")}
+        situations = {n: tuple(v) for n, v in loaded.items() if n.startswith("situations_")}
+    else:
+        data = demonstrations(scenarios, args.seeds, not args.quiet)
+        situations = hindsight(args.situations, args.situation_steps, args.horizon, not args.quiet) if args.situations else {}
+        if cache is not None:
+            cache.parent.mkdir(parents=True, exist_ok=True)
+            np.savez_compressed(cache, **{f"{n}/{i}": v for part in (data, situations) for n, d in part.items()
+                                          for i, v in enumerate(d)})  # fmt: skip
     names, held = split_held_out(list(data))
+    if situations:
+        sit_names, sit_held = split_held_out(list(situations)) if len(situations) >= 2 else (list(situations), [])
+        data.update(situations)
+        names, held = names + sit_names, held + sit_held
     train_x = torch.from_numpy(np.concatenate([data[n][0] for n in names]))
     train_y = torch.from_numpy(np.concatenate([data[n][1] for n in names]))
-    held_x = torch.from_numpy(np.concatenate([data[n][0] for n in held]))
-    held_y = torch.from_numpy(np.concatenate([data[n][1] for n in held]))
-    print(f"samples: {len(train_y)} train ({float((train_y == 0).float().mean()):.1%} stop), {len(held_y)} held out "
-          f"from {held}")  # fmt: skip
+    # hindsight stops are about 1 % of the samples: drawn --hindsight-weight times as often
+    draw = torch.from_numpy(np.concatenate([np.where(situations[n][2], args.hindsight_weight, 1.0) if n in situations
+                                            else np.ones(len(data[n][1])) for n in names]))  # fmt: skip
+    held_sets = {"suites": [n for n in held if n not in situations], "situations": [n for n in held if n in situations]}
+    held_sets = {k: (torch.from_numpy(np.concatenate([data[n][0] for n in v])), torch.from_numpy(np.concatenate([data[n][1] for n in v])))
+                 for k, v in held_sets.items() if v}  # fmt: skip
+    held_flags = torch.from_numpy(np.concatenate([situations[n][2] for n in held if n in situations] or [np.zeros(0, dtype=bool)]))
+    train_hindsight = int(sum(situations[n][2].sum() for n in names if n in situations))
+    print(f"samples: {len(train_y)} train ({float((train_y == 0).float().mean()):.1%} stop), held out "
+          f"{ {k: len(v[1]) for k, v in held_sets.items()} } from {held}")  # fmt: skip
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     writer = SummaryWriter(out / "tensorboard")
@@ -99,18 +195,26 @@ def train(args: argparse.Namespace) -> dict:
     gen = torch.Generator().manual_seed(args.seed)
 
     def held_metrics() -> dict[str, float]:
-        with torch.no_grad():
-            pred = net(held_x).argmax(-1)
-        stop_true, stop_pred = held_y == 0, pred == 0
-        tp = float((stop_true & stop_pred).sum())
-        return {"accuracy": float((pred == held_y).float().mean()),
-                "stop_recall": tp / max(float(stop_true.sum()), 1.0),
-                "stop_precision": tp / max(float(stop_pred.sum()), 1.0),
-                "majority_accuracy": float(max((held_y == 0).float().mean(), (held_y == 1).float().mean()))}  # fmt: skip
+        metrics = {}
+        for which, (held_x, held_y) in held_sets.items():
+            with torch.no_grad():
+                pred = net(held_x).argmax(-1)
+            stop_true, stop_pred = held_y == 0, pred == 0
+            tp = float((stop_true & stop_pred).sum())
+            metrics.update({f"{which}/accuracy": float((pred == held_y).float().mean()),
+                            f"{which}/stop_recall": tp / max(float(stop_true.sum()), 1.0),
+                            f"{which}/stop_precision": tp / max(float(stop_pred.sum()), 1.0),
+                            f"{which}/majority_accuracy": float(max((held_y == 0).float().mean(), (held_y == 1).float().mean())),
+                            f"{which}/stops": int(stop_true.sum()), f"{which}/samples": len(held_y)})  # fmt: skip
+            if which == "situations":  # the stops only hindsight shows: the rules drove on there
+                flag = held_flags
+                metrics[f"{which}/hindsight_stops"] = int(flag.sum())
+                metrics[f"{which}/hindsight_stop_recall"] = float(stop_pred[flag].float().mean()) if flag.any() else 0.0
+        return metrics
 
     bar = tqdm(range(1, args.steps + 1), desc="tf-bc", disable=args.quiet)
     for step in bar:
-        idx = torch.randint(0, len(train_y), (args.batch,), generator=gen)
+        idx = torch.multinomial(draw, args.batch, replacement=True, generator=gen)
         logits = net(train_x[idx])
         loss = torch.nn.functional.cross_entropy(logits, train_y[idx]) + args.beta * (logits**2).mean()
         opt.zero_grad()
@@ -122,7 +226,9 @@ def train(args: argparse.Namespace) -> dict:
         if step % 500 == 0 or step == args.steps:
             for k, v in held_metrics().items():
                 writer.add_scalar(f"heldout/{k}", v, step)
-    metrics = {**held_metrics(), "train_samples": len(train_y), "heldout_samples": len(held_y),
+    metrics = {**held_metrics(), "train_samples": len(train_y), "train_stops": int((train_y == 0).sum()),
+               "train_hindsight_stops": train_hindsight, "situations": args.situations, "horizon": args.horizon,
+               "hindsight_weight": args.hindsight_weight,
                "heldout_scenarios": held, "steps": args.steps, "batch": args.batch, "hidden": args.hidden,
                "parameters": sum(p.numel() for p in net.parameters()), "threads": args.threads,
                "minutes": round((time.time() - started) / 60, 1)}  # fmt: skip
@@ -133,12 +239,17 @@ def train(args: argparse.Namespace) -> dict:
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("tf-bc", help="behaviour-clone TF's stop/move network from keep-lane demonstrations",
+    p = sub.add_parser("tf-bc", help="behaviour-clone TF's stop/move network (keep-lane demonstrations, hindsight stops)",
                        formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
     p.add_argument("--suite", action="append", default=None, help="suites whose scenarios give demonstrations (default: both)")
     p.add_argument("--seeds", type=int, default=3, help="episodes per scenario")
     p.add_argument("--out", default="runs/train/tf-bc", help="output folder (TensorBoard, final.pt)")
-    p.add_argument("--steps", type=int, default=3000, help="gradient steps")
+    p.add_argument("--situations", type=int, default=1000, help="danger situations driven by TF's rules, labelled in hindsight (0: none)")
+    p.add_argument("--situation-steps", type=int, default=100, help="steps per danger situation")
+    p.add_argument("--horizon", type=int, default=20, help="steps before a collision labelled stop")
+    p.add_argument("--hindsight-weight", type=float, default=20.0, help="how much more often hindsight stops are drawn")
+    p.add_argument("--data", default=None, help="an .npz of the samples: read when it exists, else written")
+    p.add_argument("--steps", type=int, default=20000, help="gradient steps (the original's count)")
     p.add_argument("--batch", type=int, default=64, help="samples per gradient step")
     p.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate")
     p.add_argument("--beta", type=float, default=0.5, help="weight of the logit penalty mean(logits^2)")

@@ -11,8 +11,9 @@ Deviations (see cards/tf.md): the lanes are the three observed paths; the goal l
 path (0); an agent off the route path is pulled back to it (the original relied on lane ids and
 goal-lane search); the 2022 merge, all-wrong-lanes and lane-end escapes and the multi-agent
 right-of-way are dropped (no lane or agent ids); the alert box's front length adds the braking
-distance v^2 / (2 * 9 m/s^2), because stops are not instant here; the network's "outcome"
-input is the first 5 target-path waypoints at training time too.
+distance v^2 / (2 * 9 m/s^2), because stops are not instant here, and for the same reason the
+model's anti-deadlock counts only stop votes cast while standing; the network's "outcome" input
+is the first 5 target-path waypoints at training time too.
 """
 
 from __future__ import annotations
@@ -32,6 +33,8 @@ NOVICE_STEPS = 15
 HOLD_STEPS = 49
 IGNORE_STEPS = 10
 DEADLOCK_STOPS = 10
+STANDING = 0.1
+"""m/s below which a model stop counts towards the anti-deadlock window."""
 REAR_CONE = np.deg2rad(150.0)
 HEADING_CLIP = np.deg2rad(10.0)
 BRAKE = 9.0
@@ -159,7 +162,9 @@ class TFPlanner(StatefulPlanner):
             model_move = bool(self.stop_move(stop_move_features(row, target_pts)))
         st.model_ignore = max(st.model_ignore - 1, 0)
         if not model_move:
-            st.model_stops += 1
+            # counted while standing: the original's stops were instant, so its ten stops were a
+            # second at rest; here a stop is a brake, and a window opened mid-brake would drive on
+            st.model_stops += int(speed < STANDING)
             if st.model_stops >= DEADLOCK_STOPS:
                 st.model_stops, st.model_ignore = 0, IGNORE_STEPS
         else:

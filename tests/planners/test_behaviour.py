@@ -42,10 +42,31 @@ def test_tf_holds_behind_a_stopped_car():
     assert np.abs(trace[:, 2]).max() < 0.2  # in its lane
 
 
-def test_vcr_slows_to_a_stop_behind_a_stopped_car():
-    trace, events = drive("zoo:vcr-ttc", STOPPED_AHEAD, 150)
+@pytest.mark.parametrize("locator", ["zoo:vcr-ttc", "zoo:vcr"])
+def test_vcr_slows_to_a_stop_behind_a_stopped_car(locator):
+    trace, events = drive(locator, STOPPED_AHEAD, 150)
     assert "collision" not in events
     assert trace[-20:, 0].max() < 0.05
+
+
+# A car stopped across the lane (turned 90 deg): its corners lie just outside TF's alert box
+# (corner-in-box, as the original), so the rules alone drive into it; the learned veto stops.
+ACROSS_AHEAD = [STOPPED_AHEAD[0], {**agent(offset=80, speed=0), "policy": "zoo:stand-still"}]
+ACROSS_AHEAD[1]["mission"]["start"]["heading"] = 1.62  # 93 deg: between 90 and 96 deg no corner is in the box
+
+
+def test_tf_rules_alone_drive_into_a_car_across_the_lane():
+    trace, events = drive("zoo:tf-rules", ACROSS_AHEAD, 100)
+    assert "collision" in events and trace[-1, 0] > 10.0  # at speed
+
+
+def test_tf_network_vetoes_before_a_car_across_the_lane():
+    # The rules alone crash at step 43. Standing, ten stop votes open TF's 10-step anti-deadlock
+    # window, in which the rules creep on (as the original's would drive on): it touches the car
+    # after about 130 steps.
+    trace, events = drive("zoo:tf", ACROSS_AHEAD, 100)
+    assert "collision" not in events
+    assert trace[:, 0].min() < 0.05  # it stood still short of the car
 
 
 def test_aid_changes_lane_around_a_stopped_car():
@@ -65,7 +86,8 @@ def test_aid_brakes_when_every_lane_is_blocked():
 # AID settles a little above the limit: its speed term (weight 0.5, relative error) is outweighed by
 # the jerk of slowing down again after the cubic profiles overshoot.
 @pytest.mark.parametrize("locator, cruise, tolerance", [
-    ("zoo:tf-rules", 13.89, 0.02), ("zoo:vcr-ttc", 11.0, 0.02), ("zoo:aid-cv", 13.89, 0.07),
+    ("zoo:tf-rules", 13.89, 0.02), ("zoo:tf", 13.89, 0.02), ("zoo:vcr-ttc", 11.0, 0.02), ("zoo:vcr", 11.0, 0.02),
+    ("zoo:aid-cv", 13.89, 0.07),
 ])  # fmt: skip
 def test_empty_road_reaches_cruise_speed_smoothly(locator, cruise, tolerance):
     trace, events = drive(locator, [agent(offset=20, speed=5)], 120)

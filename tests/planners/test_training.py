@@ -44,12 +44,15 @@ def test_trajectories_then_aid_predictor(tiny_suite, tmp_path):
 
 
 def test_tf_bc_and_vcr_classifier(tiny_suite, tmp_path):
-    assert train_main(["tf-bc", "--suite", str(tiny_suite), "--seeds", "1", "--steps", "5",
-                       "--out", str(tmp_path / "tf"), "--quiet"]) == 0  # fmt: skip
+    assert train_main(["tf-bc", "--suite", str(tiny_suite), "--seeds", "1", "--steps", "5", "--situations", "20",
+                       "--situation-steps", "30", "--out", str(tmp_path / "tf"), "--quiet"]) == 0  # fmt: skip
     summary = json.loads((tmp_path / "tf" / "summary.json").read_text())
-    assert summary["train_samples"] > 0 and 0.0 <= summary["accuracy"] <= 1.0
-    assert train_main(["vcr-classifier", "--suite", str(tiny_suite), "--seeds", "1", "--epochs", "1",
-                       "--out", str(tmp_path / "vcr"), "--quiet"]) == 0  # fmt: skip
+    assert summary["train_samples"] > 0 and summary["train_stops"] > 0
+    assert 0.0 <= summary["suites/accuracy"] <= 1.0 and 0.0 <= summary["situations/accuracy"] <= 1.0
+    assert train_main(["vcr-classifier", "--suite", str(tiny_suite), "--seeds", "1", "--epochs", "1", "--situations", "20",
+                       "--situation-steps", "30", "--out", str(tmp_path / "vcr"), "--quiet"]) == 0  # fmt: skip
+    summary = json.loads((tmp_path / "vcr" / "summary.json").read_text())
+    assert summary["train_classes"]["collision"] > 0 and "situations/collision_recall" in summary
     from zoo.planners import tf, vcr
 
     _drive(tf(tmp_path / "tf" / "final.pt"))
