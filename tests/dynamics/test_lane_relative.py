@@ -170,3 +170,28 @@ def test_a_scenario_can_ask_for_the_controller_and_is_checked():
         make_spec([agent(action_space="lane", controller="lane_relative")])
     with pytest.raises(ScenarioError, match=r"agents\[0\]\.controller"):
         make_spec([agent(controller="autopilot")])
+
+
+def test_the_projection_near_a_hint_equals_the_full_scan_whatever_the_hint():
+    """The controller searches a lane near where the car was; a wrong hint must fall back to the
+    whole lane, so the (s, t) found is always the full scan's (checked on every lane of a map with
+    curves, junctions and long straights, for points on, beside and past the lanes)."""
+    from smarts.dynamics.lane_relative import _project_near, _project_on_lane
+    from smarts.maps import load_map
+    from smarts.scenario import builtin_map_path
+
+    rng = np.random.default_rng(0)
+    for name in ("highway_merge_exit", "intersection_4way_2lane", "straight_3lane"):
+        rm = load_map(builtin_map_path(name))
+        off, pts, ps = rm.lanepoint_offsets, rm.lanepoints, rm.lanepoint_s
+        for lane in range(rm.num_lanes):
+            a, b = off[lane], off[lane + 1]
+            if b - a < 2:
+                continue
+            for _ in range(6):
+                k = rng.integers(a, b)
+                x, y = pts[k] + rng.normal(0.0, 2.0, size=2)
+                hint = rng.uniform(-50.0, ps[b - 1] + 50.0)  # anywhere, also far off
+                full = _project_on_lane(off, pts, ps, lane, x, y)
+                near = _project_near(off, pts, ps, lane, x, y, hint)
+                assert near == pytest.approx(full, abs=1e-9), (name, lane, hint)
