@@ -78,10 +78,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         PARSE, "fine-tunes a trained checkpoint that only a finished run has",
     ),
     "python -m train ppo --task drive --lib sb3": (PARSE, "a full SB3 training run"),
-    "python -m train ppo --task platoon --backend batched --envs 256 --frames-per-batch 16384 --minibatch-size 4096": (
+    "python -m train ppo --task platoon --backend batched --envs 256 --frames-per-batch 16384 --minibatch-size 4096 --epochs 4": (
         PARSE, "a full training run on the batched backend; tests/batched/test_batched_training.py runs a short one"
     ),
-    "python -m smarts.diagnostic --batched --ppo-steps 49152": (
+    "python -m smarts.diagnostic --batched --ppo-steps 98304": (
         NOT_RUN, "minutes of timing up to B = 1,024 and two PPO runs; tests/batched/test_batched_diagnostic.py runs it on a tiny budget"
     ),
     "python -m train eval --agent runs/train/platoon/latest/best.pt --suite adaptive": (
