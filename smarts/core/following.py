@@ -58,17 +58,17 @@ class LeadState:
 def lead_rows(sim, agents: np.ndarray) -> np.ndarray:
     """Table row of each agent's lead vehicle, -1 where it follows none or the lead is gone.
 
-    Rows are cached per agent (on ``sim``) with the row's serial: a cached row that is alive with
-    the same serial still holds the lead, so only agents whose lead came, went or was never found
-    look it up by id."""
+    Rows are cached per agent (on the table object, which views of a simulation for one step
+    share) with the row's serial: a cached row that is alive with the same serial still holds the
+    lead, so only agents whose lead came, went or was never found look it up by id."""
     agents = np.asarray(agents, dtype=np.int64)
     table = sim.table
-    cache = sim.__dict__.get("_lead_row_cache")  # this object's own, also under wrappers
-    if cache is None:
+    cache = table.__dict__.get("_lead_row_cache")  # this object's own, also under wrappers
+    if cache is None or len(cache[0]) != len(sim.lead_ids):
         n = len(sim.lead_ids)
         cache = (np.full(n, -1, dtype=np.int64), np.zeros(n, dtype=np.int64),
                  np.array([lead is not None for lead in sim.lead_ids], dtype=bool))  # fmt: skip
-        sim.__dict__["_lead_row_cache"] = cache
+        table.__dict__["_lead_row_cache"] = cache
     rows, serials, has_lead = cache
     cached = rows[agents]
     hit = (cached >= 0) & table.alive[cached] & (table.serial[cached] == serials[agents])
