@@ -103,7 +103,7 @@ MUTATIONS: tuple[Mutation, ...] = (
              "side = 1 if cmd[i, 1] > threshold else 0",
              ("tests/dynamics", "tests/env"), "lane-relative commands never change to the right"),
     Mutation("lane-projection-no-fallback", "smarts/dynamics/lane_relative.py",
-             "    if (best_k == lo and lo > a) or (best_k == hi and hi < last):\n", "    if False:\n",
+             "    if (k == lo and lo > a) or (k == hi and hi < last):\n", "    if False:\n",
              ("tests/dynamics",), "the lane search near a hint never falls back to the whole lane"),
     Mutation("lead-row-cache-unchecked", "smarts/core/following.py",
              "hit = (cached >= 0) & table.alive[cached] & (table.serial[cached] == serials[agents])",

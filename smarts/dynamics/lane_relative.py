@@ -280,13 +280,12 @@ def _accel(command, limit, v, previous, dt, tau, max_accel, max_decel, max_jerk,
 
 
 @numba.njit(cache=True, nogil=True)
-def _project_on_lane(offsets, points, point_s, lane, x, y):  # pragma: no cover - compiled
-    """(s, t) of a point on one lane's centre line (t + left); s runs on past both ends."""
-    a, b = offsets[lane], offsets[lane + 1]
-    if b - a < 2:
-        return 0.0, 0.0
-    best_d2, best_s, best_t = np.inf, 0.0, 0.0
-    for k in range(a, b - 1):
+def _nearest_segment(offsets, points, point_s, lane, x, y, lo, hi):  # pragma: no cover - compiled
+    """(d2, s, t, k) of the nearest of segments ``lo..hi`` of one lane to a point (t + left); the
+    lane's first and last segments extend past its ends, so s keeps growing there."""
+    a, last = offsets[lane], offsets[lane + 1] - 2
+    best_d2, best_s, best_t, best_k = np.inf, 0.0, 0.0, lo
+    for k in range(lo, hi + 1):
         vx, vy = points[k + 1, 0] - points[k, 0], points[k + 1, 1] - points[k, 1]
         rx, ry = x - points[k, 0], y - points[k, 1]
         len2 = vx * vx + vy * vy
@@ -294,15 +293,25 @@ def _project_on_lane(offsets, points, point_s, lane, x, y):  # pragma: no cover 
             continue
         raw = (rx * vx + ry * vy) / len2
         u = min(max(raw, 0.0), 1.0)
-        if (k == a and raw < 0.0) or (k == b - 2 and raw > 1.0):
-            u = raw  # extend the end segments so s keeps growing past the lane's ends
+        if (k == a and raw < 0.0) or (k == last and raw > 1.0):
+            u = raw
         dx, dy = rx - u * vx, ry - u * vy
         d2 = dx * dx + dy * dy
         if d2 < best_d2:
-            best_d2 = d2
+            best_d2, best_k = d2, k
             best_s = point_s[k] + u * math.sqrt(len2)
             best_t = math.sqrt(d2) if vx * ry - vy * rx >= 0.0 else -math.sqrt(d2)
-    return best_s, best_t
+    return best_d2, best_s, best_t, best_k
+
+
+@numba.njit(cache=True, nogil=True)
+def _project_on_lane(offsets, points, point_s, lane, x, y):  # pragma: no cover - compiled
+    """(s, t) of a point on one lane's centre line (t + left); s runs on past both ends."""
+    a, b = offsets[lane], offsets[lane + 1]
+    if b - a < 2:
+        return 0.0, 0.0
+    _, s, t, _ = _nearest_segment(offsets, points, point_s, lane, x, y, a, b - 2)
+    return s, t
 
 
 PROJECTION_WINDOW = 8
@@ -322,26 +331,10 @@ def _project_near(offsets, points, point_s, lane, x, y, s_hint):  # pragma: no c
     k0 = a + np.searchsorted(point_s[a:b], s_hint) - 1
     k0 = min(max(k0, a), last)
     lo, hi = max(a, k0 - PROJECTION_WINDOW), min(last, k0 + PROJECTION_WINDOW)
-    best_d2, best_s, best_t, best_k = np.inf, 0.0, 0.0, lo
-    for k in range(lo, hi + 1):
-        vx, vy = points[k + 1, 0] - points[k, 0], points[k + 1, 1] - points[k, 1]
-        rx, ry = x - points[k, 0], y - points[k, 1]
-        len2 = vx * vx + vy * vy
-        if len2 <= 0.0:
-            continue
-        raw = (rx * vx + ry * vy) / len2
-        u = min(max(raw, 0.0), 1.0)
-        if (k == a and raw < 0.0) or (k == last and raw > 1.0):
-            u = raw
-        dx, dy = rx - u * vx, ry - u * vy
-        d2 = dx * dx + dy * dy
-        if d2 < best_d2:
-            best_d2, best_k = d2, k
-            best_s = point_s[k] + u * math.sqrt(len2)
-            best_t = math.sqrt(d2) if vx * ry - vy * rx >= 0.0 else -math.sqrt(d2)
-    if (best_k == lo and lo > a) or (best_k == hi and hi < last):
+    _, s, t, k = _nearest_segment(offsets, points, point_s, lane, x, y, lo, hi)
+    if (k == lo and lo > a) or (k == hi and hi < last):
         return _project_on_lane(offsets, points, point_s, lane, x, y)
-    return best_s, best_t
+    return s, t
 
 
 @numba.njit(cache=True, nogil=True)
