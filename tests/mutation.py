@@ -109,6 +109,9 @@ MUTATIONS: tuple[Mutation, ...] = (
              "hit = (cached >= 0) & table.alive[cached] & (table.serial[cached] == serials[agents])",
              "hit = (cached >= 0) & table.alive[cached]", ("tests/core",),
              "a cached lead row is trusted after another vehicle took the row"),
+    Mutation("episode-timeout-ignored", "smarts/benchmark/runner.py",
+             "and time.monotonic() - w.since >= timeout:", "and False:",
+             ("tests/benchmark/test_runner_failures.py",), "a hung episode holds its worker past the timeout"),
     # Trainers and the run contract.
     Mutation("torchrl-gamma-ignored", "train/ppo.py",
              "GAE(gamma=cfg.gamma,", "GAE(gamma=0.99,", TRAIN, "torchrl's GAE ignores the configured discount"),

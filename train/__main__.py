@@ -32,7 +32,7 @@ def _benchmark(args: argparse.Namespace) -> int:
           f"({', '.join(shown)}; references always included) -> {out}")  # fmt: skip
     try:
         results = run_jobs(jobs, workers=args.workers, progress=not args.quiet, ray_address=args.ray_address,
-                           resume=args.resume)  # fmt: skip
+                           resume=args.resume, episode_timeout=args.episode_timeout)  # fmt: skip
     except BenchmarkInterrupted as stop:  # Ctrl-C: report what finished, no traceback
         write_report(out, suite, agents, stop.finished, not_run=stop.not_run)
         print(f"interrupted: {len(stop.finished)} of {len(jobs)} episodes finished, reported in {out}; "
@@ -119,6 +119,9 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     bench.add_argument("--quiet", action="store_true", help="no progress bar")
     bench.add_argument("--ray-address", default=None,
                        help="run episodes as Ray tasks: auto | local | HOST:PORT (needs the ray extra)")  # fmt: skip
+    bench.add_argument("--episode-timeout", type=float, default=None,
+                       help="seconds an episode may run before its worker is killed and the episode recorded as "
+                            "failed (default: no limit; not with --ray-address)")  # fmt: skip
     bench.add_argument("--resume", action="store_true",
                        help="finish an interrupted run in --out: episodes whose logs are there and valid are "
                             "not run again")  # fmt: skip
@@ -160,6 +163,11 @@ def main(argv: list[str] | None = None) -> int:
             parser.error("--episodes must be >= 1")
         if args.workers < 1:
             parser.error("--workers must be >= 1")
+        timeout = getattr(args, "episode_timeout", None)
+        if timeout is not None and not timeout > 0:
+            parser.error("--episode-timeout must be a positive number of seconds")
+        if timeout is not None and getattr(args, "ray_address", None):
+            parser.error("--episode-timeout does not apply to Ray tasks (--ray-address)")
     try:
         return args.run(args)
     except ValueError as err:  # unknown suite, agent or malformed config: say it plainly

@@ -42,6 +42,7 @@ import multiprocessing.connection
 import re
 import signal
 import threading
+import time
 import traceback
 from collections import deque
 from collections.abc import Callable, Iterator
@@ -391,6 +392,7 @@ def run_jobs(
     policy_resolver: PolicyResolver | None = None,
     *,
     resume: bool = False,
+    episode_timeout: float | None = None,
 ) -> list[dict]:
     """Run jobs in ``workers`` processes (inline when 1), or as Ray tasks when ``ray_address`` is
     given (``auto``, ``local`` or ``HOST:PORT``); results in job order either way.
@@ -403,7 +405,15 @@ def run_jobs(
     ``resume``: an episode whose log is already at its path, reads back valid and is of this job
     (same agent, scenario, episode, seed and :func:`job_inputs`) is not run again; logs of
     episodes lost to dead workers are. Ctrl-C stops the workers and raises
-    :class:`BenchmarkInterrupted` with the episodes that finished."""
+    :class:`BenchmarkInterrupted` with the episodes that finished.
+
+    ``episode_timeout`` (seconds, None: no limit): a worker still on one episode after that long
+    is killed and the episode recorded as failed, once (a hang would only repeat); the other
+    episodes go on. With it, even ``workers`` 1 runs in a worker process. Not for Ray tasks."""
+    if episode_timeout is not None and not episode_timeout > 0:
+        raise ValueError(f"episode_timeout: expected a positive number of seconds, got {episode_timeout!r}")
+    if episode_timeout is not None and ray_address:
+        raise ValueError("episode_timeout: not supported for Ray tasks; run without ray_address")
     from rich.progress import Progress
 
     results: list[dict | None] = [None] * len(jobs)
@@ -428,11 +438,11 @@ def run_jobs(
                 pass
             elif ray_address:
                 _run_on_ray(jobs, todo, ray_address, workers, policy_resolver, done)
-            elif workers <= 1:
+            elif workers <= 1 and episode_timeout is None:
                 for k in todo:
                     done(k, run_episode_guarded(jobs[k], policy_resolver))
             else:
-                _run_in_processes(jobs, todo, workers, policy_resolver, done)
+                _run_in_processes(jobs, todo, max(workers, 1), policy_resolver, done, episode_timeout)
         except KeyboardInterrupt:
             raise BenchmarkInterrupted(results) from None
     return results  # type: ignore[return-value]
@@ -480,13 +490,14 @@ def _death(code: int | None) -> str:
     return f"worker process died (exit code {code})"
 
 
-def _lost(job: Job, reasons: list[str]) -> dict:
-    """The failed episode of a job whose every attempt lost its worker: a log saying why (so the
-    report scores and lists it like any failed episode), or just the summary if even that fails."""
+def _lost(job: Job, reasons: list[str], info: dict[str, Any] | None = None) -> dict:
+    """The failed episode of a job whose every attempt lost its worker (or ran out of time): a
+    log saying why (so the report scores and lists it like any failed episode), or just the
+    summary if even that fails. ``--resume`` runs such episodes again."""
     n = len(reasons)
     reason = reasons[-1] + ("" if n == 1 else f" on all {n} attempts, each in its own worker")
     try:
-        summary = write_failed_episode(job, reason, {"worker_died": True})
+        summary = write_failed_episode(job, reason, {"worker_died": True, **(info or {})})
     except Exception as err:
         summary = {"agent": job.agent, "scenario": None, "episode": job.episode, "seed": job.seed,
                    "failure": reason, "log": None, "traceback": f"{type(err).__name__}: {err}"}  # fmt: skip
@@ -542,6 +553,7 @@ class _Worker:
             self.process.start()
         child.close()
         self.job: int | None = None
+        self.since = 0.0  # time.monotonic() when it was given its job
 
     def give(self, k: int, job: Job) -> bool:
         try:
@@ -549,6 +561,7 @@ class _Worker:
         except OSError:  # it died while idle
             return False
         self.job = k
+        self.since = time.monotonic()
         return True
 
     def receive(self) -> tuple[int, dict] | None:
@@ -584,9 +597,11 @@ def _run_in_processes(
     workers: int,
     policy_resolver: PolicyResolver | None,
     done: Callable[[int, dict], None],
+    timeout: float | None = None,
 ) -> None:
     """Run ``todo`` on ``workers`` spawned processes. A process that dies is replaced; the job
-    it was running runs again in the replacement (:data:`RETRIES` times), then fails."""
+    it was running runs again in the replacement (:data:`RETRIES` times), then fails. A job
+    running longer than ``timeout`` seconds fails at once and its process is replaced."""
     ctx = multiprocessing.get_context("spawn")
     queue = deque(todo)
     reasons: dict[int, list[str]] = {}
@@ -607,7 +622,17 @@ def _run_in_processes(
                 if w.job is None and queue:
                     assign(i, queue.popleft())
             busy = [w for w in pool if w.job is not None]
-            ready = set(multiprocessing.connection.wait([w.conn for w in busy] + [w.process.sentinel for w in busy]))
+            wait_s = None if timeout is None else max(0.0, min(w.since for w in busy) + timeout - time.monotonic())
+            ready = set(multiprocessing.connection.wait([w.conn for w in busy] + [w.process.sentinel for w in busy],
+                                                        timeout=wait_s))  # fmt: skip
+            for i, w in enumerate(pool):
+                if w.job is not None and timeout is not None and w.conn not in ready and w.process.sentinel not in ready \
+                        and time.monotonic() - w.since >= timeout:  # fmt: skip
+                    k = w.job
+                    w.stop(graceful=False)
+                    pool[i] = _Worker(ctx, policy_resolver)
+                    done(k, _lost(jobs[k], [f"timed out: still running after {timeout:g} s (episode timeout)"],
+                                  {"timed_out": True}))  # fmt: skip
             for i, w in enumerate(pool):
                 if w.job is None or (w.conn not in ready and w.process.sentinel not in ready):
                     continue

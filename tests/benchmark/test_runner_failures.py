@@ -74,6 +74,32 @@ def test_an_episode_whose_worker_always_dies_fails_with_the_reason_and_the_rest_
     assert finished_episode(jobs[0]) is None and finished_episode(jobs[-1]) is not None
 
 
+def test_an_episode_that_hangs_fails_after_the_timeout_and_the_rest_goes_on(tmp_path, marker_dir):
+    suite = load_suite(TINY)
+    jobs = plan_jobs(["test:hang", "zoo:keep-lane"], suite, 1, tmp_path, references=False, policy_resolver=resolve)
+    start = time.monotonic()
+    results = run_jobs(jobs, workers=2, progress=False, policy_resolver=resolve, episode_timeout=20.0)
+    assert time.monotonic() - start < 120.0  # not stuck on the hung episodes
+    hung = _by_agent(results, "test:hang")
+    reason = "timed out: still running after 20 s (episode timeout)"
+    assert [r["failure"] for r in hung] == [reason, reason]
+    log = read_episode(hung[0]["log"])
+    assert log.failure == reason and log.info["timed_out"] and log.info["worker_died"]
+    keep = _by_agent(results, "zoo:keep-lane")
+    assert [r["failure"] for r in keep] == [None, None] and all(read_episode(r["log"]).agents for r in keep)
+    assert finished_episode(jobs[0]) is None  # a resumed run tries a timed-out episode again
+
+
+def test_the_episode_timeout_is_checked(tmp_path):
+    suite = load_suite(TINY)
+    jobs = plan_jobs(["zoo:keep-lane"], suite, 1, tmp_path, references=False)
+    with pytest.raises(ValueError, match="episode_timeout: expected a positive number of seconds, got 0"):
+        run_jobs(jobs, progress=False, episode_timeout=0)
+    with pytest.raises(SystemExit) as stop:
+        main(["benchmark", "--suite", TINY, "--episode-timeout", "-1", "--out", str(tmp_path / "cli")])
+    assert stop.value.code == 2 and not (tmp_path / "cli").exists()
+
+
 def test_on_ray_a_task_whose_worker_dies_is_run_again_or_becomes_a_failed_episode(tmp_path, marker_dir):
     import ray  # noqa: F401  (installed by the test extra; never skipped)
     suite = load_suite(TINY)
