@@ -3,6 +3,7 @@ printed summary, resume and refusals for ``--lib torchrl`` and ``--lib sb3``; ti
 
 import json
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,19 @@ def scalar_tags(out: Path) -> set[str]:
     acc = EventAccumulator(str(out / "tensorboard"), size_guidance={"scalars": 0})
     acc.Reload()
     return set(acc.Tags()["scalars"])
+
+
+def interrupt_after_the_first_batch(monkeypatch) -> Callable[[], None]:
+    """Make training raise KeyboardInterrupt (a Ctrl-C) right after its first batch is saved and
+    logged; returns the function that makes it run on normally again."""
+    end_of_batch = Run.end_of_batch
+
+    def stop(self, step, *args):
+        end_of_batch(self, step, *args)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Run, "end_of_batch", stop)
+    return lambda: monkeypatch.setattr(Run, "end_of_batch", end_of_batch)
 
 
 def test_both_libraries_write_the_same_run(tmp_path, capsys):
@@ -135,13 +149,7 @@ def test_resume_refuses_another_library_or_setup_before_touching_the_run(tmp_pat
 
 @pytest.mark.parametrize("lib", ["torchrl", "sb3"])
 def test_ctrl_c_saves_interrupted_checkpoint(tmp_path, monkeypatch, lib):
-    end_of_batch = Run.end_of_batch
-
-    def interrupt_after_the_first_batch(self, step, *args):
-        end_of_batch(self, step, *args)
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(Run, "end_of_batch", interrupt_after_the_first_batch)
+    run_on = interrupt_after_the_first_batch(monkeypatch)
     out = tmp_path / "run"
     code = main(["ppo", "--task", "platoon", "--lib", lib, "--scenarios", "adaptive:a01_straight_free", *SMALL,
                  "--total-steps", "256", "--eval-episodes", "0", "--out-dir", str(out)])  # fmt: skip
@@ -151,7 +159,7 @@ def test_ctrl_c_saves_interrupted_checkpoint(tmp_path, monkeypatch, lib):
     assert not (out / "final.pt").exists()
     assert (out / "interrupted_sb3.zip").is_file() == (lib == "sb3")
     # The interrupted run continues from interrupted.pt to its budget.
-    monkeypatch.setattr(Run, "end_of_batch", end_of_batch)
+    run_on()
     assert main(["ppo", "--task", "platoon", "--lib", lib, "--scenarios", "adaptive:a01_straight_free", *SMALL,
                  "--total-steps", "256", "--eval-episodes", "0", "--out-dir", str(out), "--quiet",
                  "--resume", str(out / "interrupted.pt")]) == 0  # fmt: skip
@@ -176,13 +184,7 @@ def test_evaluations_in_the_training_process_do_not_change_an_sb3_run(tmp_path):
 def test_best_pt_holds_the_highest_held_out_score_so_far(tmp_path, monkeypatch):
     """Stopped right after the first periodic evaluation: that evaluation is the best so far, so
     best.pt holds that step's weights and its held-out S_bench (as logged to TensorBoard)."""
-    end_of_batch = Run.end_of_batch
-
-    def stop_after_the_first_batch(self, step, *args):
-        end_of_batch(self, step, *args)
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(Run, "end_of_batch", stop_after_the_first_batch)
+    run_on = interrupt_after_the_first_batch(monkeypatch)
     out = tmp_path / "run"
     code = main(["ppo", "--task", "drive", "--scenarios", f"{TINY_SUITE}:t1_left", *SMALL, "--total-steps", "256",
                  "--eval-every", "64", "--eval-episodes", "1", "--eval-workers", "1", "--eval-suite", str(TINY_SUITE),
@@ -203,7 +205,7 @@ def test_best_pt_holds_the_highest_held_out_score_so_far(tmp_path, monkeypatch):
     # score raised to the maximum (1.0), neither the periodic nor the final evaluation may.
     best["metrics"]["eval/S_bench"] = 1.0
     torch.save(best, out / "best.pt")
-    monkeypatch.setattr(Run, "end_of_batch", end_of_batch)
+    run_on()
     assert main(["ppo", "--task", "drive", "--scenarios", f"{TINY_SUITE}:t1_left", *SMALL, "--total-steps", "192",
                  "--eval-every", "64", "--eval-episodes", "1", "--eval-workers", "1", "--eval-suite", str(TINY_SUITE),
                  "--out-dir", str(out), "--resume", str(out / "last.pt")]) == 0  # fmt: skip
