@@ -1,5 +1,5 @@
 """What the planners' training commands share: their options, the suites' scenarios, the
-held-out split by scenario and the cars of scripted situations."""
+held-out split by scenario and the cars and envs of scripted situations."""
 
 from __future__ import annotations
 
@@ -51,3 +51,13 @@ def road_car(lane: int, offset: float, speed: float, policy: str | None = None, 
         start["heading"] = round(heading, 3)
     car = {"action_space": "relative_target_pose", "mission": {"start": start, "goal": {"endless": True}}}
     return {**car, "policy": policy} if policy else car
+
+
+def situation_env(name: str, scenario: dict, observation, source: str, seed: int):
+    """A scripted situation (a scenario dict of ``road_car`` cars) as a started env: ``(env, obs)``."""
+    from smarts.env import DrivingParallelEnv
+    from smarts.scenario import ScenarioSpec
+
+    env = DrivingParallelEnv(ScenarioSpec.from_dict({"name": name, **scenario}, source=source), observation=observation)
+    obs, _ = env.reset(seed=seed)
+    return env, obs

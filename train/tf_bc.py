@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from train.heldout import add_run_options, apply_run_options, road_car, split_held_out, suite_scenarios
+from train.heldout import add_run_options, apply_run_options, road_car, situation_env, split_held_out, suite_scenarios
 
 
 def demonstrations(scenarios, seeds: int, progress: bool = True) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -109,17 +109,13 @@ def hindsight(count: int, steps: int, horizon: int, progress: bool = True) -> di
 
     from agents.planners.paths import valid_path
     from agents.planners.tf import INTERFACE, TFPlanner, stop_move_features
-    from smarts.env import DrivingParallelEnv
-    from smarts.scenario import ScenarioSpec
     from smarts.sensors.interface import interface_from_dict
 
     interface = interface_from_dict(INTERFACE)
     rng = np.random.default_rng(2)
     groups: dict[str, tuple[list, list, list]] = {}
     for k in tqdm(range(count), desc="hindsight", disable=not progress):
-        spec = ScenarioSpec.from_dict({"name": f"danger_{k}", **danger_situation(rng)}, source="tf-bc situations")
-        env = DrivingParallelEnv(spec, observation=interface)
-        obs, _ = env.reset(seed=k)
+        env, obs = situation_env(f"danger_{k}", danger_situation(rng), interface, "tf-bc situations", seed=k)
         rules = TFPlanner()
         track, crashed = [], False
         for _ in range(steps):

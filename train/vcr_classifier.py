@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from train.heldout import add_run_options, apply_run_options, road_car, split_held_out, suite_scenarios
+from train.heldout import add_run_options, apply_run_options, road_car, situation_env, split_held_out, suite_scenarios
 
 CLASSES = ("collision", "off_road", "on_shoulder", "wrong_way", "off_route", "safe")
 HORIZON = 8
@@ -151,17 +151,13 @@ def generate_situations(count: int, steps: int, progress: bool = True) -> dict[s
     from tqdm import tqdm
 
     from agents.planners.vcr import LEARNED_INTERFACE
-    from smarts.env import DrivingParallelEnv
-    from smarts.scenario import ScenarioSpec
     from smarts.sensors.interface import interface_from_dict
 
     interface = interface_from_dict(LEARNED_INTERFACE)
     rng = np.random.default_rng(1)
     groups: dict[str, tuple[list, list, list]] = {}
     for k in tqdm(range(count), desc="vcr situations", disable=not progress):
-        spec = ScenarioSpec.from_dict({"name": f"situation_{k}", **following_situation(rng)}, source="vcr-classifier situations")
-        env = DrivingParallelEnv(spec, observation=interface)
-        obs, _ = env.reset(seed=k)
+        env, obs = situation_env(f"situation_{k}", following_situation(rng), interface, "vcr-classifier situations", seed=k)
         parts = groups.setdefault(f"situations_{k // 10:03d}", ([], [], []))
         for part, new in zip(parts, explore(env, obs, steps, rng)):
             part.extend(new)
