@@ -55,6 +55,18 @@ class LeadState:
                    z.copy(), z.copy())  # fmt: skip
 
 
+def _lead_cache(sim) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per agent: cached lead row, that row's serial, whether the agent follows a lead at all."""
+    table = sim.table
+    cache = table.__dict__.get("_lead_row_cache")  # this object's own, also under wrappers
+    if cache is None or len(cache[0]) != len(sim.lead_ids):
+        n = len(sim.lead_ids)
+        cache = (np.full(n, -1, dtype=np.int64), np.zeros(n, dtype=np.int64),
+                 np.array([lead is not None for lead in sim.lead_ids], dtype=bool))  # fmt: skip
+        table.__dict__["_lead_row_cache"] = cache
+    return cache
+
+
 def lead_rows(sim, agents: np.ndarray) -> np.ndarray:
     """Table row of each agent's lead vehicle, -1 where it follows none or the lead is gone.
 
@@ -63,13 +75,7 @@ def lead_rows(sim, agents: np.ndarray) -> np.ndarray:
     lead, so only agents whose lead came, went or was never found look it up by id."""
     agents = np.asarray(agents, dtype=np.int64)
     table = sim.table
-    cache = table.__dict__.get("_lead_row_cache")  # this object's own, also under wrappers
-    if cache is None or len(cache[0]) != len(sim.lead_ids):
-        n = len(sim.lead_ids)
-        cache = (np.full(n, -1, dtype=np.int64), np.zeros(n, dtype=np.int64),
-                 np.array([lead is not None for lead in sim.lead_ids], dtype=bool))  # fmt: skip
-        table.__dict__["_lead_row_cache"] = cache
-    rows, serials, has_lead = cache
+    rows, serials, has_lead = _lead_cache(sim)
     cached = rows[agents]
     hit = (cached >= 0) & table.alive[cached] & (table.serial[cached] == serials[agents])
     out = np.where(hit, cached, -1)
@@ -88,7 +94,7 @@ def lead_state(sim, agents: np.ndarray, sight: float = LEAD_SIGHT) -> LeadState:
     """The lead of each agent in ``agents`` (agent indices), from the simulation's current state."""
     agents = np.asarray(agents, dtype=np.int64)
     n = len(agents)
-    if n == 0 or not any(sim.lead_ids[a] is not None for a in agents.tolist()):
+    if n == 0 or not _lead_cache(sim)[2][agents].any():
         return LeadState.empty(n)
     leads = lead_rows(sim, agents)
     rows = sim.agent_row[agents]
