@@ -90,3 +90,27 @@ def test_sections_have_the_fields_and_defaults_of_the_settings_they_build():
         assert set(section.model_fields) == set(own)
         for name, info in section.model_fields.items():
             assert name == "task" or info.default == own[name], name
+
+
+def test_device_names_a_place_for_the_batched_backends_torch_stages(tmp_path, capsys):
+    import torch
+
+    assert load_config("platoon").device == "cpu"
+    cfg = load_config("platoon", overrides={"backend": "batched", "device": "torch-cpu"})
+    assert cfg.device == "torch-cpu"
+    # A config naming a GPU stays readable without one (a run's config.json on another machine)...
+    cfg = load_config("platoon", overrides={"backend": "batched", "device": "cuda:1"})
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps(cfg.model_dump()))
+    assert load_config(path=path).device == "cuda:1"
+    with pytest.raises(ConfigError, match=r"--device: device: unknown device 'gpu'; expected one of cpu, torch-cpu, cuda, cuda:N"):
+        load_config("platoon", overrides={"backend": "batched", "device": "gpu"})
+    for device in ("cuda", "torch-cpu"):  # the per-env path has no torch stages
+        with pytest.raises(ConfigError, match="--device: device: only the batched backend has torch stages"):
+            load_config("platoon", overrides={"backend": "per_env", "device": device})
+    # ...but training refuses it, before any run folder is made, where torch sees no GPU.
+    if not torch.cuda.is_available():
+        out = tmp_path / "run"
+        assert main(["ppo", "--task", "platoon", "--backend", "batched", "--device", "cuda", "--out-dir", str(out)]) == 2
+        assert "device: 'cuda' asks for a GPU but no CUDA GPU is visible" in capsys.readouterr().err
+        assert not out.exists()

@@ -35,6 +35,7 @@ from smarts.core.resources import config_path
 from smarts.core.schema import Schema, describe, load_yaml
 from smarts.core.spec import CONTROLLERS
 from smarts.dynamics.lane_relative import LaneRelativeParams
+from smarts.dynamics.pose_control_torch import check_device_name
 from smarts.env.task_rewards import RewardWeights
 
 CONFIG_DIR = config_path("train")
@@ -149,6 +150,12 @@ class TrainConfig(Schema):
         "per_env",
         description="per_env: one simulation per scenario copy | batched: the copies of each map stepped as one "
         "vectorised simulation (smarts.env.batched; built-in traffic only, not with ray_address).",
+    )
+    device: str = Field(
+        "cpu",
+        description="Where the simulation stages that have a torch version run (batched backend only): cpu: the "
+        "compiled numpy kernels | torch-cpu: the torch stages on the CPU (to check them) | cuda, cuda:N: the torch "
+        "stages on that GPU (refused when torch sees none).",
     )
     total_steps: PositiveInt = Field(60_000, description="Env steps to train for, summed over the envs.")
     envs: PositiveInt = Field(
@@ -267,6 +274,14 @@ class TrainConfig(Schema):
         if frames is not None and size > frames:
             raise ValueError(f"must be <= frames_per_batch ({frames})")
         return size
+
+    @field_validator("device")
+    @classmethod
+    def _device_name(cls, name: str, info: ValidationInfo) -> str:
+        check_device_name(name)  # whether the GPU is there is asked when the envs are built
+        if name != "cpu" and info.data.get("backend") == "per_env":
+            raise ValueError("only the batched backend has torch stages; use backend: batched, or device: cpu")
+        return name
 
     @field_validator("ray_address")
     @classmethod

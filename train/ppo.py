@@ -51,6 +51,7 @@ from agents.ppo import (
     scale_action,
 )
 from smarts.env.task_rewards import reward_factory
+from smarts.dynamics.pose_control_torch import resolve_device
 from smarts.env.batched.torchrl_env import BatchedTorchRLEnv
 from smarts.env.torchrl_env import SmartsBatchedEnv
 from train.config import ACTION_SPACES, TrainConfig
@@ -65,8 +66,17 @@ def env_options(cfg: TrainConfig) -> dict:
     }
 
 
+def batched_options(cfg: TrainConfig) -> dict:
+    """The batched backend's own settings: where its torch stages run (``device``; a GPU that is
+    not there is refused here, before anything is built or written). Nothing for ``cpu``."""
+    if resolve_device(cfg.device) is None:
+        return {}
+    return {"sim_device": cfg.device}
+
+
 def check_env_split(cfg: TrainConfig, specs: list) -> None:
     """Refuse, before anything is built or written, copies that cannot be split as configured."""
+    batched_options(cfg)
     if cfg.backend == "per_env" and any(s.traffic is not None and s.traffic.engine == "sumo" for s in specs) and cfg.workers < cfg.envs:
         raise ValueError("SUMO scenarios run one per process: set workers equal to envs")
     if cfg.workers > 1:
@@ -90,6 +100,8 @@ def make_env(cfg: TrainConfig, specs: list | None = None) -> TransformedEnv:
     options = env_options(cfg)
     # backend batched: the copies of each map as one vectorised simulation (same keys and seeds)
     batch_env = BatchedTorchRLEnv if cfg.backend == "batched" else SmartsBatchedEnv
+    if cfg.backend == "batched":
+        options.update(batched_options(cfg))
     if cfg.workers > 1:
         per = [specs[w :: cfg.workers] for w in range(cfg.workers)]
         base = ParallelEnv(cfg.workers, [functools.partial(batch_env, p, **options) for p in per],

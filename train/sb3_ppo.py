@@ -22,6 +22,7 @@ import torch
 
 from agents.checkpoint import CheckpointError
 from agents.sb3_policy import SB3_FORMAT
+from smarts.dynamics.pose_control_torch import resolve_device
 from train.config import ACTION_SPACES, TrainConfig
 from train.run import TRAIN_SEED_BASE, Run, check_resume, interface_dict, lane_relative_dict, training_specs
 
@@ -43,8 +44,10 @@ def make_vec_env(cfg: TrainConfig):
         from smarts.env.batched.sb3_vec_env import BatchedVecEnv
         from smarts.env.task_rewards import reward_factory
 
+        where = {} if resolve_device(cfg.device) is None else {"device": cfg.device}  # its torch stages
         return BatchedVecEnv(training_specs(cfg), observation=interface, reward_factory=reward_factory(weights),
-                             lane_relative=lane, seed=TRAIN_SEED_BASE + cfg.seed * 1_000_003, normalize_actions=True)  # fmt: skip
+                             lane_relative=lane, seed=TRAIN_SEED_BASE + cfg.seed * 1_000_003, normalize_actions=True,
+                             **where)  # fmt: skip
     factories = [
         functools.partial(DrivingParallelEnv, spec, observation=interface, reward=TaskReward(weights), lane_relative=lane)
         for spec in training_specs(cfg)
@@ -97,6 +100,7 @@ def train_sb3(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path |
         raise ValueError("init_from: starting from another run's networks is for lib torchrl; SB3 runs resume only")
     if cfg.ray_address:
         raise ValueError("ray_address: Ray collectors are for lib torchrl; SB3 runs step their envs in processes")
+    resolve_device(cfg.device)  # a GPU that is not there: refused before the run folder is made
     blob = check_resume(resume, cfg) if resume is not None else None
     run = Run(cfg, out, resume, progress=progress)  # the run folder (never another run's), config.json, TensorBoard
     vec = make_vec_env(cfg)

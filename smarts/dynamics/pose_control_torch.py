@@ -35,7 +35,7 @@ def check_device_name(name: str) -> str:
     """``name`` if it is one of ``DEVICE_CHOICES`` (whether its GPU exists is ``resolve_device``'s
     question: a config naming ``cuda`` stays readable on a machine without one)."""
     if not isinstance(name, str) or not (name in ("cpu", "torch-cpu") or _CUDA.fullmatch(name)):
-        raise ValueError(f"device: unknown device {name!r}; expected one of {', '.join(DEVICE_CHOICES)}")
+        raise ValueError(f"unknown device {name!r}; expected one of {', '.join(DEVICE_CHOICES)}")
     return name
 
 

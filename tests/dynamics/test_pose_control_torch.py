@@ -125,7 +125,7 @@ def test_resolve_device():
     assert resolve_device("cpu") is None
     assert resolve_device("torch-cpu") == torch.device("cpu")
     for name in ("gpu", "cuda:x", "CPU", "", "cuda:"):
-        with pytest.raises(ValueError, match=r"device: unknown device .*cpu, torch-cpu, cuda, cuda:N"):
+        with pytest.raises(ValueError, match=r"unknown device .*cpu, torch-cpu, cuda, cuda:N"):
             resolve_device(name)
     assert check_device_name("cuda:1") == "cuda:1"
     if torch.cuda.is_available():
