@@ -1,4 +1,4 @@
-"""B independent episodes on one map stepped as one simulation: one vehicle table, one call per stage.
+"""B independent episodes stepped as one simulation: one vehicle table, one call per stage.
 
 The episodes' vehicles live in one stacked ``VehicleTable`` of ``B * capacity`` rows: episode ``b``
 owns rows ``b * capacity`` to ``(b + 1) * capacity`` (its *block*; ``row // capacity`` is the
@@ -19,6 +19,11 @@ unchanged and give the same vehicles as in a single simulation. They step one ep
 unless a *batch stage* (``add_batch_stage``) steps a kind of them for all episodes at once (the
 env layer's built-in traffic stage does).
 
+The episodes may run on different maps: the maps are stacked into one lane index space
+(``smarts.maps.stack``), so lane-indexed stages do not care, and the two spatial lookups (lane
+projection, the drivable raster of the on-road tests) take each row's map from its episode
+(``episode_map``). Each episode's providers see its map's *window* (its map in the stacked indices).
+
 Each episode keeps its own clock, step count and seed and is reset on its own
 (:meth:`BatchedSimulation.reset_episodes`) while the others go on; episode ``b`` reset with seed
 ``s`` follows the same trajectory as a single ``Simulation`` reset with seed ``s`` given the same
@@ -37,9 +42,9 @@ from smarts.core.events import agent_events
 from smarts.core.missions import ResolvedMission
 from smarts.core.provider import Provider
 from smarts.core.simulation import EventConfig, Simulation, _route_progress, check_seed, derived_seed
-from smarts.core.vehicle_table import COLUMN, VehicleTable
-from smarts.maps import RoadMap, project
-from smarts.maps.drivable import raster_lookup
+from smarts.core.vehicle_table import VehicleTable
+from smarts.maps import RoadMap
+from smarts.maps.stack import MapStack, stack_maps
 
 
 def block_view(table: VehicleTable, start: int, stop: int) -> VehicleTable:
@@ -137,6 +142,7 @@ class EpisodeSim:
         self.agent_index = {sim.local_agent_ids[a]: a for a in agents}
         self.lead_ids = [m.follow for m in sim.missions]
         self.table = _EpisodeTable(sim, b)
+        self.road_map = sim.views[b].road_map  # its map, in the batch's lane indices
 
     @property
     def time(self) -> float:
@@ -151,7 +157,11 @@ class EpisodeSim:
 
 
 class BatchedSimulation(Simulation):
-    """``B`` episodes of scenarios on one map as one ``Simulation`` of all their agents.
+    """``B`` episodes of scenarios as one ``Simulation`` of all their agents.
+
+    ``road_map``: the map of every episode, or a ``MapStack`` of several with ``episode_map[b]``
+    the map of episode ``b`` (missions and providers then use the stack's windows and stacked
+    lane indices; ``self.road_map`` is the stack's combined map).
 
     ``episode_missions[b]``: the missions of episode ``b`` (agent ids as in its scenario; the
     union's ids are ``"<b>/<agent id>"``). ``providers``: providers of the whole batch (the agent
@@ -166,7 +176,7 @@ class BatchedSimulation(Simulation):
 
     def __init__(
         self,
-        road_map: RoadMap,
+        road_map: RoadMap | MapStack,
         episode_missions: Sequence[Sequence[ResolvedMission]],
         providers: list[Provider],
         episode_providers: Sequence[list[Provider]],
@@ -177,10 +187,16 @@ class BatchedSimulation(Simulation):
         capacity: int,
         seeds: Sequence[int],
         signals: Sequence[object] | None = None,
+        episode_map: Sequence[int] | None = None,
     ):
         n_episodes = len(episode_missions)
         if n_episodes == 0:
             raise ValueError("BatchedSimulation needs at least one episode")
+        self.map_stack = road_map if isinstance(road_map, MapStack) else stack_maps([road_map])
+        self.episode_map = np.zeros(n_episodes, dtype=np.int64) if episode_map is None else np.asarray(episode_map, dtype=np.int64)
+        if self.episode_map.shape != (n_episodes,) or not ((0 <= self.episode_map) & (self.episode_map < self.map_stack.num_maps)).all():
+            raise ValueError(f"episode_map: expected {n_episodes} map numbers from 0 to {self.map_stack.num_maps - 1}, got {episode_map!r}")
+        road_map = self.map_stack.combined
         missions, episode_of = [], []
         for b, group in enumerate(episode_missions):
             if not group:
@@ -210,9 +226,11 @@ class BatchedSimulation(Simulation):
                 state.via_colour = self.via_colour[b]
         cap = self.episode_capacity
         self.views = [
-            EpisodeView(block_view(self.table, b * cap, (b + 1) * cap), road_map, self.dt, self.episode_seed[b], signals[b])
+            EpisodeView(block_view(self.table, b * cap, (b + 1) * cap), self.map_stack.windows[self.episode_map[b]],
+                        self.dt, self.episode_seed[b], signals[b])  # fmt: skip
             for b in range(n_episodes)
         ]
+        self.row_map = np.repeat(self.episode_map, cap)  # map of every stacked row
         self.episode_providers = [list(p) for p in episode_providers]
         for provs in self.episode_providers:
             for k, p in enumerate(provs):
@@ -349,11 +367,16 @@ class BatchedSimulation(Simulation):
         agent_cut = np.searchsorted(sorted_agents, self.episode_agent_start)
         return row_cut[:-1], row_cut[1:], agent_cut[:-1], agent_cut[1:]
 
+    def project_rows(self, rows: np.ndarray):
+        """``LaneProjection`` of stacked ``rows``, each on its episode's map (stacked lanes)."""
+        t = self.table
+        return self.map_stack.project(gather_xy(t, rows), t.heading[rows], self.row_map[rows])
+
     def _project(self, rows: np.ndarray) -> None:
         if rows.size == 0:
             return
         t = self.table
-        proj = project(self.road_map, gather_xy(t, rows), t.heading[rows])
+        proj = self.project_rows(rows)
         t.lane[rows] = proj.lane
         t.s[rows], t.t[rows], t.lane_heading[rows], t.lane_distance[rows] = (
             proj.s, proj.t, proj.lane_heading, proj.distance
@@ -369,15 +392,14 @@ class BatchedSimulation(Simulation):
         )
 
     def _events_of(self, episodes: np.ndarray) -> None:
-        ma = self.mission_arrays
-        origin, inv_res, cell_max, width, flat = raster_lookup(self.road_map)
+        ma, st = self.mission_arrays, self.map_stack
         self.agent_events[~self.agent_active] = False
         agents = self._active
         alive_lo, alive_hi, agent_lo, agent_hi = self.episode_ranges(self.alive, agents)
         _episode_events(
             episodes, alive_lo, alive_hi, agent_lo, agent_hi,
-            self.table.data, self.table.lane, self.alive, agents, self.agent_row[agents],
-            flat, width, origin, inv_res, cell_max,
+            self.table.data, self.table.lane, self.alive, agents, self.agent_row[agents], self.episode_map,
+            st.raster_flat, st.raster_base, st.raster_width, st.raster_origin, st.raster_inv_res, st.raster_cell_max,
             self.road_map.lane_internal, self.road_map.lane_road, ma.on_route_road,
             ma.goal_kind, ma.goal_xy, ma.goal_radius, ma.goal_road, ma.goal_lane, ma.goal_s,
             ma.goal_gate, self.agent_prev_xy, self.agent_prev_row,
@@ -391,20 +413,24 @@ class BatchedSimulation(Simulation):
 @numba.njit(cache=True, nogil=True)
 def _episode_events(
     episodes, alive_lo, alive_hi, agent_lo, agent_hi,
-    data, lane, alive, agents, rows, flat_raster, raster_width, raster_origin, inv_res, cell_max,
+    data, lane, alive, agents, rows, episode_map, raster_flat, raster_base, raster_width, raster_origin,
+    raster_inv_res, raster_cell_max,
     lane_internal, lane_road, on_route_road, goal_kind, goal_xy, goal_radius, goal_road, goal_lane,
     goal_s, goal_gate, prev_xy, prev_row, anchor, anchor_time, not_moving_seconds,
     not_moving_distance, episode_time, at_step_limit, terminate_on, events, done,
 ):  # pragma: no cover - compiled
-    """``agent_events`` of each episode in ``episodes`` with only that episode's rows as others."""
+    """``agent_events`` of each episode in ``episodes`` with only that episode's rows as others,
+    on its map's drivable raster (rasters concatenated, map ``m``'s from ``raster_base[m]``)."""
     for k in range(episodes.shape[0]):
         b = episodes[k]
         lo, hi = agent_lo[b], agent_hi[b]
         if lo == hi:
             continue
+        m = episode_map[b]
         agent_events(
             data, lane, alive[alive_lo[b]:alive_hi[b]], agents[lo:hi], rows[lo:hi],
-            flat_raster, raster_width, raster_origin, inv_res, cell_max,
+            raster_flat[raster_base[m]:raster_base[m + 1]], raster_width[m], raster_origin[m],
+            raster_inv_res[m], raster_cell_max[m],
             lane_internal, lane_road, on_route_road, goal_kind, goal_xy, goal_radius, goal_road,
             goal_lane, goal_s, goal_gate, prev_xy, prev_row, anchor, anchor_time, not_moving_seconds,
             not_moving_distance, episode_time[b], at_step_limit[b], terminate_on, events, done,

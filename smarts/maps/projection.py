@@ -40,7 +40,28 @@ class LaneProjection(NamedTuple):
 class _Index:
     """Arrays derived once per map for the projection (kept on the RoadMap instance)."""
 
-    def __init__(self, m: RoadMap) -> None:
+    def __init__(self, m: RoadMap, table: np.ndarray | None = None) -> None:
+        self.table = table if table is not None else self._segment_table(m)
+        # The grid gains an empty border of cells so clamped outside (or NaN) points find nothing.
+        nx, ny = m.grid_shape
+        counts = np.zeros((nx + 2, ny + 2), dtype=np.int64)
+        counts[1:-1, 1:-1] = np.diff(m.grid_offsets).reshape(nx, ny)
+        self.offsets = np.concatenate([[0], np.cumsum(counts.ravel())]).astype(np.intp)
+        self.ny = ny + 2
+        self.origin = np.asarray(m.grid_origin, dtype=np.float64) - m.grid_cell
+        self.inv_cell = 1.0 / m.grid_cell
+        self.cell_max_x, self.cell_max_y = float(nx + 1), float(ny + 1)
+        self.grid_segs = m.grid_segs.astype(np.intp)
+        # the kernel's per-map parameters (``smarts.maps.stack`` passes several maps' grids)
+        self.k_cell_base = np.zeros(1, dtype=np.int64)
+        self.k_ny = np.array([self.ny], dtype=np.int64)
+        self.k_origin = self.origin.reshape(1, 2).copy()
+        self.k_inv_cell = np.array([self.inv_cell])
+        self.k_cell_max = np.array([[self.cell_max_x, self.cell_max_y]])
+        self.k_map = np.zeros(1, dtype=np.int64)
+
+    @staticmethod
+    def _segment_table(m: RoadMap) -> np.ndarray:
         vec = m.seg_vec
         len2 = (vec * vec).sum(axis=1)
         inv_len2 = np.divide(1.0, len2, out=np.zeros_like(len2), where=len2 > 0)
@@ -50,7 +71,7 @@ class _Index:
         last = np.zeros(len(vec))
         first[m.lane_point_offsets[:-1] - lane_of_seg] = 1.0
         last[m.lane_point_offsets[1:] - lane_of_seg - 2] = 1.0
-        self.table = np.ascontiguousarray(
+        return np.ascontiguousarray(
             np.stack(
                 [
                     m.seg_start[:, 0],
@@ -70,19 +91,6 @@ class _Index:
                 ]
             )
         )
-        # The grid gains an empty border of cells so clamped outside (or NaN) points find nothing.
-        nx, ny = m.grid_shape
-        counts = np.zeros((nx + 2, ny + 2), dtype=np.int64)
-        counts[1:-1, 1:-1] = np.diff(m.grid_offsets).reshape(nx, ny)
-        self.offsets = np.concatenate([[0], np.cumsum(counts.ravel())]).astype(np.intp)
-        self.ny = ny + 2
-        self.origin = np.asarray(m.grid_origin, dtype=np.float64) - m.grid_cell
-        self.inv_cell = 1.0 / m.grid_cell
-        self.cell_max = np.array([nx + 1, ny + 1], dtype=np.float64)
-        self.origin_x, self.origin_y = (float(v) for v in self.origin)
-        self.cell_max_x, self.cell_max_y = float(nx + 1), float(ny + 1)
-        self.grid_segs = m.grid_segs.astype(np.intp)
-
 
 def projection_index(road_map: RoadMap) -> _Index:
     index = road_map.__dict__.get("_projection_index")
@@ -110,22 +118,27 @@ def project(
     use_heading = heading is not None
     h = np.ascontiguousarray(heading, dtype=np.float64).reshape(-1) if use_heading else xy[:, 0]
     _project_kernel(
-        ix.table, ix.offsets, ix.grid_segs, ix.ny, ix.origin_x, ix.origin_y, ix.inv_cell,
-        ix.cell_max_x, ix.cell_max_y, xy, h, use_heading, *out,
+        ix.table, ix.offsets, ix.grid_segs, ix.k_cell_base, ix.k_ny, ix.k_origin, ix.k_inv_cell,
+        ix.k_cell_max, ix.k_map, xy, h, use_heading, *out,
     )
     return out
 
 
 @numba.njit(cache=True, nogil=True)
 def _project_kernel(
-    table, offsets, grid_segs, ny, origin_x, origin_y, inv_cell, cell_max_x, cell_max_y,
+    table, offsets, grid_segs, cell_base, ny, origin, inv_cell, cell_max, point_map,
     xy, heading, use_heading, out_lane, out_s, out_t, out_heading, out_distance,
 ):  # pragma: no cover - compiled
+    """Point ``p`` searches the grid of map ``point_map[p]`` (``point_map[0]`` for every point
+    when it has one entry): per map, its first cell in ``offsets``, its cells per column, origin,
+    inverse cell size and largest cell index."""
+    last_map = point_map.shape[0] - 1
     for p in range(xy.shape[0]):
+        m = point_map[min(p, last_map)]
         x, y = xy[p, 0], xy[p, 1]
-        gx = min(max((x - origin_x) * inv_cell, 0.0), cell_max_x)  # NaN -> empty border cell
-        gy = min(max((y - origin_y) * inv_cell, 0.0), cell_max_y)
-        cell = int(gx) * ny + int(gy)
+        gx = min(max((x - origin[m, 0]) * inv_cell[m], 0.0), cell_max[m, 0])  # NaN -> empty border cell
+        gy = min(max((y - origin[m, 1]) * inv_cell[m], 0.0), cell_max[m, 1])
+        cell = cell_base[m] + int(gx) * ny[m] + int(gy)
         ch = cs = 0.0
         if use_heading:
             ch, cs = math.cos(heading[p]), math.sin(heading[p])

@@ -158,6 +158,15 @@ class RoadMap:
         except KeyError:
             raise KeyError(f"map {self.source!r} has no road {road_id!r}") from None
 
+    def own_lanes(self) -> range:
+        """Indices of this map's own lanes: all of them, except in a window of a stack of maps
+        (``smarts.maps.stack``), where the arrays hold every map's lanes."""
+        return self.__dict__.get("_own_lanes") or range(self.num_lanes)
+
+    def own_roads(self) -> range:
+        """Indices of this map's own roads (see :meth:`own_lanes`)."""
+        return self.__dict__.get("_own_roads") or range(len(self.road_ids))
+
     def road_lanes(self, road: int) -> np.ndarray:
         """Lane indices of a road, rightmost first."""
         lanes = np.flatnonzero(self.lane_road == road)

@@ -77,7 +77,7 @@ def entry_roads(road_map: RoadMap) -> list[int]:
     """Non-junction roads no lane leads into (where traffic enters the map)."""
     has_pred = np.diff(road_map.pred_offsets) > 0
     roads = []
-    for road in range(len(road_map.road_ids)):
+    for road in road_map.own_roads():
         lanes = road_map.road_lanes(road)
         if len(lanes) and not road_map.lane_internal[lanes].any() and not has_pred[lanes].any():
             roads.append(road)
@@ -88,7 +88,7 @@ def exit_roads(road_map: RoadMap) -> list[int]:
     """Non-junction roads that lead nowhere (where traffic leaves the map)."""
     has_succ = np.diff(road_map.succ_offsets) > 0
     roads = []
-    for road in range(len(road_map.road_ids)):
+    for road in road_map.own_roads():
         lanes = road_map.road_lanes(road)
         if len(lanes) and not road_map.lane_internal[lanes].any() and not has_succ[lanes].any():
             roads.append(road)

@@ -37,12 +37,33 @@ def _platoon_reward():
 
 @pytest.mark.parametrize("controller", ["lane_relative", "direct"])
 def test_episode_with_seed_s_follows_the_single_env_with_seed_s(controller):
-    """Four episodes of a two-agent scenario with traffic and a signalled one, each against a
-    single env reset with the same seed and given the same actions: observations, rewards and
-    end flags equal bit for bit over whole episodes, through the batch's auto-resets."""
+    """Four episodes of a two-agent scenario with traffic and a signalled one (on two maps, one
+    simulation), each against a single env reset with the same seed and given the same actions:
+    observations, rewards and end flags equal bit for bit over whole episodes, through the
+    batch's auto-resets."""
     specs = _adaptive("a02_straight_two_followers_low", "a09_lead_turns_right_at_signal_medium", controller=controller) * 2
     batch = BatchedDriving(specs, observation=PLATOON, reward_factory=_platoon_reward())
+    assert len(batch.groups) == 1 and batch.groups[0].sim.map_stack.num_maps == 2
     assert all(group.sim.batch_stages for group in batch.groups)  # traffic stepped in one call per spec
+    resets, compared = _compare_with_single_envs(batch, specs, steps=420)
+    assert resets >= 2 and compared > 1000
+
+
+def test_every_map_of_the_platoon_task_in_one_simulation_gives_the_single_envs_episodes():
+    """All scenarios of the adaptive suite (seven maps) stepped as one simulation: each copy's
+    observations, rewards and end flags equal its single env's bit for bit."""
+    suite = load_suite("adaptive").scenarios
+    specs = _adaptive(*(s.name for s in suite))
+    batch = BatchedDriving(specs, observation=PLATOON, reward_factory=_platoon_reward())
+    assert len(batch.groups) == 1
+    assert batch.groups[0].sim.map_stack.num_maps == len({s.map_path() for s in specs}) >= 5
+    _, compared = _compare_with_single_envs(batch, specs, steps=150)
+    assert compared >= 150 * len(specs)
+
+
+def _compare_with_single_envs(batch: BatchedDriving, specs: list, steps: int) -> tuple[int, int]:
+    """Step ``batch`` with random commands beside one single env per copy (same seeds, same
+    actions) and assert every slot's results equal; returns (resets, agent-steps compared)."""
     batch.set_seed(7)
     first = batch.reset()
     singles = [DrivingParallelEnv(s, observation=PLATOON, reward=_platoon_reward()()) for s in specs]
@@ -60,7 +81,7 @@ def test_episode_with_seed_s_follows_the_single_env_with_seed_s(controller):
     rng = np.random.default_rng(3)
     resets = compared = 0
     box = batch.action_space
-    for _ in range(420):
+    for _ in range(steps):
         commands = rng.uniform(box.low, box.high, size=(batch.num_slots, box.shape[0]))
         res = batch.step(commands)
         for i, env in enumerate(singles):
@@ -79,7 +100,7 @@ def test_episode_with_seed_s_follows_the_single_env_with_seed_s(controller):
                 first_obs, _ = env.reset(seed=7 + i * 100_003 + episode[i])
                 assert all(res.restarted[slot[(i, a)]] for a in env.possible_agents)
                 check(res.first, first_obs, i)
-    assert resets >= 2 and compared > 1000
+    return resets, compared
 
 
 def test_torchrl_env_gives_what_the_per_env_batched_env_gives():

@@ -25,6 +25,7 @@ from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
 from smarts.env.assembly import scenario_map, traffic_providers
 from smarts.maps import RoadMap
+from smarts.maps.stack import stack_maps
 from smarts.scenario import ScenarioSpec
 from smarts.traffic.signals import SignalState
 
@@ -142,22 +143,32 @@ def build_batched_simulation(
     lane_relative: LaneRelativeParams | None = None,
     batch_traffic: bool = True,
 ) -> BatchedSimulation:
-    """One ``BatchedSimulation`` of ``len(specs)`` episodes (all on the same map), episode ``b``
-    of ``specs[b]`` with seed ``seeds[b]``. ``batch_traffic``: step the built-in traffic of all
-    episodes in one call (``smarts.env.batched.traffic``); False steps it episode by episode."""
+    """One ``BatchedSimulation`` of ``len(specs)`` episodes, episode ``b`` of ``specs[b]`` with
+    seed ``seeds[b]``. Scenarios on different maps share the batch through a stack of their maps
+    (``smarts.maps.stack``). ``road_map``: the map of every scenario (when they all run on one
+    map already loaded). ``batch_traffic``: step the built-in traffic of all episodes in one call
+    (``smarts.env.batched.traffic``); False steps it episode by episode."""
     for spec in specs:
         check_batchable(spec)
     first = specs[0]
-    road_map = road_map or scenario_map(first)
     limits = limits or ReachLimits()
     for spec in specs[1:]:
-        if spec.map_path() != first.map_path():
-            raise BatchedSetupError(f"{spec.source}: map {spec.map} differs from {first.source}'s; one batched simulation runs one map")
         for field in ("step_length", "events"):
             if getattr(spec, field) != getattr(first, field):
                 raise BatchedSetupError(f"{spec.source}: {field} differs from {first.source}'s; episodes of one batch share it")
-    missions, vehicles, episode_providers, signals = [], [], [], []
+    map_number: dict = {}
+    maps: list[RoadMap] = []
     for spec in specs:
+        if spec.map_path() not in map_number:
+            if road_map is not None and maps:
+                raise BatchedSetupError(f"{spec.source}: map {spec.map} differs from {first.source}'s, but one road_map was given for all")
+            map_number[spec.map_path()] = len(maps)
+            maps.append(road_map if road_map is not None else scenario_map(spec))
+    stack = stack_maps(maps)
+    episode_map = [map_number[spec.map_path()] for spec in specs]
+    missions, vehicles, episode_providers, signals = [], [], [], []
+    for spec, m in zip(specs, episode_map):
+        road_map = stack.windows[m]  # the scenario's map in the batch's lane indices
         missions.append([
             resolve_mission(road_map, agent.id, agent.mission, f"{spec.source}: agents[{i}].mission", spec.traffic)
             for i, agent in enumerate(spec.agents)
@@ -179,10 +190,10 @@ def build_batched_simulation(
                          not_moving_distance=first.events.not_moving_distance)  # fmt: skip
     agents = BatchedAgentProvider(vehicles, limits, first.step_length, lane_relative)
     sim = BatchedSimulation(
-        road_map, missions, [agents], episode_providers, dt=first.step_length,
+        stack, missions, [agents], episode_providers, dt=first.step_length,
         episode_steps=[s.episode_steps for s in specs], events=events,
         capacity=max(s.vehicle_capacity for s in specs),
-        seeds=[check_seed(s, f"seeds[{b}]") for b, s in enumerate(seeds)], signals=signals,
+        seeds=[check_seed(s, f"seeds[{b}]") for b, s in enumerate(seeds)], signals=signals, episode_map=episode_map,
     )  # fmt: skip
     agents.vehicles = [dataclasses.replace(v, agent_id=aid) for v, aid in zip(vehicles, sim.agent_ids)]
     if batch_traffic:

@@ -4,8 +4,9 @@ Every learning agent of every copy is a slot (copies in order, agents in scenari
 takes ``actions[slots, k]`` and gives per slot the observation, reward and end flags of the agent
 that acted; copies whose agents have all finished are reset at once (auto-reset) and their first
 observations are returned beside (``StepResult.first``), so no copy ever waits for another.
-Copies on the same map form one ``BatchedSimulation`` (one call per stage); copies on other maps
-form further ones.
+All copies form one ``BatchedSimulation`` (one call per stage), whatever their maps; only copies
+that cannot share one (another step length or event set, or another reward section when no task
+reward is given) form further ones.
 
 Seeds are those of ``SmartsBatchedEnv``: after ``set_seed(s)`` copy ``i`` starts at seed
 ``s + i * 100_003`` and counts up by one per episode, so both backends play the same episodes.
@@ -13,7 +14,7 @@ Seeds are those of ``SmartsBatchedEnv``: after ``set_seed(s)`` copy ``i`` starts
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,7 +28,7 @@ from smarts.core.simulation import check_seed, derived_seed
 from smarts.dynamics.action_spaces import agent_action_space
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
-from smarts.env.assembly import as_spec, scenario_map
+from smarts.env.assembly import as_spec
 from smarts.env.batched.assembly import BatchedSetupError, build_batched_simulation, check_batchable
 from smarts.env.batched.observe import BatchedObserver
 from smarts.env.reward import default_rewards
@@ -67,7 +68,7 @@ class _StepView:
 
 
 class _Group:
-    """The copies on one map: one ``BatchedSimulation``, its reward function, its slots."""
+    """Copies stepped as one ``BatchedSimulation``, with its reward function and its slots."""
 
     def __init__(self, sim: BatchedSimulation, copies: list[int], reward, reward_spec, agent_slot: np.ndarray):
         self.sim, self.copies, self.reward, self.reward_spec = sim, copies, reward, reward_spec
@@ -78,7 +79,7 @@ class BatchedDriving:
     """``scenarios`` (names, YAML paths or specs; one copy each) stepped by the batched backend.
 
     ``observation``: one interface for every agent (None: the scenarios' own, which must agree);
-    ``reward_factory`` builds one task reward per map group (``smarts.env.task_rewards``; None:
+    ``reward_factory`` builds one task reward per group (``smarts.env.task_rewards``; None:
     each scenario's default reward); ``lane_relative`` and ``limits`` as for ``DrivingParallelEnv``.
     Refuses what it cannot batch (SUMO traffic, social agents, comms, Continuous...) with a
     ``BatchedSetupError`` naming the scenario and field.
@@ -109,21 +110,15 @@ class BatchedDriving:
         self.observation_space: gym.spaces.Dict = self.observer.space
         self.slots: list[tuple[int, str]] = [(i, a.id) for i, s in enumerate(self.specs) for a in s.agents]
         slot_index = {key: j for j, key in enumerate(self.slots)}
-        by_map: dict[Path, list[int]] = {}
+        by_kind: dict[tuple, list[int]] = {}
         for i, spec in enumerate(self.specs):
-            by_map.setdefault(spec.map_path(), []).append(i)
+            reward_key = None if reward_factory is not None else repr(spec.reward)
+            by_kind.setdefault((spec.step_length, repr(spec.events), reward_key), []).append(i)
         self.groups: list[_Group] = []
         self.copy_place: list[tuple[int, int]] = [(0, 0)] * len(self.specs)  # copy -> (group, episode)
-        for copies in by_map.values():
+        for copies in by_kind.values():
             specs = [self.specs[i] for i in copies]
-            sim = build_batched_simulation(specs, [s.seed for s in specs], limits=self.limits,
-                                           road_map=scenario_map(specs[0]), lane_relative=lane_relative)  # fmt: skip
-            reward_specs = {repr(s.reward) for s in specs}
-            if reward_factory is None and len(reward_specs) > 1:
-                raise BatchedSetupError(
-                    f"{specs[0].source}: scenarios on one map have different reward sections; give a task reward "
-                    "(reward_factory) or batch them separately"
-                )
+            sim = build_batched_simulation(specs, [s.seed for s in specs], limits=self.limits, lane_relative=lane_relative)
             agent_slot = np.array([slot_index[(copies[sim.agent_episode[a]], sim.local_agent_ids[a])]
                                    for a in range(len(sim.agent_ids))], dtype=np.int64)  # fmt: skip
             g = len(self.groups)

@@ -5,8 +5,8 @@ ids), but the provider's per-row state arrays are views into stacked ``[episodes
 owned here, so one step of all of them is: one map projection of every other road user of every
 episode, one compiled loop that hands each episode's rows to the provider's own kernels
 (``build_occupancy``, ``step_vehicles``) on its block of the table, then Python only for the few
-episodes where a vehicle arrives or a departure is due. Episodes with equal traffic specs share
-route tables (built alike, so equal), and one call covers each such set.
+episodes where a vehicle arrives or a departure is due. Episodes with equal traffic specs on the
+same map share route tables (built alike, so equal), and one call covers each such set.
 """
 
 from __future__ import annotations
@@ -15,8 +15,7 @@ import numba
 import numpy as np
 
 import smarts.traffic.builtin.kernels as K
-from smarts.core.batched import BatchedSimulation, gather_xy
-from smarts.maps import project
+from smarts.core.batched import BatchedSimulation
 from smarts.traffic.builtin.provider import BuiltinTrafficProvider
 
 
@@ -52,17 +51,17 @@ class BatchedBuiltinTraffic:
             for name in ("si", "st", "pa", "mine", "arrived", "acc", "guard", "change", "turn", "raw_lane",
                          "raw_row", "raw_kind", "raw_f", "e_row", "e_kind", "e_f", "lane_off"):  # fmt: skip
                 setattr(p, name, getattr(self, name)[k])
-        # One call per set of episodes with equal traffic specs (their route tables are equal).
+        # One call per set of episodes with equal traffic specs on one map (equal route tables).
         sets: dict[int, list[int]] = {}
         specs: list = []
         for k, p in enumerate(self.provider):
-            for s, spec in enumerate(specs):
-                if spec == p.traffic:
+            for s, (road_map, spec) in enumerate(specs):
+                if road_map is p.map and spec == p.traffic:
                     sets[s].append(k)
                     break
             else:
                 sets[len(specs)] = [k]
-                specs.append(p.traffic)
+                specs.append((p.map, p.traffic))
         self.sets = [np.array(v, dtype=np.int64) for v in sets.values()]
         self.next_due = np.zeros(m)  # earliest departure time of each provider (inf: none)
         self.waiting = np.zeros(m, dtype=bool)  # a departure waits for room
@@ -92,7 +91,7 @@ class BatchedBuiltinTraffic:
         union_mine.reshape(sim.episodes, cap)[self.episode] = self.mine
         foreign = np.flatnonzero(table.alive & ~union_mine & self._rows_of_members)
         if foreign.size:
-            proj = project(sim.road_map, gather_xy(table, foreign), table.heading[foreign])
+            proj = sim.project_rows(foreign)
             f_lane, f_s, f_t = proj.lane.astype(np.int64), proj.s, proj.t
             f_dh = table.heading[foreign] - proj.lane_heading
         else:
