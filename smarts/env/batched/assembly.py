@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import torch
 
 from smarts.core.batched import BatchedSimulation
 from smarts.core.errors import ActionError, ScenarioError
@@ -23,6 +24,7 @@ from smarts.dynamics.action_spaces import ActionSpaceType, action_components
 from smarts.dynamics.agent_provider import AgentProvider, AgentVehicle
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
+from smarts.dynamics.pose_control_torch import apply_pose_torch, resolve_device
 from smarts.env.assembly import scenario_map, traffic_providers
 from smarts.maps import RoadMap
 from smarts.maps.stack import stack_maps
@@ -65,11 +67,15 @@ def check_batchable(spec: ScenarioSpec) -> None:
 
 class BatchedAgentProvider(AgentProvider):
     """The agent provider of all episodes: one action space and controller for every agent, the
-    actions as one ``[agents, k]`` array (``BatchedSimulation.action_array``), and resets per episode."""
+    actions as one ``[agents, k]`` array (``BatchedSimulation.action_array``), and resets per episode.
+
+    ``device``: a torch device for the stages that have a torch version (the pose controller,
+    ``smarts.dynamics.pose_control_torch``); None runs the compiled numpy kernels."""
 
     def __init__(self, vehicles: list[AgentVehicle], limits: ReachLimits, dt: float,
-                 lane_relative: LaneRelativeParams | None = None):  # fmt: skip
+                 lane_relative: LaneRelativeParams | None = None, device: torch.device | None = None):  # fmt: skip
         super().__init__(vehicles, limits, dt, lane_relative)
+        self.device = device
         kinds = {(v.action_space, v.controller) for v in vehicles}
         if len(kinds) != 1:
             raise BatchedSetupError(
@@ -131,7 +137,11 @@ class BatchedAgentProvider(AgentProvider):
         actions = np.asarray(sim.action_array[members], dtype=np.float64)
         if self.controller == "lane_relative":
             actions = self._from_commands(self.kind, sim, members, rows, actions, dt)
-        self._drive(self.kind, sim, members, rows, actions, dt)
+        if self.device is not None:
+            world_frame = self.kind is ActionSpaceType.TARGET_POSE
+            apply_pose_torch(sim.table, rows, actions, world_frame, dt, self.limits, self.device)
+        else:
+            self._drive(self.kind, sim, members, rows, actions, dt)
 
 
 def build_batched_simulation(
@@ -142,12 +152,16 @@ def build_batched_simulation(
     road_map: RoadMap | None = None,
     lane_relative: LaneRelativeParams | None = None,
     batch_traffic: bool = True,
+    device: str = "cpu",
 ) -> BatchedSimulation:
     """One ``BatchedSimulation`` of ``len(specs)`` episodes, episode ``b`` of ``specs[b]`` with
     seed ``seeds[b]``. Scenarios on different maps share the batch through a stack of their maps
     (``smarts.maps.stack``). ``road_map``: the map of every scenario (when they all run on one
     map already loaded). ``batch_traffic``: step the built-in traffic of all episodes in one call
-    (``smarts.env.batched.traffic``); False steps it episode by episode."""
+    (``smarts.env.batched.traffic``); False steps it episode by episode. ``device``: where stages
+    with a torch version run (``smarts.dynamics.pose_control_torch.resolve_device``; "cpu": the
+    compiled kernels)."""
+    torch_device = resolve_device(device)
     for spec in specs:
         check_batchable(spec)
     first = specs[0]
@@ -188,7 +202,7 @@ def build_batched_simulation(
         terminate[event_from_name(name)] = True
     events = EventConfig(terminate_on=terminate, not_moving_seconds=first.events.not_moving_seconds,
                          not_moving_distance=first.events.not_moving_distance)  # fmt: skip
-    agents = BatchedAgentProvider(vehicles, limits, first.step_length, lane_relative)
+    agents = BatchedAgentProvider(vehicles, limits, first.step_length, lane_relative, torch_device)
     sim = BatchedSimulation(
         stack, missions, [agents], episode_providers, dt=first.step_length,
         episode_steps=[s.episode_steps for s in specs], events=events,

@@ -80,7 +80,9 @@ class BatchedDriving:
 
     ``observation``: one interface for every agent (None: the scenarios' own, which must agree);
     ``reward_factory`` builds one task reward per group (``smarts.env.task_rewards``; None:
-    each scenario's default reward); ``lane_relative`` and ``limits`` as for ``DrivingParallelEnv``.
+    each scenario's default reward); ``lane_relative`` and ``limits`` as for ``DrivingParallelEnv``;
+    ``sim_device``: where simulation stages with a torch version run ("cpu": the compiled numpy
+    kernels; "cuda", "torch-cpu": see ``smarts.dynamics.pose_control_torch.resolve_device``).
     Refuses what it cannot batch (SUMO traffic, social agents, comms, Continuous...) with a
     ``BatchedSetupError`` naming the scenario and field.
     """
@@ -95,6 +97,7 @@ class BatchedDriving:
         limits: ReachLimits | None = None,
         lane_relative: LaneRelativeParams | None = None,
         reward_factory: Callable[[], Any] | None = None,
+        sim_device: str = "cpu",
     ):
         if not scenarios:
             raise ValueError("BatchedDriving needs at least one scenario")
@@ -118,7 +121,8 @@ class BatchedDriving:
         self.copy_place: list[tuple[int, int]] = [(0, 0)] * len(self.specs)  # copy -> (group, episode)
         for copies in by_kind.values():
             specs = [self.specs[i] for i in copies]
-            sim = build_batched_simulation(specs, [s.seed for s in specs], limits=self.limits, lane_relative=lane_relative)
+            sim = build_batched_simulation(specs, [s.seed for s in specs], limits=self.limits,
+                                           lane_relative=lane_relative, device=sim_device)  # fmt: skip
             agent_slot = np.array([slot_index[(copies[sim.agent_episode[a]], sim.local_agent_ids[a])]
                                    for a in range(len(sim.agent_ids))], dtype=np.int64)  # fmt: skip
             g = len(self.groups)
