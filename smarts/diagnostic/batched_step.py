@@ -12,7 +12,10 @@ chunks with 95% confidence intervals. Cases:
 - ``free_direct``: the agent alone on a straight three-lane road, RelativeTargetPose actions;
 - ``free_lane``: the same driven by lane-relative commands (the training controller);
 - ``lead_lane``: the adaptive suite's a01_straight_free (a lead vehicle of built-in traffic to
-  follow, whose traffic provider steps per episode) with lane-relative commands.
+  follow, whose traffic provider steps per episode) with lane-relative commands;
+- ``mix_lane``: B copies cycling through every scenario of the adaptive suite (the platoon
+  task's mix: 11 scenarios on 7 maps, with traffic, signals and up to three agents per copy) with
+  lane-relative commands; all copies are one simulation over the stacked maps.
 
 ``--ppo-steps N`` adds end-to-end rows: ``python -m train ppo --task platoon`` on each backend
 (run as users run it; the env-steps/s it records over the whole run and over its collection
@@ -38,10 +41,30 @@ CASES = {
     "free_direct": ("free", "direct"),
     "free_lane": ("free", "lane_relative"),
     "lead_lane": ("lead", "lane_relative"),
+    "mix_lane": ("mix", "lane_relative"),
 }
 DEFAULT_BATCHES = (1, 16, 64, 256, 1024)
 CHUNKS = 5
 STRAIGHT = 0.9  # RelativeTargetPose dx (m) of the direct case: 9 m/s straight ahead
+
+
+def case_specs(case: str, batch: int) -> list:
+    """The ``batch`` scenario copies of ``case``, their agents on RelativeTargetPose (direct
+    actions or lane-relative commands)."""
+    from smarts.benchmark.suites import load_suite
+
+    if case not in CASES:
+        raise ValueError(f"unknown case {case!r}; expected one of {', '.join(CASES)}")
+    scenario, controller = CASES[case]
+    if scenario != "mix":
+        return [case_spec(case)] * batch
+    suite = [s.spec for s in load_suite("adaptive").scenarios]
+    specs = []
+    for k in range(batch):
+        spec = suite[k % len(suite)]
+        agents = [dataclasses.replace(a, action_space="relative_target_pose", controller=controller) for a in spec.agents]
+        specs.append(dataclasses.replace(spec, agents=agents))
+    return specs
 
 
 def case_spec(case: str):
@@ -50,8 +73,8 @@ def case_spec(case: str):
     from smarts.benchmark.suites import load_suite
     from smarts.scenario import ScenarioSpec
 
-    if case not in CASES:
-        raise ValueError(f"unknown case {case!r}; expected one of {', '.join(CASES)}")
+    if case not in CASES or CASES[case][0] == "mix":
+        raise ValueError(f"unknown single-scenario case {case!r}; expected one of {', '.join(c for c in CASES if CASES[c][0] != 'mix')}")
     scenario, controller = CASES[case]
     if scenario == "lead":
         spec = next(s.spec for s in load_suite("adaptive").scenarios if s.name == "a01_straight_free")
@@ -108,9 +131,9 @@ def batched_rate(case: str, batch: int, steps: int, warmup: int, seed: int = 0) 
     the memory per episode."""
     from smarts.env.batched import BatchedDriving
 
-    spec = case_spec(case)
+    specs = case_specs(case, batch)
     tracemalloc.start()
-    env = BatchedDriving([spec] * batch, observation=AgentInterface())
+    env = BatchedDriving(specs, observation=AgentInterface())
     env.set_seed(seed)
     env.reset()
     memory = tracemalloc.get_traced_memory()[0]
@@ -126,8 +149,7 @@ def per_env_rate(case: str, batch: int, steps: int, warmup: int, seed: int = 0) 
     """Agent-steps/s (mean, 95% CI over chunks) of ``batch`` episodes on the per-env path."""
     from smarts.env.parallel_env import DrivingParallelEnv
 
-    spec = case_spec(case)
-    envs = [DrivingParallelEnv(spec, observation=AgentInterface()) for _ in range(batch)]
+    envs = [DrivingParallelEnv(spec, observation=AgentInterface()) for spec in case_specs(case, batch)]
     episode = [0] * batch
     for i, env in enumerate(envs):
         env.reset(seed=seed + i * 100_003)
@@ -135,12 +157,14 @@ def per_env_rate(case: str, batch: int, steps: int, warmup: int, seed: int = 0) 
 
     def step_all() -> int:
         commands = _actions(case, rng, batch)
+        acted = 0
         for i, env in enumerate(envs):
             if not env.agents:
                 episode[i] += 1
                 env.reset(seed=seed + i * 100_003 + episode[i])
-            env.step({a: commands[i] for a in env.agents})
-        return batch
+            acted += len(env.agents)
+            env.step({a: commands[i] for a in env.agents})  # the copy's agents share its command
+        return acted
 
     mean, ci = _timed(step_all, steps, warmup)
     for env in envs:
