@@ -114,3 +114,26 @@ def test_device_names_a_place_for_the_batched_backends_torch_stages(tmp_path, ca
         assert main(["ppo", "--task", "platoon", "--backend", "batched", "--device", "cuda", "--out-dir", str(out)]) == 2
         assert "device: 'cuda' asks for a GPU but no CUDA GPU is visible" in capsys.readouterr().err
         assert not out.exists()
+
+
+def test_both_trainers_hand_the_device_to_the_batched_backend():
+    import torch
+
+    from train.ppo import make_env
+    from train.sb3_ppo import make_vec_env
+
+    def agent_device(driving):
+        return {p.device for group in driving.groups for p in group.sim.providers}
+
+    for device, expected in (("torch-cpu", torch.device("cpu")), ("cpu", None)):
+        cfg = load_config("platoon", overrides={"backend": "batched", "device": device, "envs": "2"})
+        env = make_env(cfg)
+        try:
+            assert agent_device(env.base_env.driving) == {expected}
+        finally:
+            env.close()
+        vec = make_vec_env(cfg.model_copy(update={"lib": "sb3"}))
+        try:
+            assert agent_device(vec.driving) == {expected}
+        finally:
+            vec.close()

@@ -68,9 +68,8 @@ def env_options(cfg: TrainConfig) -> dict:
 
 def batched_options(cfg: TrainConfig) -> dict:
     """The batched backend's own settings: where its torch stages run (``device``; a GPU that is
-    not there is refused here, before anything is built or written). Nothing for ``cpu``."""
-    if resolve_device(cfg.device) is None:
-        return {}
+    not there is refused here, before anything is built or written)."""
+    resolve_device(cfg.device)
     return {"sim_device": cfg.device}
 
 

@@ -44,10 +44,9 @@ def make_vec_env(cfg: TrainConfig):
         from smarts.env.batched.sb3_vec_env import BatchedVecEnv
         from smarts.env.task_rewards import reward_factory
 
-        where = {} if resolve_device(cfg.device) is None else {"device": cfg.device}  # its torch stages
         return BatchedVecEnv(training_specs(cfg), observation=interface, reward_factory=reward_factory(weights),
                              lane_relative=lane, seed=TRAIN_SEED_BASE + cfg.seed * 1_000_003, normalize_actions=True,
-                             **where)  # fmt: skip
+                             sim_device=cfg.device)  # fmt: skip
     factories = [
         functools.partial(DrivingParallelEnv, spec, observation=interface, reward=TaskReward(weights), lane_relative=lane)
         for spec in training_specs(cfg)
