@@ -96,6 +96,7 @@ def limit_relative_pose_torch(
     return d * torch.cos(direction), d * torch.sin(direction), dh, d / dt
 
 
+@torch.inference_mode()  # no autograd bookkeeping: a little less overhead per op
 def apply_pose_torch(
     table: VehicleTable,
     rows: np.ndarray,
@@ -115,7 +116,7 @@ def apply_pose_torch(
     actions = _checked(kind, actions, table, rows)
     if len(rows) == 0:
         return
-    state = torch.from_numpy(table.data[_READ][:, rows]).to(device)
+    state = torch.from_numpy(table.data[_READ[:, None], rows]).to(device)  # only these rows
     req = torch.from_numpy(np.ascontiguousarray(actions.T)).to(device)
     x, y, h, v0, a0 = state
     dx, dy, dh = req
