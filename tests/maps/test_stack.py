@@ -9,6 +9,7 @@ from smarts.maps import load_map, project, shortest_route
 from smarts.maps.drivable import raster_lookup
 from smarts.maps.stack import stack_maps
 from smarts.scenario.builtin_maps import builtin_map_path
+from smarts.traffic.builtin.junctions import junction_table
 from smarts.traffic.density import density_flows
 from smarts.traffic.signals import SignalState
 from tests.builders import agent, make_spec
@@ -77,6 +78,11 @@ def test_routes_missions_flows_and_signals_on_a_window_are_the_maps_own(maps, st
     traffic = TrafficSpec(engine="builtin", density="high")
     flows = density_flows(traffic, m)
     assert flows and [f.route for f in density_flows(traffic, w)] == [f.route for f in flows]
+    alone_jt, window_jt = junction_table(m), junction_table(w)  # only the window's own junctions
+    assert alone_jt.num_connections > 0
+    np.testing.assert_array_equal(window_jt.conn_from, alone_jt.conn_from + base)
+    np.testing.assert_array_equal(window_jt.conn_to, alone_jt.conn_to + base)
+    np.testing.assert_array_equal(window_jt.zone, alone_jt.zone)
     alone_signals, window_signals = SignalState(m), SignalState(w)
     for t in (0.0, 7.0, 31.0):
         alone_signals.update_fixed_time(t)

@@ -66,7 +66,8 @@ def junction_table(road_map: RoadMap) -> JunctionTable:
     m = road_map
     exits = lane_exits(m)
     conn_from, conn_to, paths = [], [], []
-    for lane in np.flatnonzero(~m.lane_internal):
+    own = np.asarray(m.own_lanes(), dtype=np.int64)  # a window of a map stack: its own lanes only
+    for lane in own[~m.lane_internal[own]]:
         for path, target in exits[int(lane)]:
             if path:
                 conn_from.append(int(lane))
