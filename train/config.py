@@ -148,7 +148,7 @@ class TrainConfig(Schema):
     lib: Literal[LIBS] = Field("torchrl", description="torchrl | sb3 (Stable-Baselines3's PPO).")
     backend: Literal[BACKENDS] = Field(
         "per_env",
-        description="per_env: one simulation per scenario copy | batched: the copies of each map stepped as one "
+        description="per_env: one simulation per scenario copy | batched: all copies, whatever their maps, stepped as one "
         "vectorised simulation (smarts.env.batched; built-in traffic only, not with ray_address).",
     )
     device: str = Field(

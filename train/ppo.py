@@ -97,7 +97,7 @@ def make_env(cfg: TrainConfig, specs: list | None = None) -> TransformedEnv:
     specs = training_specs(cfg) if specs is None else specs
     check_env_split(cfg, specs)
     options = env_options(cfg)
-    # backend batched: the copies of each map as one vectorised simulation (same keys and seeds)
+    # backend batched: all copies as one vectorised simulation, whatever their maps (same keys and seeds)
     batch_env = BatchedTorchRLEnv if cfg.backend == "batched" else SmartsBatchedEnv
     if cfg.backend == "batched":
         options.update(batched_options(cfg))

@@ -40,7 +40,7 @@ def make_vec_env(cfg: TrainConfig):
     from smarts.env.task_rewards import TaskReward
 
     interface, weights, lane = cfg.observation_interface(), cfg.reward_weights(), cfg.lane_relative_params()
-    if cfg.backend == "batched":  # the copies of each map as one vectorised simulation
+    if cfg.backend == "batched":  # all copies as one vectorised simulation, whatever their maps
         from smarts.env.batched.sb3_vec_env import BatchedVecEnv
         from smarts.env.task_rewards import reward_factory
 
