@@ -6,7 +6,9 @@ owned here, so one step of all of them is: one map projection of every other roa
 episode, one compiled loop that hands each episode's rows to the provider's own kernels
 (``build_occupancy``, ``step_vehicles``) on its block of the table, then Python only for the few
 episodes where a vehicle arrives or a departure is due. Episodes with equal traffic specs on the
-same map share route tables (built alike, so equal), and one call covers each such set.
+same map share route tables (built alike, so equal). Each such set's route and junction tables
+are concatenated with the others' (``_Tables``): the compiled loop hands every provider a view of
+its own set's part, so one call covers every set, whatever the specs and maps.
 """
 
 from __future__ import annotations
@@ -63,6 +65,11 @@ class BatchedBuiltinTraffic:
                 sets[len(specs)] = [k]
                 specs.append((p.map, p.traffic))
         self.sets = [np.array(v, dtype=np.int64) for v in sets.values()]
+        self.set_of = np.zeros(m, dtype=np.int64)
+        for t, members in enumerate(self.sets):
+            self.set_of[members] = t
+        self.members = np.concatenate(self.sets) if self.sets else np.zeros(0, dtype=np.int64)
+        self.tables = _Tables([self.provider[members[0]] for members in self.sets])
         self.next_due = np.zeros(m)  # earliest departure time of each provider (inf: none)
         self.waiting = np.zeros(m, dtype=bool)  # a departure waits for room
         self.member_of = np.full(sim.episodes, -1, dtype=np.int64)
@@ -103,17 +110,15 @@ class BatchedBuiltinTraffic:
         f_local = foreign - np.repeat(starts, f_hi - f_lo)
         own_local = own - np.repeat(starts, o_hi - o_lo)
         arrivals = np.zeros(len(self.provider), dtype=bool)
-        for members in self.sets:
-            p = self.provider[members[0]]
-            jt = p.junctions
+        if self.members.size:
+            p, tb = self.provider[0], self.tables
+            tb.check_current()
             _step_episodes(
-                members, self.episode, cap, o_lo, o_hi, own_local, f_lo, f_hi, f_local, f_lane, f_s, f_t, f_dh,
-                table.data, self.si, self.st, self.pa, self.mine, self.arrived, self.acc, self.guard, self.change,
-                self.turn, self.lane_off, self.raw_lane, self.raw_f, self.raw_row, self.raw_kind, self.e_f,
-                self.e_row, self.e_kind, p.routes.slot_int, p.routes.slot_cost, p.lane_f, p.lane_lr, p.pred_off,
-                p.pred, p.point_off, p.point_s, p.points, p.seg_heading, p.conn_int, jt.conn_length,
-                jt.lanes_offsets, jt.lanes, jt.conn_of_lane, jt.offset_of_lane, jt.foe_offsets, jt.foe,
-                jt.foe_kind, jt.zone, sim.via_colour, dt, sim.episode_step, arrivals,
+                self.members, self.set_of, self.episode, cap, o_lo, o_hi, own_local, f_lo, f_hi, f_local, f_lane,
+                f_s, f_t, f_dh, table.data, self.si, self.st, self.pa, self.mine, self.arrived, self.acc, self.guard,
+                self.change, self.turn, self.lane_off, self.raw_lane, self.raw_f, self.raw_row, self.raw_kind,
+                self.e_f, self.e_row, self.e_kind, p.lane_f, p.lane_lr, p.pred_off, p.pred, p.point_off, p.point_s,
+                p.points, p.seg_heading, *tb.arrays, *tb.bounds, sim.via_colour, dt, sim.episode_step, arrivals,
             )  # fmt: skip
         for k in np.flatnonzero(arrivals).tolist():
             b, p = int(self.episode[k]), self.provider[k]
@@ -133,19 +138,67 @@ class BatchedBuiltinTraffic:
         # (each provider's own step_count is not kept: its kernels get the episode's step here)
 
 
+class _Tables:
+    """The route tables (``slot_int``, ``slot_cost``) and junction tables of several sets of
+    providers, each array concatenated along its last axis over the sets, with per-set bounds:
+    set ``t``'s own array is ``array[..., bound[t]:bound[t + 1]]`` (indices inside it stay the
+    set's own). The lane arrays are the same for every set (one map or one stack of maps)."""
+
+    def __init__(self, providers: list):
+        self.providers = providers
+        self._packed = [p.routes.slot_int for p in providers]
+        per_set = [self._of(p) for p in providers]
+        if not per_set:
+            self.arrays, self.bounds = (), ()
+            return
+        self.arrays = tuple(np.ascontiguousarray(np.concatenate([t[i] for t in per_set], axis=-1))
+                            for i in range(len(per_set[0])))  # fmt: skip
+        self.bounds = tuple(np.concatenate([[0], np.cumsum([t[i].shape[-1] for t in per_set])]).astype(np.int64)
+                            for i in range(len(per_set[0])))  # fmt: skip
+
+    @staticmethod
+    def _of(p) -> tuple:
+        jt = p.junctions
+        return (p.routes.slot_int, p.routes.slot_cost, p.conn_int, jt.conn_length, jt.lanes_offsets, jt.lanes,
+                jt.conn_of_lane, jt.offset_of_lane, jt.foe_offsets, jt.foe, jt.foe_kind, jt.zone)  # fmt: skip
+
+    def check_current(self) -> None:
+        """Routes are added when a provider is built; should one add more later, pack again."""
+        for p, packed in zip(self.providers, self._packed):
+            if p.routes.slot_int is not packed:
+                self.__init__(self.providers)
+                return
+
+
 @numba.njit(cache=True, nogil=True)
 def _step_episodes(
-    members, episode, cap, o_lo, o_hi, own_local, f_lo, f_hi, f_local, f_lane, f_s, f_t, f_dh,
+    members, set_of, episode, cap, o_lo, o_hi, own_local, f_lo, f_hi, f_local, f_lane, f_s, f_t, f_dh,
     data, si, st, pa, mine, arrived, acc, guard, change, turn, lane_off, raw_lane, raw_f, raw_row, raw_kind,
-    e_f, e_row, e_kind, slot_int, slot_cost, lane_f, lane_lr, pred_off, pred, point_off, point_s, points,
-    seg_heading, conn_int, conn_length, lanes_offsets, lanes, conn_of_lane, offset_of_lane, foe_offsets, foe,
-    foe_kind, zone, via_colour, dt, episode_step, arrivals,
+    e_f, e_row, e_kind, lane_f, lane_lr, pred_off, pred, point_off, point_s, points, seg_heading,
+    slot_int_all, slot_cost_all, conn_int_all, conn_length_all, lanes_offsets_all, lanes_all, conn_of_lane_all,
+    offset_of_lane_all, foe_offsets_all, foe_all, foe_kind_all, zone_all,
+    b_slot_int, b_slot_cost, b_conn_int, b_conn_length, b_lanes_offsets, b_lanes, b_conn_of_lane,
+    b_offset_of_lane, b_foe_offsets, b_foe, b_foe_kind, b_zone, via_colour, dt, episode_step, arrivals,
 ):  # pragma: no cover - compiled
-    """``BuiltinTrafficProvider.step``'s compiled part for each member, on its block of rows."""
+    """``BuiltinTrafficProvider.step``'s compiled part for each member, on its block of rows, with
+    its set's route and junction tables (views into the concatenated ones, see ``_Tables``)."""
     for q in range(members.shape[0]):
         k = members[q]
         if o_hi[k] == o_lo[k]:
             continue
+        t = set_of[k]
+        slot_int = slot_int_all[:, b_slot_int[t]:b_slot_int[t + 1]]
+        slot_cost = slot_cost_all[b_slot_cost[t]:b_slot_cost[t + 1]]
+        conn_int = conn_int_all[:, b_conn_int[t]:b_conn_int[t + 1]]
+        conn_length = conn_length_all[b_conn_length[t]:b_conn_length[t + 1]]
+        lanes_offsets = lanes_offsets_all[b_lanes_offsets[t]:b_lanes_offsets[t + 1]]
+        lanes = lanes_all[b_lanes[t]:b_lanes[t + 1]]
+        conn_of_lane = conn_of_lane_all[b_conn_of_lane[t]:b_conn_of_lane[t + 1]]
+        offset_of_lane = offset_of_lane_all[b_offset_of_lane[t]:b_offset_of_lane[t + 1]]
+        foe_offsets = foe_offsets_all[b_foe_offsets[t]:b_foe_offsets[t + 1]]
+        foe = foe_all[b_foe[t]:b_foe[t + 1]]
+        foe_kind = foe_kind_all[b_foe_kind[t]:b_foe_kind[t + 1]]
+        zone = zone_all[:, b_zone[t]:b_zone[t + 1]]
         b = episode[k]
         own = own_local[o_lo[k]:o_hi[k]]
         lo, hi = f_lo[k], f_hi[k]
