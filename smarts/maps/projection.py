@@ -37,28 +37,43 @@ class LaneProjection(NamedTuple):
     distance: np.ndarray  # float64[N] distance to the lane's centre line
 
 
+class Grids(NamedTuple):
+    """The projection kernel's view of one or several maps' segment grids over one segment table:
+    map ``m``'s cells start at ``offsets[cell_base[m]]``, with ``ny[m]`` cells per column, its
+    ``origin[m]``, inverse cell size and largest cell index (x, y). ``smarts.maps.stack``
+    concatenates several maps' grids into one."""
+
+    table: np.ndarray  # float64[14, S] per-segment rows (see the _AX... constants)
+    offsets: np.ndarray  # intp[cells + 1] CSR of each cell's segments
+    segs: np.ndarray  # intp[...] segment indices
+    cell_base: np.ndarray  # int64[M]
+    ny: np.ndarray  # int64[M]
+    origin: np.ndarray  # float64[M, 2]
+    inv_cell: np.ndarray  # float64[M]
+    cell_max: np.ndarray  # float64[M, 2]
+
+
+_ONE_MAP = np.zeros(1, dtype=np.int64)  # every point on the grids' first (only) map
+
+
 class _Index:
     """Arrays derived once per map for the projection (kept on the RoadMap instance)."""
 
     def __init__(self, m: RoadMap, table: np.ndarray | None = None) -> None:
-        self.table = table if table is not None else self._segment_table(m)
         # The grid gains an empty border of cells so clamped outside (or NaN) points find nothing.
         nx, ny = m.grid_shape
         counts = np.zeros((nx + 2, ny + 2), dtype=np.int64)
         counts[1:-1, 1:-1] = np.diff(m.grid_offsets).reshape(nx, ny)
-        self.offsets = np.concatenate([[0], np.cumsum(counts.ravel())]).astype(np.intp)
-        self.ny = ny + 2
-        self.origin = np.asarray(m.grid_origin, dtype=np.float64) - m.grid_cell
-        self.inv_cell = 1.0 / m.grid_cell
-        self.cell_max_x, self.cell_max_y = float(nx + 1), float(ny + 1)
-        self.grid_segs = m.grid_segs.astype(np.intp)
-        # the kernel's per-map parameters (``smarts.maps.stack`` passes several maps' grids)
-        self.k_cell_base = np.zeros(1, dtype=np.int64)
-        self.k_ny = np.array([self.ny], dtype=np.int64)
-        self.k_origin = self.origin.reshape(1, 2).copy()
-        self.k_inv_cell = np.array([self.inv_cell])
-        self.k_cell_max = np.array([[self.cell_max_x, self.cell_max_y]])
-        self.k_map = np.zeros(1, dtype=np.int64)
+        self.grids = Grids(
+            table=table if table is not None else self._segment_table(m),
+            offsets=np.concatenate([[0], np.cumsum(counts.ravel())]).astype(np.intp),
+            segs=m.grid_segs.astype(np.intp),
+            cell_base=np.zeros(1, dtype=np.int64),
+            ny=np.array([ny + 2], dtype=np.int64),
+            origin=(np.asarray(m.grid_origin, dtype=np.float64) - m.grid_cell).reshape(1, 2),
+            inv_cell=np.array([1.0 / m.grid_cell]),
+            cell_max=np.array([[nx + 1, ny + 1]], dtype=np.float64),
+        )
 
     @staticmethod
     def _segment_table(m: RoadMap) -> np.ndarray:
@@ -112,15 +127,18 @@ def project(
     and NaN positions or headings, get lane -1.
     """
     ix = road_map.__dict__.get("_projection_index") or projection_index(road_map)
+    return project_on_grids(ix.grids, xy, heading, _ONE_MAP)
+
+
+def project_on_grids(grids: Grids, xy: np.ndarray, heading: np.ndarray | None, point_map: np.ndarray) -> LaneProjection:
+    """``project`` with each point ``xy[p]`` searched on the grid of map ``point_map[p]`` of
+    ``grids`` (``point_map`` of one entry: that map for every point)."""
     xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
     n = xy.shape[0]
     out = LaneProjection(np.empty(n, dtype=np.int32), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
     use_heading = heading is not None
     h = np.ascontiguousarray(heading, dtype=np.float64).reshape(-1) if use_heading else xy[:, 0]
-    _project_kernel(
-        ix.table, ix.offsets, ix.grid_segs, ix.k_cell_base, ix.k_ny, ix.k_origin, ix.k_inv_cell,
-        ix.k_cell_max, ix.k_map, xy, h, use_heading, *out,
-    )
+    _project_kernel(*grids, point_map, xy, h, use_heading, *out)
     return out
 
 

@@ -27,7 +27,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from smarts.maps.drivable import raster_lookup
-from smarts.maps.projection import LaneProjection, _Index, _project_kernel, projection_index
+from smarts.maps.projection import Grids, LaneProjection, _Index, project_on_grids, projection_index
 from smarts.maps.road_map import RoadMap
 
 
@@ -163,24 +163,18 @@ class MapStack:
     def _spatial_index(self) -> None:
         """Every window's projection grid over the one shared segment table, concatenated, and
         every map's drivable raster, for per-point lookups in one call."""
-        shared = None
-        grids = []
-        for window in self.windows:
-            if shared is None:
-                ix = projection_index(window)
-                shared = ix.table
-            else:
-                ix = _Index(window, table=shared)
-                window.__dict__["_projection_index"] = ix
-            grids.append(ix)
-        self.seg_table = shared
-        self.grid_offsets = _csr([ix.offsets for ix in grids]).astype(np.intp)
-        self.grid_segs = np.concatenate([ix.grid_segs for ix in grids]).astype(np.intp)
-        self.grid_cell_base = np.concatenate([[0], np.cumsum([len(ix.offsets) - 1 for ix in grids])]).astype(np.int64)
-        self.grid_ny = np.array([ix.ny for ix in grids], dtype=np.int64)
-        self.grid_origin = np.array([ix.origin for ix in grids], dtype=np.float64)
-        self.grid_inv_cell = np.array([ix.inv_cell for ix in grids], dtype=np.float64)
-        self.grid_cell_max = np.array([[ix.cell_max_x, ix.cell_max_y] for ix in grids], dtype=np.float64)
+        grids = [projection_index(self.windows[0]).grids]
+        for window in self.windows[1:]:
+            ix = _Index(window, table=grids[0].table)
+            window.__dict__["_projection_index"] = ix
+            grids.append(ix.grids)
+        self.grids = Grids(
+            table=grids[0].table,
+            offsets=_csr([g.offsets for g in grids]).astype(np.intp),
+            segs=np.concatenate([g.segs for g in grids]).astype(np.intp),
+            cell_base=np.concatenate([[0], np.cumsum([len(g.offsets) - 1 for g in grids[:-1]])]).astype(np.int64),
+            **{name: np.concatenate([getattr(g, name) for g in grids]) for name in ("ny", "origin", "inv_cell", "cell_max")},
+        )
         rasters = [raster_lookup(m) for m in self.maps]
         self.raster_flat = np.concatenate([r[4] for r in rasters])
         self.raster_base = np.concatenate([[0], np.cumsum([len(r[4]) for r in rasters])]).astype(np.int64)
@@ -191,19 +185,11 @@ class MapStack:
 
     def project(self, xy: np.ndarray, heading: np.ndarray | None, map_index: np.ndarray) -> LaneProjection:
         """``smarts.maps.project`` of each point ``xy[i]`` on map ``map_index[i]`` (stacked lanes)."""
-        xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
-        n = xy.shape[0]
+        n = np.asarray(xy).reshape(-1, 2).shape[0]
         map_index = np.asarray(map_index, dtype=np.int64).reshape(-1)
         if map_index.shape[0] != n or (n and not (0 <= map_index.min() and map_index.max() < self.num_maps)):
             raise ValueError(f"map_index: expected {n} map numbers from 0 to {self.num_maps - 1}, got {map_index!r}")
-        out = LaneProjection(np.empty(n, dtype=np.int32), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
-        use_heading = heading is not None
-        h = np.ascontiguousarray(heading, dtype=np.float64).reshape(-1) if use_heading else xy[:, 0]
-        _project_kernel(
-            self.seg_table, self.grid_offsets, self.grid_segs, self.grid_cell_base, self.grid_ny, self.grid_origin,
-            self.grid_inv_cell, self.grid_cell_max, map_index, xy, h, use_heading, *out,
-        )  # fmt: skip
-        return out
+        return project_on_grids(self.grids, xy, heading, map_index)
 
 
 def _refuse_space(combined: RoadMap) -> None:
