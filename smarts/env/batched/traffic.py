@@ -53,7 +53,7 @@ class BatchedBuiltinTraffic:
             for name in ("si", "st", "pa", "mine", "arrived", "acc", "guard", "change", "turn", "raw_lane",
                          "raw_row", "raw_kind", "raw_f", "e_row", "e_kind", "e_f", "lane_off"):  # fmt: skip
                 setattr(p, name, getattr(self, name)[k])
-        # One call per set of episodes with equal traffic specs on one map (equal route tables).
+        # Sets of episodes with equal traffic specs on one map share route tables (built alike, so equal).
         sets: dict[int, list[int]] = {}
         specs: list = []
         for k, p in enumerate(self.provider):
@@ -64,12 +64,12 @@ class BatchedBuiltinTraffic:
             else:
                 sets[len(specs)] = [k]
                 specs.append((p.map, p.traffic))
-        self.sets = [np.array(v, dtype=np.int64) for v in sets.values()]
-        self.set_of = np.zeros(m, dtype=np.int64)
-        for t, members in enumerate(self.sets):
+        set_members = [np.array(v, dtype=np.int64) for v in sets.values()]
+        self.set_of = np.zeros(m, dtype=np.int64)  # each provider's set: its part of the tables
+        for t, members in enumerate(set_members):
             self.set_of[members] = t
-        self.members = np.concatenate(self.sets) if self.sets else np.zeros(0, dtype=np.int64)
-        self.tables = _Tables([self.provider[members[0]] for members in self.sets])
+        self.members = np.concatenate(set_members) if set_members else np.zeros(0, dtype=np.int64)
+        self.tables = _Tables([self.provider[members[0]] for members in set_members])
         self.next_due = np.zeros(m)  # earliest departure time of each provider (inf: none)
         self.waiting = np.zeros(m, dtype=bool)  # a departure waits for room
         self.member_of = np.full(sim.episodes, -1, dtype=np.int64)
