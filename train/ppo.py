@@ -66,16 +66,10 @@ def env_options(cfg: TrainConfig) -> dict:
     }
 
 
-def batched_options(cfg: TrainConfig) -> dict:
-    """The batched backend's own settings: where its torch stages run (``device``; a GPU that is
-    not there is refused here, before anything is built or written)."""
-    resolve_device(cfg.device)
-    return {"sim_device": cfg.device}
-
-
 def check_env_split(cfg: TrainConfig, specs: list) -> None:
-    """Refuse, before anything is built or written, copies that cannot be split as configured."""
-    batched_options(cfg)
+    """Refuse, before anything is built or written, copies that cannot be split as configured (and
+    a ``device`` whose GPU is not there)."""
+    resolve_device(cfg.device)
     if cfg.backend == "per_env" and any(s.traffic is not None and s.traffic.engine == "sumo" for s in specs) and cfg.workers < cfg.envs:
         raise ValueError("SUMO scenarios run one per process: set workers equal to envs")
     if cfg.workers > 1:
@@ -100,7 +94,7 @@ def make_env(cfg: TrainConfig, specs: list | None = None) -> TransformedEnv:
     # backend batched: all copies as one vectorised simulation, whatever their maps (same keys and seeds)
     batch_env = BatchedTorchRLEnv if cfg.backend == "batched" else SmartsBatchedEnv
     if cfg.backend == "batched":
-        options.update(batched_options(cfg))
+        options["sim_device"] = cfg.device  # where its torch stages run
     if cfg.workers > 1:
         per = [specs[w :: cfg.workers] for w in range(cfg.workers)]
         base = ParallelEnv(cfg.workers, [functools.partial(batch_env, p, **options) for p in per],
