@@ -58,13 +58,14 @@ def case_specs(case: str, batch: int) -> list:
     scenario, controller = CASES[case]
     if scenario != "mix":
         return [case_spec(case)] * batch
-    suite = [s.spec for s in load_suite("adaptive").scenarios]
-    specs = []
-    for k in range(batch):
-        spec = suite[k % len(suite)]
-        agents = [dataclasses.replace(a, action_space="relative_target_pose", controller=controller) for a in spec.agents]
-        specs.append(dataclasses.replace(spec, agents=agents))
-    return specs
+    suite = [_on_relative_target_pose(s.spec, controller) for s in load_suite("adaptive").scenarios]
+    return [suite[k % len(suite)] for k in range(batch)]
+
+
+def _on_relative_target_pose(spec, controller: str):
+    """``spec`` with every agent on RelativeTargetPose driven by ``controller``."""
+    agents = [dataclasses.replace(a, action_space="relative_target_pose", controller=controller) for a in spec.agents]
+    return dataclasses.replace(spec, agents=agents)
 
 
 def case_spec(case: str):
@@ -89,8 +90,7 @@ def case_spec(case: str):
             },
             source="batched_step_benchmark",
         )  # fmt: skip
-    agents = [dataclasses.replace(a, action_space="relative_target_pose", controller=controller) for a in spec.agents]
-    return dataclasses.replace(spec, agents=agents)
+    return _on_relative_target_pose(spec, controller)
 
 
 def _actions(case: str, rng: np.random.Generator, n: int) -> np.ndarray:
