@@ -1,0 +1,246 @@
+"""Stepping a golden case on a backend and hashing what it gives, step by step.
+
+Four streams are hashed per step of an episode:
+- ``table``: every live row of the episode's vehicle table in row order: its row within the
+  episode, id, x, y, heading and speed (float64 bits);
+- ``obs``: the observation of every learning agent that acted, in scenario order, every key;
+- ``reward``: their rewards (as float32);
+- ``events``: their event flags and terminated/truncated flags.
+
+A step's record is 8 hex digits, 2 of each stream's digest of that step alone (so a mismatch names
+the first step and stream that differ, short enough to commit thousands of steps); an episode also
+keeps the chained digest of each stream over all its steps, which no difference escapes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tests.golden.cases import MAX_STEPS, golden_actions
+
+STREAMS = ("table", "obs", "reward", "events")
+
+
+def _digest(parts: list[bytes]) -> bytes:
+    h = hashlib.blake2b(digest_size=16)
+    for p in parts:
+        h.update(len(p).to_bytes(8, "little"))
+        h.update(p)
+    return h.digest()
+
+
+@dataclass
+class EpisodeRecord:
+    steps: list[str] = field(default_factory=list)
+    chains: dict[str, bytes] = field(default_factory=lambda: {s: b"" for s in STREAMS})
+
+    def add(self, table: bytes, obs: bytes, reward: bytes, events: bytes) -> None:
+        short = []
+        for name, value in zip(STREAMS, (table, obs, reward, events)):
+            d = _digest([value])
+            self.chains[name] = _digest([self.chains[name], d])
+            short.append(d.hex()[:2])
+        self.steps.append("".join(short))
+
+    def to_json(self) -> dict:
+        return {"steps": "".join(self.steps), **{k: v.hex() for k, v in self.chains.items()}}
+
+    def first_difference(self, golden: dict) -> str | None:
+        """None when this episode is the golden one; else where it first differs."""
+        mine = self.to_json()
+        if mine == golden:
+            return None
+        width = 2 * len(STREAMS)
+        theirs = golden["steps"]
+        for k in range(max(len(self.steps), len(theirs) // width)):
+            a, b = mine["steps"][k * width:(k + 1) * width], theirs[k * width:(k + 1) * width]
+            if a != b:
+                streams = [s for i, s in enumerate(STREAMS) if a[2 * i:2 * i + 2] != b[2 * i:2 * i + 2]]
+                if not a or not b:
+                    return f"length {len(self.steps)} steps, golden {len(theirs) // width}"
+                return f"step {k}: {', '.join(streams)}"
+        streams = [s for s in STREAMS if mine[s] != golden[s]]
+        return f"chained digests of {', '.join(streams)}"
+
+
+def table_bytes(ids: list, alive: np.ndarray, x, y, heading, speed) -> bytes:
+    """The ``table`` stream of one episode: ``alive`` its live rows (episode-local, ascending)."""
+    rows = np.flatnonzero(alive)
+    parts = [rows.astype(np.int64).tobytes(), "\0".join(str(ids[r]) for r in rows.tolist()).encode()]
+    for col in (x, y, heading, speed):
+        parts.append(np.ascontiguousarray(col[rows], dtype=np.float64).tobytes())
+    return _digest(parts)
+
+
+def obs_bytes(per_agent: list[dict[str, np.ndarray]]) -> bytes:
+    parts = []
+    for obs in per_agent:
+        for key in sorted(obs):
+            v = np.ascontiguousarray(obs[key])
+            parts += [key.encode(), str(v.dtype).encode(), repr(v.shape).encode(), v.tobytes()]
+    return _digest(parts)
+
+
+def reward_bytes(rewards) -> bytes:
+    return np.asarray(rewards, dtype=np.float32).tobytes()
+
+
+def events_bytes(events: np.ndarray, terminated, truncated) -> bytes:
+    return _digest([
+        np.ascontiguousarray(events, dtype=bool).tobytes(),
+        np.asarray(terminated, dtype=bool).tobytes(),
+        np.asarray(truncated, dtype=bool).tobytes(),
+    ])  # fmt: skip
+
+
+def _kinds(spec, agent_ids: list[str]) -> list[tuple[str, str]]:
+    by_id = {a.id: a for a in spec.agents}
+    return [(by_id[a].action_space, by_id[a].controller) for a in agent_ids]
+
+
+# ---------------------------------------------------------------------------- per-env backend
+def run_single(spec, seed: int, max_steps: int = MAX_STEPS) -> EpisodeRecord:
+    """One episode of ``spec`` with ``seed`` on ``DrivingParallelEnv``."""
+    from smarts.env import DrivingParallelEnv
+
+    env = DrivingParallelEnv(spec)
+    try:
+        return _run_single(env, spec, seed, max_steps)
+    finally:
+        env.close()
+
+
+def _run_single(env, spec, seed: int, max_steps: int) -> EpisodeRecord:
+    sim = env.sim
+    learners = set(env.possible_agents)
+    local = {a.id: i for i, a in enumerate(spec.agents)}
+    message = len(env.comms.message_components) if env.comms is not None else 0
+    seen: dict = {}
+
+    def listener(s) -> None:
+        acting = [a for a in s.active_agents.tolist() if s.agent_ids[a] in learners]
+        t = s.table
+        seen["table"] = table_bytes(t.ids, t.alive, t.x, t.y, t.heading, t.speed)
+        seen["events"] = s.agent_events[acting].copy()
+
+    env.add_step_listener(listener)
+    record = EpisodeRecord()
+    obs, _ = env.reset(seed=seed)
+    t = sim.table
+    first = [a for a in sim.active_agents.tolist() if sim.agent_ids[a] in learners]
+    record.add(
+        table_bytes(t.ids, t.alive, t.x, t.y, t.heading, t.speed),
+        obs_bytes([obs[a] for a in env.agents]),
+        b"",
+        events_bytes(sim.agent_events[first], [], []),
+    )
+    for step in range(1, max_steps + 1):
+        if not env.agents:
+            break
+        ids = list(env.agents)
+        batch = {k: np.stack([obs[a][k] for a in ids]) for k in obs[ids[0]]}
+        rows = sim.agent_row[[sim.agent_index[a] for a in ids]]
+        poses = np.stack([t.x[rows], t.y[rows], t.heading[rows]], axis=1)
+        kinds = _kinds(spec, ids)
+        acts = golden_actions(batch, kinds, poses, np.array([local[a] for a in ids]), step - 1, spec.step_length, message)
+        actions = {a: acts[i, : _width(kinds[i]) + message] for i, a in enumerate(ids)}
+        obs, rewards, terms, truncs, _ = env.step(actions)
+        acted = list(rewards)
+        record.add(
+            seen["table"],
+            obs_bytes([obs[a] for a in acted]),
+            reward_bytes([rewards[a] for a in acted]),
+            events_bytes(seen["events"], [terms[a] for a in acted], [truncs[a] for a in acted]),
+        )
+    return record
+
+
+def _width(kind: tuple[str, str]) -> int:
+    space, controller = kind
+    return 2 if controller == "lane_relative" or space == "lane" else 3
+
+
+# ---------------------------------------------------------------------------- batched backend
+def run_batched(specs: list, seeds: list[int], max_steps: int = MAX_STEPS) -> list[EpisodeRecord]:
+    """The first episode of each copy (``specs[i]`` with ``seeds[i]``) on the batched backend,
+    all copies in one ``BatchedDriving``."""
+    from smarts.env.batched import BatchedDriving
+
+    bd = BatchedDriving(specs)
+    try:
+        return _run_batched(bd, specs, seeds, max_steps)
+    finally:
+        bd.close()
+
+
+def _episode_table(bd, copy: int):
+    g, b = bd.copy_place[copy]
+    sim = bd.groups[g].sim
+    return sim, sim.views[b].table, b
+
+
+def _run_batched(bd, specs: list, seeds: list[int], max_steps: int) -> list[EpisodeRecord]:
+    pending = {i: s for i, s in enumerate(seeds)}
+    bd.seed_schedule = lambda copy: pending.pop(copy, 0)
+    n_copies = len(specs)
+    slots = bd.slots
+    slot_copy = np.array([c for c, _ in slots])
+    local = np.array([[a.id for a in specs[c].agents].index(aid) for c, aid in slots])
+    kinds = [_kinds(specs[c], [aid])[0] for c, aid in slots]
+    seen: dict = {}
+
+    slot_agent: list[tuple] = [None] * len(slots)  # slot -> (group simulation, union agent)
+    for g in bd.groups:
+        for a, j in enumerate(g.agent_slot.tolist()):
+            slot_agent[j] = (g.sim, a)
+
+    def tables() -> list[bytes]:
+        out = []
+        for c in range(n_copies):
+            _, t, _ = _episode_table(bd, c)
+            out.append(table_bytes(t.ids, t.alive, t.x, t.y, t.heading, t.speed))
+        return out
+
+    def events_of(sel: np.ndarray) -> np.ndarray:
+        return np.array([slot_agent[j][0].agent_events[slot_agent[j][1]] for j in sel.tolist()], dtype=bool).reshape(len(sel), -1)
+
+    def listener() -> None:
+        seen["tables"] = tables()
+        seen["active"] = [bool(s.agent_active[a]) for s, a in slot_agent]
+        seen["events"] = {j: s.agent_events[a].copy() for j, (s, a) in enumerate(slot_agent) if s.agent_active[a]}
+
+    bd.add_step_listener(listener)
+    obs = bd.reset()
+    records = [EpisodeRecord() for _ in range(n_copies)]
+    for c, tb in enumerate(tables()):
+        sel = np.flatnonzero(slot_copy == c)
+        records[c].add(tb, obs_bytes([{k: v[j] for k, v in obs.items()} for j in sel]), b"",
+                       events_bytes(events_of(sel), [], []))  # fmt: skip
+    done_copies = np.zeros(n_copies, dtype=bool)
+    for step in range(1, max_steps + 1):
+        if done_copies.all():
+            break
+        poses = np.zeros((len(slots), 3))
+        for j, (sim, a) in enumerate(slot_agent):
+            r = sim.agent_row[a]
+            if r >= 0:
+                poses[j] = (sim.table.x[r], sim.table.y[r], sim.table.heading[r])
+        acts = golden_actions(obs, kinds, poses, local, step - 1, specs[0].step_length)
+        acts = acts[:, : bd.action_space.shape[0]]
+        result = bd.step(acts)
+        obs = result.obs
+        for c in np.flatnonzero(~done_copies).tolist():
+            sel = np.flatnonzero((slot_copy == c) & result.acted)
+            records[c].add(
+                seen["tables"][c],
+                obs_bytes([{k: v[j] for k, v in obs.items()} for j in sel]),
+                reward_bytes(result.reward[sel]),
+                events_bytes(np.array([seen["events"][j] for j in sel.tolist()], dtype=bool).reshape(len(sel), -1),
+                             result.terminated[sel], result.truncated[sel]),
+            )
+            if result.restarted[slot_copy == c].any():
+                done_copies[c] = True
+    return records

@@ -1,0 +1,89 @@
+"""Every backend and batch size against the golden trajectories (``tests/golden/golden.json``).
+
+The golden file holds per-step digests of the vehicle table, observations, rewards and events of
+every golden case (``tests.golden.cases``) and seed, recorded with ``python -m tests.golden.record``.
+An episode must give the same bits alone (the per-env backend), among the copies of its own case
+(B = 3, one per seed) and among every case the batched backend runs (one simulation of many maps).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from tests.golden.cases import MAX_STEPS, SEEDS, all_cases
+from tests.golden.record import GOLDEN
+from tests.golden.run import run_batched, run_single
+
+CASES = {c.name: c for c in all_cases()}
+GOLD = json.loads(GOLDEN.read_text())
+
+NOT_BATCHED = {
+    name for name, c in CASES.items()
+    if c.sumo or name in {
+        "library/intersection_v2v", "library/straight_takeover", "library/t_junction_social",
+        "readme/readme_all_sensors", "readme/readme_v2v", "feature/feature_occlusion_flag",
+        "feature/feature_continuous", "feature/feature_lane", "feature/feature_mixed_spaces",
+        "feature/replay_ngsim",
+    }
+}  # fmt: skip
+"""Cases the batched backend refuses today (SUMO, comms, social agents, take-over, occlusion,
+lidar and rasters, Continuous and Lane actions, replay)."""
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("golden")
+
+
+def _specs(work: Path, name: str):
+    return CASES[name].load(work)
+
+
+def test_the_golden_file_covers_every_case_and_seed():
+    assert GOLD["max_steps"] == MAX_STEPS
+    assert sorted(GOLD["cases"]) == sorted(CASES)
+    for name, episodes in GOLD["cases"].items():
+        assert sorted(episodes) == sorted(str(s) for s in SEEDS), name
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_single_episodes_match_the_golden_trajectories(name, work):
+    spec = _specs(work, name)
+    problems = {}
+    for seed in SEEDS:
+        diff = run_single(spec, seed).first_difference(GOLD["cases"][name][str(seed)])
+        if diff is not None:
+            problems[seed] = diff
+    assert not problems, f"{name}: seeds differ from the golden trajectories: {problems}"
+
+
+@pytest.mark.parametrize("name", sorted(set(CASES) - NOT_BATCHED))
+def test_batched_copies_of_one_case_match_the_golden_trajectories(name, work):
+    spec = _specs(work, name)
+    records = run_batched([spec] * len(SEEDS), list(SEEDS))
+    problems = {}
+    for seed, record in zip(SEEDS, records):
+        diff = record.first_difference(GOLD["cases"][name][str(seed)])
+        if diff is not None:
+            problems[seed] = diff
+    assert not problems, f"{name}: batched copies differ from the golden trajectories: {problems}"
+
+
+def test_one_batch_of_every_batched_case_matches_the_golden_trajectories(work):
+    names = sorted(set(CASES) - NOT_BATCHED)
+    specs = [_specs(work, n) for n in names]
+    # Today's batched backend steps one action space and controller per batch.
+    kinds = [{(a.action_space, a.controller) for a in s.agents} for s in specs]
+    keep = [i for i, k in enumerate(kinds) if k == {("relative_target_pose", "direct")}]
+    names, specs = [names[i] for i in keep], [specs[i] for i in keep]
+    seeds = [SEEDS[i % len(SEEDS)] for i in range(len(names))]
+    records = run_batched(specs, seeds)
+    problems = {}
+    for name, seed, record in zip(names, seeds, records):
+        diff = record.first_difference(GOLD["cases"][name][str(seed)])
+        if diff is not None:
+            problems[f"{name} seed {seed}"] = diff
+    assert not problems, f"copies differ from the golden trajectories in one batch: {problems}"
