@@ -73,6 +73,9 @@ class _Group:
     def __init__(self, sim: BatchedSimulation, copies: list[int], reward, reward_spec, agent_slot: np.ndarray):
         self.sim, self.copies, self.reward, self.reward_spec = sim, copies, reward, reward_spec
         self.agent_slot = agent_slot  # slot of each union agent
+        # Events that end an agent as terminated (the step limit truncates): the group's own set.
+        self.terminal = sim.event_config.terminate_on.copy()
+        self.terminal[Event.MAX_STEPS] = False
 
 
 class BatchedDriving:
@@ -146,8 +149,6 @@ class BatchedDriving:
         self.seed_schedule: Callable[[int], int | None] | None = None
         """When set, ``seed_schedule(copy)`` gives each new episode's seed instead (adapters with
         their own seeding convention)."""
-        self._terminal = self.groups[0].sim.event_config.terminate_on.copy()
-        self._terminal[Event.MAX_STEPS] = False
 
     # ------------------------------------------------------------------ per-episode readers
     def episode_sim(self, copy: int) -> EpisodeSim:
@@ -253,7 +254,7 @@ class BatchedDriving:
                 r = default_rewards(sim, agents, group.reward_spec)
             events = sim.agent_events[agents]
             done = sim.agent_done[agents]
-            term = (events & self._terminal).any(axis=1)
+            term = (events & group.terminal).any(axis=1)
             reward[slots] = r
             terminated[slots] = term
             truncated[slots] = done & ~term
