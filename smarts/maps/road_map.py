@@ -31,6 +31,12 @@ import numpy as np
 from smarts.cache import atomic_write_bytes
 from smarts.maps.errors import MapError
 
+MARK_CROSSWALK, MARK_BIKE_LANE, MARK_SPEED_BUMP = 1, 2, 3
+"""Kinds of :attr:`RoadMap.mark_kind`: a pedestrian crossing, a bike lane (not driven by cars), a
+speed bump."""
+OPTIONAL_FIELDS = ("mark_kind", "mark_offsets", "mark_points")
+"""Fields a saved map may lack (written before they existed): they take their empty defaults."""
+
 CHECKSUM_KEY = "_sha256"
 """Entry of a saved map holding the SHA-256 of all its other arrays (see :func:`arrays_sha256`)."""
 
@@ -131,6 +137,11 @@ class RoadMap:
     stop_sign_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # float64[N, 2] position
     stop_sign_lane: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))  # lane it controls, -1 if none
 
+    # --- marks on or beside the road (K of them; from dataset maps), polygons CSR over marks ---
+    mark_kind: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int8))  # MARK_* below
+    mark_offsets: np.ndarray = field(default_factory=lambda: np.zeros(1, np.int64))  # int64[K + 1]
+    mark_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # float64[P, 2] outlines
+
     lane_index_of: dict[str, int] = field(default_factory=dict, repr=False)
     road_index_of: dict[str, int] = field(default_factory=dict, repr=False)
 
@@ -196,6 +207,12 @@ class RoadMap:
     def lane_polyline(self, lane: int) -> np.ndarray:
         return self.points[self.lane_point_offsets[lane] : self.lane_point_offsets[lane + 1]]
 
+    def marks(self, kind: int | None = None) -> list[np.ndarray]:
+        """Outlines (float64[k, 2]) of the marks of ``kind`` (None: every mark)."""
+        off = self.mark_offsets
+        return [self.mark_points[off[i] : off[i + 1]] for i in range(len(self.mark_kind))
+                if kind is None or int(self.mark_kind[i]) == kind]  # fmt: skip
+
     def lane_lanepoints(self, lane: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(xy[n, 2], s[n], heading[n]) of a lane's ~1 m lanepoints."""
         a, b = self.lanepoint_offsets[lane], self.lanepoint_offsets[lane + 1]
@@ -226,6 +243,8 @@ class RoadMap:
         kwargs = {}
         for f in fields(cls):
             if f.name in ("lane_index_of", "road_index_of", "junction_shapes"):
+                continue
+            if f.name in OPTIONAL_FIELDS and f.name not in data:
                 continue
             value = data[f.name]
             if f.name in ("lane_ids", "road_ids", "tls_ids"):

@@ -130,6 +130,8 @@ class MapStack:
             tls_phase_state=cat([c["tls_phase_state"] for c in conns]),
             stop_sign_xy=cat([c["stop_sign_xy"] for c in conns]).reshape(-1, 2),
             stop_sign_lane=cat([c["stop_sign_lane"] for c in conns]),
+            mark_kind=cat([m.mark_kind for m in maps]), mark_offsets=_csr([m.mark_offsets for m in maps]),
+            mark_points=cat([m.mark_points for m in maps]).reshape(-1, 2),
             # ids repeat across maps: look them up in a window (keys here name the map)
             lane_index_of={f"{k}:{lane}": int(self.lane_base[k]) + i for k, m in enumerate(maps) for i, lane in enumerate(m.lane_ids)},
             road_index_of={f"{k}:{road}": int(self.road_base[k]) + i for k, m in enumerate(maps) for i, road in enumerate(m.road_ids)},
@@ -146,7 +148,7 @@ class MapStack:
             window.__dict__.pop(name, None)
         window.source, window.content_hash = m.source, m.content_hash
         for name in ("grid_origin", "grid_cell", "grid_shape", "grid_margin", "raster_origin", "raster_resolution",
-                     "drivable", "bounds", "junction_shapes"):  # fmt: skip
+                     "drivable", "bounds", "junction_shapes", "mark_kind", "mark_offsets", "mark_points"):  # fmt: skip
             setattr(window, name, getattr(m, name))
         window.grid_offsets = m.grid_offsets
         window.grid_segs = _shifted(m.grid_segs, int(self.seg_base[k]))

@@ -17,7 +17,7 @@ import numpy as np
 
 from smarts.core.errors import ReplayError, ScenarioError
 from smarts.core.spec.replay import ReplaySpec
-from smarts.replay.recording import FRAME_EPS, Recording
+from smarts.replay.recording import DRIVABLE_KINDS, FRAME_EPS, TIME_TOLERANCE, Recording
 
 _CACHE: OrderedDict[tuple, Recording] = OrderedDict()
 _CACHE_SIZE = 4
@@ -40,10 +40,15 @@ def read_recording(
     offset: tuple[float, float] = (0.0, 0.0),
     scenario: str | None = None,
 ) -> Recording:
-    """Read a recording of ``fmt`` (ngsim, argoverse2, waymo) from ``path`` (cached)."""
+    """Read a recording of ``fmt`` (ngsim, argoverse2, waymo) from ``path`` (cached). ``scenario``
+    picks a Waymo scenario (id or record index) or an NGSIM site (the ``Location`` of the data
+    portal's file)."""
     path = Path(path)
     if not path.exists():
         raise ReplayError(f"{path}: {fmt} recording does not exist")
+    if fmt == "argoverse2" and scenario is not None:
+        raise ReplayError(f"{path}: scenario {scenario!r}: an Argoverse 2 scenario is a folder of its own (name it "
+                          "in path)")  # fmt: skip
     stat = path.stat()
     key = (fmt, str(path.resolve()), stat.st_size, stat.st_mtime_ns, coordinates, swap_xy, flip_y, tuple(offset), scenario)
     rec = _CACHE.get(key)
@@ -54,7 +59,7 @@ def read_recording(
     if fmt == "ngsim":
         from smarts.replay.ngsim import read_ngsim
 
-        rec = read_ngsim(path, coordinates=coordinates, **options)
+        rec = read_ngsim(path, coordinates=coordinates, location=scenario, **options)
     elif fmt == "argoverse2":
         from smarts.replay.argoverse2 import read_argoverse2
 
@@ -132,26 +137,33 @@ def plan_replay(replay: ReplaySpec, base_dir: Path | None, source: str = "<dict>
         known = rec.index_of
     for agent, vid in replay.take_over.items():
         if vid not in known:
-            problems.append(f"{where}.take_over.{agent}: no vehicle {vid!r} in {rec.source} ({_some(rec.ids)})")
+            what = rec.skipped.get(vid)
+            if what is not None:
+                problems.append(f"{where}.take_over.{agent}: {vid!r} in {rec.source} is {what}, which is not replayed; "
+                                f"an agent takes over a vehicle ({_some(_drivable(rec))})")  # fmt: skip
+            else:
+                problems.append(f"{where}.take_over.{agent}: no vehicle {vid!r} in {rec.source} ({_some(rec.ids)})")
+        elif rec.kind[known[vid]] not in DRIVABLE_KINDS:
+            problems.append(f"{where}.take_over.{agent}: {vid!r} in {rec.source} is a {rec.kind_name(known[vid])}, not a "
+                            f"vehicle; an agent takes over a vehicle ({_some(_drivable(rec))})")  # fmt: skip
     if problems:
         raise ScenarioError("\n".join(problems))
     taken = [known[v] for v in replay.take_over.values()]
     start = replay.start
     if start is None:
         start = max((rec.entry_time(k) for k in taken), default=0.0)
-    if start > rec.duration + FRAME_EPS:
+    if start > rec.duration + TIME_TOLERANCE * rec.dt:
         raise ScenarioError(f"{where}.start: the recording lasts {rec.duration:g} s, got {start:g}")
     take_overs = []
     for (agent, vid), k in zip(replay.take_over.items(), taken):
         entry, exit_ = rec.entry_time(k), rec.exit_time(k)
-        if not entry - FRAME_EPS * rec.dt <= start <= exit_ + FRAME_EPS * rec.dt:
+        if not entry - TIME_TOLERANCE * rec.dt <= start <= exit_ + TIME_TOLERANCE * rec.dt:
             problems.append(
                 f"{where}.take_over.{agent}: vehicle {vid!r} is recorded from {entry:g} s to {exit_:g} s, not at "
                 f"the start ({start:g} s); set replay.start within that time or leave it out"
             )
             continue
-        frame = rec.start_frame + start / rec.dt
-        _, state = rec.state_at(frame, np.array([k]))
+        _, state = rec.state_at(rec.frame_of(start), np.array([k]))
         track = rec.track(k)
         take_overs.append(TakeOver(agent, vid, table_id(vid), state[:2, 0].copy(), float(state[2, 0]),
                                    float(state[3, 0]), track[-1, :2].copy()))  # fmt: skip
@@ -164,8 +176,12 @@ def most_at_once(rec: Recording, start: float = 0.0, duration: float | None = No
     """The most vehicles recorded at one frame between ``start`` and ``start + duration`` s."""
     if rec.num_vehicles == 0:
         return 0
-    lo = rec.start_frame + int(np.floor(start / rec.dt + FRAME_EPS))
-    hi = rec.last.max() if duration is None else min(rec.last.max(), lo + int(np.ceil(duration / rec.dt - FRAME_EPS)))
+    lo = int(np.floor(rec.frame_of(start) + FRAME_EPS))
+    hi = int(rec.last.max())
+    if duration is not None:
+        hi = min(hi, int(np.floor(rec.frame_of(start + duration) + FRAME_EPS)))
+    if hi < lo:
+        return 0
     first = np.maximum(rec.first, lo)
     last = np.minimum(rec.last, hi)
     inside = first <= last
@@ -188,6 +204,10 @@ def check_capacity(plan: ReplayPlan, capacity: int, agents: int, source: str = "
         )
 
 
+def _drivable(rec: Recording) -> list[str]:
+    return [vid for vid, kind in zip(rec.ids, rec.kind.tolist()) if kind in DRIVABLE_KINDS]
+
+
 def _some(ids: list[str], n: int = 8) -> str:
     head = ", ".join(ids[:n])
     return f"vehicles: {head}{', ...' if len(ids) > n else ''} ({len(ids)} in all)"
@@ -203,15 +223,33 @@ def take_over_mission(road_map, take: TakeOver, where: str):
     from smarts.core.errors import MapError
     from smarts.core.spec.scenario import GoalSpec, MissionSpec, StartSpec
     from smarts.maps import project
+    from smarts.maps.errors import NoRouteError
+    from smarts.maps.routing import shortest_route
 
     proj = project(road_map, take.start_xy[None, :], np.array([take.start_heading]))
     lane = int(proj.lane[0])
+    sx, sy = (float(v) for v in take.start_xy)
+    gx, gy = (float(v) for v in take.goal_xy)
     if lane < 0:
         raise MapError(
-            f"{where}: vehicle {take.vehicle_id!r} starts at ({take.start_xy[0]:.1f}, {take.start_xy[1]:.1f}), "
-            f"which is on no lane of {road_map.source}; line the recording up with the map "
-            "(replay.coordinates, swap_xy, flip_y, offset)"
+            f"{where}: vehicle {take.vehicle_id!r} starts at ({sx:.1f}, {sy:.1f}), which is on no lane of "
+            f"{road_map.source}; line the recording up with the map (replay.coordinates, swap_xy, flip_y, offset)"
         )
+    goal_lane = int(project(road_map, take.goal_xy[None, :]).lane[0])
+    if goal_lane < 0:
+        raise MapError(
+            f"{where}: vehicle {take.vehicle_id!r} ends at ({gx:.1f}, {gy:.1f}), which is off the map "
+            f"{road_map.source} (on no lane; the recording runs beyond the map): take over a vehicle whose track "
+            "ends on the map"
+        )
+    try:
+        shortest_route(road_map, lane, goal_lane)
+    except NoRouteError:
+        raise MapError(
+            f"{where}: vehicle {take.vehicle_id!r}: no route on {road_map.source} from where it starts "
+            f"({sx:.1f}, {sy:.1f}, lane {road_map.lane_ids[lane]!r}) to where it ends ({gx:.1f}, {gy:.1f}, lane "
+            f"{road_map.lane_ids[goal_lane]!r})"
+        ) from None
     road = road_map.road_ids[int(road_map.lane_road[lane])]
     offset = float(np.clip(proj.s[0], 0.0, road_map.lane_length[lane]))
     start = StartSpec(road=road, lane=int(road_map.lane_index[lane]), offset=offset,

@@ -1,10 +1,12 @@
-"""The replay provider: recorded vehicles follow their tracks, interpolated to the simulation step.
+"""The replay provider: recorded road users follow their tracks, interpolated to the simulation step.
 
-Each step looks every recorded vehicle of the window up at once (``Recording.state_at`` on arrays):
-vehicles whose track starts by now enter the vehicle table, those whose track has ended leave it,
-and the rest get their interpolated pose and speed written into their rows. A row handed to another
-provider (an agent taking a vehicle over, or the traffic model when the vehicle turns reactive) is
-released for good: its recording is no longer replayed.
+Each step looks every recorded road user of the window up at once, on the recording's own clock
+(``Recording.frame_of``): those whose track starts by now enter the vehicle table (pedestrians with
+the pedestrian role, so observations, collisions and occlusion see them as such), those whose track
+has ended leave it, and the rest get their interpolated pose and speed written into their rows.
+Recorded traffic-signal states (Waymo) are written into the simulation's signals each frame. A row
+handed to another provider (an agent taking a vehicle over, or the traffic model when the vehicle
+turns reactive) is released for good: its recording is no longer replayed.
 
 Reactive hand-over goes through the simulation's ``hand_over`` to a provider the env assembles
 (``reactive_target``, the built-in traffic model); this package never imports traffic.
@@ -21,7 +23,7 @@ import numpy as np
 from smarts.core.provider import ProviderBase
 from smarts.core.geometry import wrap_scalar
 from smarts.core.vehicle_table import COLUMN, Role, VehicleType
-from smarts.replay.recording import FRAME_EPS, Recording, interpolate
+from smarts.replay.recording import FRAME_EPS, ObjectKind, Recording, interpolate
 
 if TYPE_CHECKING:
     from smarts.core.provider import Provider
@@ -31,6 +33,10 @@ ID_PREFIX = "replay-"
 """Vehicle table ids of recorded vehicles are this prefix and the dataset's id."""
 
 PENDING, DRIVING, DONE = 0, 1, 2
+SIGNAL_CHARS = "oryGryGry"
+"""Waymo's signal state codes (unknown, arrow stop/caution/go, stop/caution/go, flashing stop and
+caution) as SUMO state letters: stop red, caution yellow, go green, unknown no signal; a flashing
+red is a stop and a flashing yellow a caution."""
 
 
 def table_id(vehicle_id: str) -> str:
@@ -54,8 +60,9 @@ class ReplayProvider(ProviderBase):
         reactive_target: Provider | None = None,
     ):
         self.recording = recording
-        self.start_frame = recording.start_frame + start / recording.dt
-        self.end_frame = np.inf if duration is None else self.start_frame + duration / recording.dt
+        self.start_time = float(start)
+        self.start_frame = recording.frame_of(self.start_time)
+        self.end_frame = np.inf if duration is None else recording.frame_of(self.start_time + duration)
         self.reactive = reactive
         self.reactive_distance = float(reactive_distance)
         self.reactive_target = reactive_target
@@ -77,6 +84,10 @@ class ReplayProvider(ProviderBase):
         self._vehicle_of_row = np.zeros(0, dtype=np.int64)
         self._dims = np.stack([recording.length[self.vehicles], recording.width[self.vehicles]])
         self._vtype = recording.vtype[self.vehicles]
+        self._role = np.where(recording.kind[self.vehicles] == ObjectKind.PEDESTRIAN, int(Role.PEDESTRIAN),
+                              int(Role.REPLAY))  # fmt: skip
+        self._signal_tls: np.ndarray | None = None  # the map's signal index of each recorded signal
+        self._signal_frame = -1
         self._enter = np.zeros(n, dtype=np.int64)  # scratch: vehicles entering / leaving this step
         self._leave = np.zeros(n, dtype=np.int64)
         self.handed_over: list[str] = []
@@ -88,9 +99,12 @@ class ReplayProvider(ProviderBase):
         self.row[:] = -1
         self._vehicle_of_row = np.full(sim.table.capacity, -1, dtype=np.int64)
         self.handed_over = []
+        self._signal_tls = None
+        self._signal_frame = -1
         self._advance(sim, 0.0)
 
     def start(self, sim: Simulation) -> None:
+        self._signals(sim, force=True)  # after every reset, so a fixed-time reset cannot undo it
         if self.reactive == "always":
             self._hand_to_traffic(sim, self.row[self.state == DRIVING])
 
@@ -98,6 +112,7 @@ class ReplayProvider(ProviderBase):
         if self.reactive == "interaction":
             self._interactions(sim)
         self._advance(sim, dt)
+        self._signals(sim)
         if self.reactive == "always":
             fresh = self.row[(self.state == DRIVING)]
             if fresh.size:
@@ -113,8 +128,30 @@ class ReplayProvider(ProviderBase):
 
     # ------------------------------------------------------------------ per step
     def frame_at(self, time: float) -> float:
-        """The recording's (fractional) frame at simulation time ``time``."""
-        return self.start_frame + time / self.recording.dt
+        """The recording's (fractional) frame at simulation time ``time``, on its own clock."""
+        return self.recording.frame_of(self.start_time + time)
+
+    def _signals(self, sim: Simulation, force: bool = False) -> None:
+        """The recorded signal states of the frame at or before now, written into the simulation's
+        signals (those of the map named ``signal_<lane>``; only when the frame changed)."""
+        signals = getattr(sim, "signals", None)
+        rec = self.recording
+        if signals is None or rec.signal_states is None or rec.road_map is None:
+            return
+        if self._signal_tls is None:
+            from smarts.replay.lane_map import SIGNAL_PREFIX
+
+            index = {tls: t for t, tls in enumerate(sim.road_map.tls_ids)}
+            self._signal_tls = np.array([index.get(SIGNAL_PREFIX + lane, -1) for lane in rec.road_map.signal_lanes])
+        frame = self.frame_at(sim.time)
+        rel = int(np.floor(frame - rec.start_frame + FRAME_EPS))
+        rel = min(max(rel, 0), len(rec.signal_states) - 1)
+        if rel == self._signal_frame and not force:
+            return
+        self._signal_frame = rel
+        codes = rec.signal_states[rel]
+        tls_ids = sim.road_map.tls_ids
+        signals.set_states({tls_ids[t]: SIGNAL_CHARS[int(c)] for t, c in zip(self._signal_tls.tolist(), codes) if t >= 0})
 
     def _advance(self, sim: Simulation, dt: float) -> None:
         rec = self.recording
@@ -137,7 +174,7 @@ class ReplayProvider(ProviderBase):
                                 rec.x, rec.y, rec.heading, rec.speed)  # fmt: skip
             for i, k in enumerate(entering.tolist()):
                 row = table.add(
-                    self.table_ids[k], owner=self.provider_id, role=Role.REPLAY,
+                    self.table_ids[k], owner=self.provider_id, role=Role(int(self._role[k])),
                     x=float(st[0, i]), y=float(st[1, i]), heading=float(st[2, i]), speed=float(st[3, i]),
                     vtype=VehicleType(int(self._vtype[k])), length=float(self._dims[0, k]),
                     width=float(self._dims[1, k]),

@@ -1,19 +1,71 @@
-"""A recorded dataset's tracks as flat arrays: one contiguous run of frames per vehicle.
+"""A recorded dataset's tracks as flat arrays: one contiguous run of frames per road user.
 
 Every reader (NGSIM, Argoverse 2, Waymo) produces a :class:`Recording`. Tracks are stored CSR-style
-(``offsets[v]:offsets[v + 1]`` slices vehicle ``v``'s frames out of the flat state arrays), so a
+(``offsets[v]:offsets[v + 1]`` slices road user ``v``'s frames out of the flat state arrays), so a
 recording of thousands of vehicles over an hour costs memory for its samples only, and the replay
-provider gathers every vehicle's state at a time with one vectorised lookup.
+provider gathers every road user's state at a time with one vectorised lookup.
+
+Frames are the recording's own clock: frame ``k`` is at ``times[k - start_frame]`` seconds after the
+first frame (Waymo's jittery timestamps as recorded), or at ``(k - start_frame) * dt`` when the source
+has a fixed rate (NGSIM, Argoverse 2). A simulation time maps to a (fractional) frame through
+:meth:`Recording.frame_of`, which snaps to a recorded frame within :data:`TIME_TOLERANCE` of a frame
+interval, so the first and last frames are always hit.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import IntEnum
 
 import numpy as np
 
 from smarts.core.errors import ReplayError
 from smarts.core.geometry import wrap_angle
+from smarts.core.vehicle_table import VehicleType
+
+
+class ObjectKind(IntEnum):
+    """What a recorded road user is, as the dataset says (wider than the vehicle table's types)."""
+
+    PASSENGER = 0
+    BUS = 1
+    TRUCK = 2
+    MOTORCYCLE = 3
+    PEDESTRIAN = 4
+    CYCLIST = 5
+
+
+def table_type(kind: int) -> VehicleType:
+    """The vehicle table's type for an object kind. A cyclist is a motorcycle-sized two-wheeler to
+    the table until the table has a bicycle type of its own."""
+    if kind == ObjectKind.CYCLIST:
+        return getattr(VehicleType, "BICYCLE", VehicleType.MOTORCYCLE)
+    return VehicleType(int(kind))
+
+
+DRIVABLE_KINDS = (ObjectKind.PASSENGER, ObjectKind.BUS, ObjectKind.TRUCK, ObjectKind.MOTORCYCLE)
+"""Kinds an agent may take over (a pedestrian or cyclist is not driven by a vehicle model)."""
+
+# kinds of DatasetMap.marks
+CROSSWALK, BIKE_LANE, SPEED_BUMP = 1, 2, 3
+MARK_NAMES = {CROSSWALK: "crosswalk", BIKE_LANE: "bike_lane", SPEED_BUMP: "speed_bump"}
+# kinds of DatasetMap.lines
+LINE_KINDS = ("edge", "solid_white", "dashed_white", "solid_yellow", "dashed_yellow", "double_yellow", "other")
+
+MAX_FRAMES = 10_000_000
+"""Frames one recording may span (11.5 days at 10 Hz): the limit checked before any per-frame array
+is allocated, so a file claiming a huge frame range is an error, not a memory exhaustion."""
+MAX_GAP_SECONDS = 10.0
+"""A track's missing frames are filled by interpolation up to this long a gap; a longer gap is two
+road users sharing an id (or a broken file), refused with both frames named."""
+MAX_SAMPLES = 50_000_000
+"""Samples (after filling gaps) one recording may hold: about 2 GB of state arrays."""
+MAX_COORDINATE = 1.0e8
+"""m (or feet) beyond which a coordinate is not a position on Earth in any projection."""
+MAX_SPEED = 200.0
+"""m/s: no road user is faster; a larger speed is a broken value."""
+MAX_SIZE = 100.0
+"""m: no road user's box is longer or wider."""
 
 
 @dataclass
@@ -28,23 +80,44 @@ class DatasetMap:
     speed_limits: np.ndarray  # float64[L] m/s
     internal: np.ndarray  # bool[L] lanes inside an intersection
     successors: list[list[str]]
-    left: list[str | None]
-    right: list[str | None]
+    left: list[list[tuple[str, int, int, int, int]]]
+    """Per lane, its left neighbours: (neighbour id, first and last point of this lane, first and
+    last point of the neighbour) where the two run side by side and a lane change may happen."""
+    right: list[list[tuple[str, int, int, int, int]]]
     outlines: list[np.ndarray] = field(default_factory=list)
     """Drivable-area polygons (float64[k, 2]) drawn into the drivable raster."""
     stop_signs: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     stop_sign_lanes: list[str | None] = field(default_factory=list)
     """The first lane each stop sign controls (a lane id of ``lane_ids``), None when not given."""
+    marks: list[np.ndarray] = field(default_factory=list)
+    """Crosswalk, bike lane and speed bump polygons (float64[k, 2])."""
+    mark_kinds: list[int] = field(default_factory=list)
+    """``CROSSWALK``, ``BIKE_LANE`` or ``SPEED_BUMP`` per mark."""
+    lines: list[np.ndarray] = field(default_factory=list)
+    """Painted lines and road edges (float64[k, 2]) for pictures."""
+    line_kinds: list[str] = field(default_factory=list)
+    """One of :data:`LINE_KINDS` per line."""
+    signal_lanes: list[str] = field(default_factory=list)
+    """Lanes controlled by a recorded traffic signal (Waymo), in the order of
+    ``Recording.signal_states``' columns."""
+    signal_stops: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    """float64[S, 2]: where road users stop for each signal (NaN when the dataset gives none)."""
+
+
+def full_span(n_self: int, other: str, n_other: int) -> tuple[str, int, int, int, int]:
+    """A neighbour that runs alongside for both lanes' whole length (Argoverse 2's neighbours)."""
+    return (other, 0, n_self - 1, 0, n_other - 1)
 
 
 @dataclass
 class Recording:
-    """Tracks of ``V`` recorded vehicles on a uniform frame grid (frame ``k`` at ``k * dt`` s).
+    """Tracks of ``V`` recorded road users on the recording's frame grid.
 
-    ``first[v]`` is vehicle ``v``'s first frame and ``count[v]`` its number of consecutive frames;
-    its samples are ``x[offsets[v]:offsets[v + 1]]`` (and the same for ``y``, ``heading``,
+    ``first[v]`` is road user ``v``'s first frame and ``count[v]`` its number of consecutive
+    frames; its samples are ``x[offsets[v]:offsets[v + 1]]`` (and the same for ``y``, ``heading``,
     ``speed``). Positions are metres in the map frame, headings radians (0 along +x,
-    counter-clockwise), speeds m/s.
+    counter-clockwise), speeds m/s. ``dt`` is the nominal frame interval; ``times`` (when given)
+    the recorded time of every frame from the first, which the clock follows instead.
     """
 
     source: str
@@ -61,12 +134,24 @@ class Recording:
     width: np.ndarray  # float64[V]
     vtype: np.ndarray  # int8[V] smarts.core.vehicle_table.VehicleType
     road_map: DatasetMap | None = None
+    kind: np.ndarray | None = None
+    """int8[V] :class:`ObjectKind`; None: the kinds of ``vtype``."""
+    times: np.ndarray | None = None
+    """float64[frames]: seconds of each frame after the first; None: ``k * dt``."""
+    signal_states: np.ndarray | None = None
+    """int8[frames, S]: Waymo's signal state codes (0 unknown .. 8) of ``road_map.signal_lanes``."""
+    skipped: dict[str, str] = field(default_factory=dict)
+    """Ids of recorded objects that are not replayed, and what they are (for messages)."""
     offsets: np.ndarray = field(init=False)
     index_of: dict[str, int] = field(init=False)
 
     def __post_init__(self) -> None:
         self.first = np.asarray(self.first, dtype=np.int64)
         self.count = np.asarray(self.count, dtype=np.int64)
+        self.vtype = np.asarray(self.vtype, dtype=np.int8)
+        if self.kind is None:
+            self.kind = self.vtype.copy()
+        self.kind = np.asarray(self.kind, dtype=np.int8)
         self.offsets = np.concatenate([[0], np.cumsum(self.count)]).astype(np.int64)
         self.index_of = {vid: i for i, vid in enumerate(self.ids)}
         if len(self.index_of) != len(self.ids):
@@ -79,20 +164,27 @@ class Recording:
 
     @property
     def last(self) -> np.ndarray:
-        """int64[V]: each vehicle's last frame."""
+        """int64[V]: each road user's last frame."""
         return self.first + self.count - 1
 
     @property
     def frames(self) -> int:
         """Frames from the first recorded one to the last (0 for an empty recording)."""
+        if self.times is not None:
+            return len(self.times)
         return int(self.last.max() - self.first.min() + 1) if self.ids else 0
 
     @property
     def start_frame(self) -> int:
+        if self.times is not None:
+            return 0
         return int(self.first.min()) if self.ids else 0
 
     @property
     def duration(self) -> float:
+        """Seconds from the first frame to the last."""
+        if self.times is not None:
+            return float(self.times[-1]) if len(self.times) else 0.0
         return max(self.frames - 1, 0) * self.dt
 
     def extent(self) -> tuple[float, float, float, float]:
@@ -101,21 +193,58 @@ class Recording:
             return (0.0, 0.0, 0.0, 0.0)
         return (float(self.x.min()), float(self.y.min()), float(self.x.max()), float(self.y.max()))
 
+    # ------------------------------------------------------------------ the clock
+    def time_of(self, frame: float) -> float:
+        """Seconds after the first frame of (integer) frame ``frame``."""
+        rel = int(round(frame)) - self.start_frame
+        if self.times is None:
+            return float(rel) * self.dt
+        n = len(self.times)
+        if rel < 0:
+            return float(self.times[0] + rel * self.dt)
+        if rel >= n:
+            return float(self.times[-1] + (rel - n + 1) * self.dt)
+        return float(self.times[rel])
+
+    def frame_of(self, time: float) -> float:
+        """The (fractional) frame at ``time`` seconds after the first frame: on a recorded frame when
+        within :data:`TIME_TOLERANCE` frame intervals of it, linear between frames, and one
+        nominal interval per frame before the first and after the last."""
+        if self.times is None:
+            return self.start_frame + time / self.dt
+        times = self.times
+        n = len(times)
+        if n == 0:
+            return float(self.start_frame)
+        k = int(np.searchsorted(times, time, side="right")) - 1  # times[k] <= time < times[k + 1]
+        tol = TIME_TOLERANCE * self.dt
+        for j in (k, k + 1):
+            if 0 <= j < n and abs(time - times[j]) <= tol:
+                return float(self.start_frame + j)
+        if k < 0:
+            return self.start_frame + (time - times[0]) / self.dt
+        if k >= n - 1:
+            return self.start_frame + n - 1 + (time - times[-1]) / self.dt
+        return self.start_frame + k + (time - times[k]) / (times[k + 1] - times[k])
+
     def entry_time(self, vehicle: int) -> float:
-        """Seconds from the recording's first frame to this vehicle's first."""
-        return float(self.first[vehicle] - self.start_frame) * self.dt
+        """Seconds from the recording's first frame to this road user's first."""
+        return self.time_of(int(self.first[vehicle]))
 
     def exit_time(self, vehicle: int) -> float:
-        return float(self.last[vehicle] - self.start_frame) * self.dt
+        return self.time_of(int(self.last[vehicle]))
 
     def track(self, vehicle: int) -> np.ndarray:
-        """float64[count, 4]: x, y, heading, speed of one vehicle at its frames."""
+        """float64[count, 4]: x, y, heading, speed of one road user at its frames."""
         a, b = self.offsets[vehicle], self.offsets[vehicle + 1]
         return np.stack([self.x[a:b], self.y[a:b], self.heading[a:b], self.speed[a:b]], axis=1)
 
+    def kind_name(self, vehicle: int) -> str:
+        return ObjectKind(int(self.kind[vehicle])).name.lower()
+
     # ------------------------------------------------------------------ selection
     def select(self, keep: np.ndarray) -> Recording:
-        """The recording with only the vehicles where ``keep`` (bool[V]) holds."""
+        """The recording with only the road users where ``keep`` (bool[V]) holds."""
         keep = np.asarray(keep, dtype=bool)
         samples = np.repeat(keep, self.count)
         return Recording(
@@ -133,23 +262,39 @@ class Recording:
             width=self.width[keep],
             vtype=self.vtype[keep],
             road_map=self.road_map,
+            kind=self.kind[keep],
+            times=self.times,
+            signal_states=self.signal_states,
+            skipped=dict(self.skipped),
         )
 
     # ------------------------------------------------------------------ state at a time
     def state_at(self, frame_pos: float, vehicles: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Which vehicles are recorded at fractional frame ``frame_pos`` and their interpolated
+        """Which road users are recorded at fractional frame ``frame_pos`` and their interpolated
         state: (bool[n] present, float64[4, n] x, y, heading, speed; NaN where absent).
 
-        ``vehicles`` (int64 indices) restricts the lookup; None: every vehicle. Linear in position
-        and speed, along the shorter arc in heading; exact at recorded frames."""
+        ``vehicles`` (int64 indices) restricts the lookup; None: every road user. Linear in
+        position and speed, along the shorter arc in heading; exact at recorded frames."""
         idx = np.arange(self.num_vehicles) if vehicles is None else np.asarray(vehicles, dtype=np.int64)
         return interpolate(
             frame_pos, self.first[idx], self.count[idx], self.offsets[idx], self.x, self.y, self.heading, self.speed
         )
 
+    def signals_at(self, frame_pos: float) -> np.ndarray | None:
+        """int8[S]: the signal states at the recorded frame at or before ``frame_pos`` (None when
+        the recording has no signals)."""
+        if self.signal_states is None or self.signal_states.shape[1] == 0:
+            return None
+        rel = int(np.floor(frame_pos - self.start_frame + FRAME_EPS))
+        rel = min(max(rel, 0), len(self.signal_states) - 1)
+        return self.signal_states[rel]
+
 
 FRAME_EPS = 1e-6
 """Fraction of a frame by which a time may miss a recorded frame and still count as on it."""
+TIME_TOLERANCE = 0.1
+"""Fraction of the nominal frame interval within which a time counts as a recorded frame's time
+(Waymo's timestamps jitter by a few tenths of a millisecond around 0.1 s)."""
 
 
 def interpolate(
@@ -186,6 +331,33 @@ def interpolate(
     return present, out
 
 
+def check_values(
+    source: str, column: str, values: np.ndarray, *, where: str = "data row", bound: float | None = None,
+    positive: bool = False, rows: np.ndarray | None = None,
+) -> None:  # fmt: skip
+    """Every value of a numeric column finite (and within ``bound`` in magnitude, and positive when
+    asked); else a ``ReplayError`` naming the file, the column and the first bad row (1-based, or
+    ``rows[i]`` when given)."""
+    values = np.asarray(values, dtype=np.float64)
+    bad = ~np.isfinite(values)
+    if bound is not None:
+        bad |= np.abs(values) > bound
+    if positive:
+        bad |= ~(values > 0)
+    if not bad.any():
+        return
+    i = int(np.flatnonzero(bad)[0])
+    row = int(rows[i]) if rows is not None else i + 1
+    value = float(values[i])
+    if not np.isfinite(value):
+        expected = "a finite number"
+    elif positive and not value > 0:
+        expected = "a positive size"
+    else:
+        expected = f"a value within +-{bound:g}"
+    raise ReplayError(f"{source}: column {column}: expected {expected}, got {value:g} in {where} {row}")
+
+
 def from_samples(
     source: str,
     fmt: str,
@@ -202,36 +374,44 @@ def from_samples(
     *,
     smooth_frames: int = 0,
     road_map: DatasetMap | None = None,
+    kind: np.ndarray | None = None,
+    times: np.ndarray | None = None,
+    signal_states: np.ndarray | None = None,
+    skipped: dict[str, str] | None = None,
 ) -> Recording:
     """Group per-sample rows (any order) into tracks.
 
-    Frames a vehicle skips are filled by linear interpolation so each track is one run. Heading and
-    speed, when not given (``None``), come from the positions, smoothed over ``smooth_frames``
-    frames first (noisy sources such as NGSIM); the positions themselves are kept as recorded.
-    Per-vehicle ``length``/``width``/``vtype`` are taken from each vehicle's first sample.
+    Frames a road user skips are filled by linear interpolation so each track is one run (gaps
+    longer than :data:`MAX_GAP_SECONDS` and recordings beyond :data:`MAX_FRAMES` or
+    :data:`MAX_SAMPLES` are refused before anything is allocated). Heading and speed, when not given
+    (``None``), come from the positions (:func:`kinematics_from_positions`); the positions themselves
+    are kept as recorded. Per-road-user ``length``/``width``/``vtype``/``kind`` are taken from its
+    first sample.
     """
     vehicle_ids = np.asarray(vehicle_ids).astype(str)
     frames = np.asarray(frames, dtype=np.int64)
+    if len(vehicle_ids) == 0:
+        raise ReplayError(f"{source}: no vehicle samples")
     order = np.lexsort((frames, vehicle_ids))
     vids, frames = vehicle_ids[order], frames[order]
-    x, y = np.asarray(x, np.float64)[order], np.asarray(y, np.float64)[order]
-    heading = None if heading is None else np.asarray(heading, np.float64)[order]
-    speed = None if speed is None else np.asarray(speed, np.float64)[order]
-    length, width = np.asarray(length, np.float64)[order], np.asarray(width, np.float64)[order]
-    vtype = np.asarray(vtype, np.int8)[order]
-    if len(vids) == 0:
-        raise ReplayError(f"{source}: no vehicle samples")
     dup = (vids[1:] == vids[:-1]) & (frames[1:] == frames[:-1])
     if dup.any():
         i = int(np.flatnonzero(dup)[0])
         raise ReplayError(f"{source}: vehicle {str(vids[i])!r} has two samples at frame {int(frames[i])}")
     starts = np.flatnonzero(np.r_[True, vids[1:] != vids[:-1]])
     ends = np.r_[starts[1:], len(vids)]
+    _check_extent(source, vids, frames, starts, ends, dt)
+    x, y = np.asarray(x, np.float64)[order], np.asarray(y, np.float64)[order]
+    heading = None if heading is None else np.asarray(heading, np.float64)[order]
+    speed = None if speed is None else np.asarray(speed, np.float64)[order]
+    length, width = np.asarray(length, np.float64)[order], np.asarray(width, np.float64)[order]
+    vtype = np.asarray(vtype, np.int8)[order]
+    kind = vtype if kind is None else np.asarray(kind, np.int8)[order]
     ids = vids[starts].tolist()
     first = frames[starts]
     count = frames[ends - 1] - first + 1
     total = int(count.sum())
-    # every vehicle's frames on its own full run: position of each sample in the output
+    # every road user's frames on its own full run: position of each sample in the output
     out_off = np.concatenate([[0], np.cumsum(count)])
     dest = out_off[np.repeat(np.arange(len(ids)), ends - starts)] + (frames - np.repeat(first, ends - starts))
     full = np.zeros(total, dtype=bool)
@@ -269,18 +449,85 @@ def from_samples(
         width=width[starts],
         vtype=vtype[starts],
         road_map=road_map,
+        kind=kind[starts],
+        times=times,
+        signal_states=signal_states,
+        skipped=dict(skipped or {}),
     )
 
 
+def _check_extent(source: str, vids: np.ndarray, frames: np.ndarray, starts: np.ndarray, ends: np.ndarray,
+                  dt: float) -> None:  # fmt: skip
+    """Refuse frame ranges that would need huge arrays, before they are allocated."""
+    span = int(frames.max()) - int(frames.min()) + 1
+    if span > MAX_FRAMES:
+        lo, hi = int(frames.min()), int(frames.max())
+        raise ReplayError(f"{source}: frames run from {lo} to {hi} ({span} frames); at most {MAX_FRAMES} are "
+                          "supported (a broken frame number?)")  # fmt: skip
+    gap = np.diff(frames)
+    gap[starts[1:] - 1] = 1  # across two tracks is no gap
+    max_gap = max(int(round(MAX_GAP_SECONDS / dt)), 1)
+    if gap.size and gap.max() > max_gap:
+        i = int(np.argmax(gap))
+        raise ReplayError(
+            f"{source}: vehicle {str(vids[i])!r} has no samples from frame {int(frames[i])} to frame "
+            f"{int(frames[i + 1])} (a gap of {(int(gap[i]) - 1) * dt:g} s); gaps of up to {MAX_GAP_SECONDS:g} s are "
+            "filled by interpolation: a longer one is two road users with one id, or a broken frame number"
+        )
+    total = int((frames[ends - 1] - frames[starts] + 1).sum())
+    if total > MAX_SAMPLES:
+        raise ReplayError(f"{source}: the tracks hold {total} frames in all; at most {MAX_SAMPLES} are supported")
+
+
+HEADING_ERROR = np.radians(2.0)
+"""rad: the heading error (one standard deviation) a chord may have from position noise; sets the
+chord length used for headings from positions (:func:`heading_baseline`)."""
+MIN_BASELINE = 0.5
+"""m: the shortest chord a heading is taken from (noise-free data still needs a displacement)."""
+MAX_BASELINE = 5.0
+"""m: the longest (very noisy data would otherwise hold headings through turns)."""
+HOLD_SECONDS = 10.0
+"""s: how far along a track a chord end is looked for; a road user that moves less than the chord
+in that time is standing: its heading is held."""
+
+
+def heading_baseline(x: np.ndarray, y: np.ndarray, count: np.ndarray, smooth_frames: int) -> float:
+    """The chord length (m) over which a heading from noisy positions is within
+    :data:`HEADING_ERROR`: the file's frame-to-frame position jitter ``s`` is estimated from second
+    differences of positions (robustly: 1.4826 x their median absolute value, over sqrt(6), since a
+    second difference of white noise has six times its variance and driving itself adds only
+    centimetres at 10 Hz), the smoothing over ``smooth_frames`` frames divides it by
+    sqrt(smooth_frames), and a chord between two such points has a direction error of about
+    sqrt(2) s / L radians."""
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    i = np.arange(1, x.size - 1)
+    inside = np.ones(x.size, dtype=bool)
+    inside[start] = False
+    inside[np.minimum(start + count - 1, x.size - 1)] = False
+    i = i[inside[i]]
+    if i.size < 10:
+        return MIN_BASELINE
+    d2 = np.concatenate([x[i + 1] - 2 * x[i] + x[i - 1], y[i + 1] - 2 * y[i] + y[i - 1]])
+    jitter = 1.4826 * float(np.median(np.abs(d2))) / np.sqrt(6.0)
+    smoothed = jitter / np.sqrt(max(int(smooth_frames), 1))
+    return float(np.clip(np.sqrt(2.0) * smoothed / HEADING_ERROR, MIN_BASELINE, MAX_BASELINE))
+
+
 def kinematics_from_positions(
-    x: np.ndarray, y: np.ndarray, count: np.ndarray, dt: float, smooth_frames: int
+    x: np.ndarray, y: np.ndarray, count: np.ndarray, dt: float, smooth_frames: int, baseline: float | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Heading and speed of concatenated tracks from their (smoothed) positions.
+    """Heading and speed of concatenated tracks from their positions.
 
     Positions are smoothed by a centred moving average over ``smooth_frames`` frames (narrower at
-    a track's ends), then differentiated with central differences (one-sided at the ends). A
-    vehicle standing still keeps the heading it last moved with (its first moving heading before
-    that), since the direction of a zero displacement says nothing."""
+    a track's ends); the speed is their central difference (one-sided at a track's ends). The
+    heading at a frame is the direction of the chord between the nearest earlier and later smoothed
+    positions at least half ``baseline`` metres away (from :func:`heading_baseline`; the frame itself
+    on a side where there is none), so it is defined by a displacement larger than the noise
+    however slowly the road user moves. Where the road user moves less than half the baseline in
+    :data:`HOLD_SECONDS` either way, it stands: the heading is held from when it last moved (its
+    first moving heading before that)."""
+    from smarts.replay.kinematics import chord_headings
+
     n = x.size
     start = np.repeat(np.concatenate([[0], np.cumsum(count)[:-1]]), count)
     end = start + np.repeat(count, count)  # exclusive
@@ -294,13 +541,14 @@ def kinematics_from_positions(
     prev = np.maximum(i - 1, start)
     nxt = np.minimum(i + 1, end - 1)
     span = np.maximum(nxt - prev, 1) * dt
-    vx, vy = (sx[nxt] - sx[prev]) / span, (sy[nxt] - sy[prev]) / span
-    speed = np.hypot(vx, vy)
-    moving = speed > 0.05
-    heading = np.arctan2(vy, vx)
-    # carry the last moving heading forward within each track, then the first one backward
-    carry = _carry_forward(np.where(moving, i, -1), start)
-    back = _carry_backward(np.where(moving, i, n), end)
+    speed = np.hypot(sx[nxt] - sx[prev], sy[nxt] - sy[prev]) / span
+    if baseline is None:
+        baseline = heading_baseline(x, y, count, smooth_frames)
+    window = max(int(round(HOLD_SECONDS / dt)), 1)
+    heading, defined = chord_headings(sx, sy, start, end, 0.5 * baseline, window)
+    # carry the last defined heading forward within each track, then the first one backward
+    carry = _carry_forward(np.where(defined, i, -1), start)
+    back = _carry_backward(np.where(defined, i, n), end)
     src = np.where(carry >= 0, carry, back)
     src = np.where((src >= 0) & (src < n), src, i)
     return heading[src], speed

@@ -9,6 +9,7 @@ being parsed into garbage.
 
 from __future__ import annotations
 
+import os
 import struct
 from collections.abc import Iterator
 from pathlib import Path
@@ -19,6 +20,9 @@ import numpy as np
 from smarts.core.errors import ReplayError
 
 _MASK_DELTA = 0xA282EAD8
+MAX_RECORD_BYTES = 1 << 30
+"""Bytes one record may hold (a Waymo Open Motion scenario is a few MB): a larger length in a
+header is refused before anything is allocated."""
 
 
 def _crc32c_table() -> np.ndarray:
@@ -65,6 +69,7 @@ def read_records(path: str | Path) -> Iterator[bytes]:
     the file, the record (0-based) and its byte offset."""
     path = Path(path)
     with open(path, "rb") as f:
+        size = os.fstat(f.fileno()).st_size
         index = 0
         while True:
             offset = f.tell()
@@ -78,6 +83,12 @@ def read_records(path: str | Path) -> Iterator[bytes]:
             if masked_crc(length_bytes) != length_crc:
                 raise ReplayError(f"{where}: the length's checksum does not match (not a TFRecord file, or corrupted)")
             (length,) = struct.unpack("<Q", length_bytes)
+            after = size - offset - 12
+            if length + 4 > after:  # checked before reading: a header may claim any size
+                raise ReplayError(f"{where}: truncated (the header claims {length} data bytes and a 4-byte checksum; "
+                                  f"{max(after, 0)} bytes follow it)")
+            if length > MAX_RECORD_BYTES:
+                raise ReplayError(f"{where}: a {length}-byte record; at most {MAX_RECORD_BYTES} bytes are read per record")
             data = f.read(length)
             footer = f.read(4)
             if len(data) < length or len(footer) < 4:

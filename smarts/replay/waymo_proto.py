@@ -2,8 +2,8 @@
 
 The descriptors are built here in code from the published field numbers (wire-format facts: names,
 numbers and types), in a private descriptor pool, so neither TensorFlow nor the Waymo package nor
-``protoc`` is needed. Fields not listed (traffic signal states, prediction targets, crosswalk and
-speed bump polygons) are kept by protobuf as unknown fields and ignored. Enumerations are read as
+``protoc`` is needed. Fields not listed (prediction targets, lidar, camera tokens) are kept by
+protobuf as unknown fields and ignored. Enumerations are read as
 plain integers, which is the same on the wire.
 """
 
@@ -50,21 +50,38 @@ MESSAGES: dict[str, list[tuple[str, int, int, int, str | None]]] = {
     "RoadLine": [("type", 1, INT32, ONE, None), ("polyline", 2, MESSAGE, MANY, "MapPoint")],
     "RoadEdge": [("type", 1, INT32, ONE, None), ("polyline", 2, MESSAGE, MANY, "MapPoint")],
     "StopSign": [("lane", 1, INT64, MANY, None), ("position", 2, MESSAGE, ONE, "MapPoint")],
+    "Crosswalk": [("polygon", 1, MESSAGE, MANY, "MapPoint")],
+    "SpeedBump": [("polygon", 1, MESSAGE, MANY, "MapPoint")],
+    "Driveway": [("polygon", 1, MESSAGE, MANY, "MapPoint")],
     "MapFeature": [
         ("id", 1, INT64, ONE, None), ("lane", 3, MESSAGE, ONE, "LaneCenter"), ("road_line", 4, MESSAGE, ONE, "RoadLine"),
         ("road_edge", 5, MESSAGE, ONE, "RoadEdge"), ("stop_sign", 7, MESSAGE, ONE, "StopSign"),
+        ("crosswalk", 8, MESSAGE, ONE, "Crosswalk"), ("speed_bump", 9, MESSAGE, ONE, "SpeedBump"),
+        ("driveway", 10, MESSAGE, ONE, "Driveway"),
     ],
+    "TrafficSignalLaneState": [
+        ("lane", 1, INT64, ONE, None), ("state", 2, INT32, ONE, None), ("stop_point", 3, MESSAGE, ONE, "MapPoint"),
+    ],
+    "DynamicMapState": [("lane_states", 1, MESSAGE, MANY, "TrafficSignalLaneState")],
     "Scenario": [
         ("timestamps_seconds", 1, DOUBLE, MANY, None), ("tracks", 2, MESSAGE, MANY, "Track"),
         ("objects_of_interest", 4, INT32, MANY, None), ("scenario_id", 5, STRING, ONE, None),
-        ("sdc_track_index", 6, INT32, ONE, None), ("map_features", 8, MESSAGE, MANY, "MapFeature"),
-        ("current_time_index", 10, INT32, ONE, None),
+        ("sdc_track_index", 6, INT32, ONE, None), ("dynamic_map_states", 7, MESSAGE, MANY, "DynamicMapState"),
+        ("map_features", 8, MESSAGE, MANY, "MapFeature"), ("current_time_index", 10, INT32, ONE, None),
     ],
 }  # fmt: skip
 
-OBJECT_VEHICLE, OBJECT_PEDESTRIAN, OBJECT_CYCLIST = 1, 2, 3
+OBJECT_VEHICLE, OBJECT_PEDESTRIAN, OBJECT_CYCLIST, OBJECT_OTHER = 1, 2, 3, 4
 LANE_FREEWAY, LANE_SURFACE_STREET, LANE_BIKE = 1, 2, 3
 """Values of Track.ObjectType and LaneCenter.LaneType."""
+SIGNAL_UNKNOWN, SIGNAL_ARROW_STOP, SIGNAL_ARROW_CAUTION, SIGNAL_ARROW_GO = 0, 1, 2, 3
+SIGNAL_STOP, SIGNAL_CAUTION, SIGNAL_GO, SIGNAL_FLASHING_STOP, SIGNAL_FLASHING_CAUTION = 4, 5, 6, 7, 8
+"""Values of TrafficSignalLaneState.State."""
+SIGNAL_NAMES = ("unknown", "arrow_stop", "arrow_caution", "arrow_go", "stop", "caution", "go", "flashing_stop",
+                "flashing_caution")  # fmt: skip
+ROAD_LINE_KINDS = {1: "dashed_white", 2: "solid_white", 3: "solid_white", 4: "dashed_yellow", 5: "dashed_yellow",
+                   6: "solid_yellow", 7: "double_yellow", 8: "double_yellow"}  # fmt: skip
+"""RoadLine.RoadLineType -> the kind a picture draws (``recording.LINE_KINDS``)."""
 
 
 @lru_cache(maxsize=1)

@@ -3,8 +3,9 @@
 Every signal-controlled connection (incoming lane -> through the junction -> outgoing lane) has a
 colour each step. The built-in traffic model and the red-light rule read ``colour`` and
 ``stop_xy``; observations read the colours of the connections ahead on a route. The colour comes
-either from the map's fixed-time programs (``update_fixed_time``) or from SUMO's current state
-strings (``set_states``); both give the same per-connection arrays.
+either from the map's fixed-time programs (``update_fixed_time``) or from state strings
+(``set_states``: SUMO's current states, or a dataset's recorded states for signals without a
+program); both give the same per-connection arrays.
 """
 
 from __future__ import annotations
@@ -60,6 +61,8 @@ class SignalState:
         changed = False
         for t in range(len(rm.tls_ids)):
             a, b = rm.tls_phase_offsets[t], rm.tls_phase_offsets[t + 1]
+            if b == a:  # no program: a recorded signal, set by whoever replays it (set_states)
+                continue
             into = (time + rm.tls_offset[t]) % self._cycle[t]
             phase = a + int(np.searchsorted(np.cumsum(rm.tls_phase_duration[a:b]), into, side="right"))
             phase = min(phase, b - 1)

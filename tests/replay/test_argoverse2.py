@@ -21,9 +21,10 @@ from tests.replay.files import AV2_ID, av2_map, av2_tracks, write_av2
 
 def test_tracks_are_read_as_recorded(tmp_path):
     rec = read_recording("argoverse2", write_av2(tmp_path / "scn"))
-    assert rec.ids == ["11", "12", "AV"]  # the pedestrian is left out
-    assert rec.first.tolist() == [20, 0, 0] and rec.count.tolist() == [60, 50, 110]
-    assert rec.vtype.tolist() == [VehicleType.PASSENGER, VehicleType.BUS, VehicleType.PASSENGER]
+    assert rec.ids == ["11", "12", "AV", "ped_1"]  # the pedestrian replays as a pedestrian
+    assert rec.first.tolist() == [20, 0, 0, 0] and rec.count.tolist() == [60, 50, 110, 110]
+    assert rec.vtype.tolist() == [VehicleType.PASSENGER, VehicleType.BUS, VehicleType.PASSENGER, VehicleType.PEDESTRIAN]
+    assert rec.kind_name(3) == "pedestrian" and (rec.length[3], rec.width[3]) == (0.5, 0.5)
     track = rec.track(0)
     np.testing.assert_allclose(track[:, 0], 30.0 + 1.2 * np.arange(60), atol=1e-9)
     np.testing.assert_allclose(track[:, 1], 5.25)
@@ -111,11 +112,14 @@ def test_env_drives_an_agent_among_the_recorded_vehicles(tmp_path):
     env = DrivingParallelEnv(str(path))
     try:
         obs, _ = env.reset(seed=0)
-        seen = 0
+        seen, pedestrians = 0, 0
         for _ in range(40):
             obs, rewards, terminations, truncations, _ = env.step({"ego": np.array([1.0, 0.0, 0.0], np.float32)})
             assert env.observation_space("ego").contains(obs["ego"]) and not terminations["ego"]
-            seen = max(seen, int((np.abs(obs["ego"]["neighbours"]).sum(axis=1) > 0).sum()))
-        assert seen == 2 and rewards["ego"] > 0  # the bus and vehicle 11 around it; progress on its route
+            neighbours = obs["ego"]["neighbours"]
+            seen = max(seen, int((np.abs(neighbours).sum(axis=1) > 0).sum()))
+            pedestrians = max(pedestrians, int((neighbours[:, 8] == 1.0).sum()))
+        # the bus, vehicle 11 and the pedestrian (flagged as one) around it; progress on its route
+        assert seen == 3 and pedestrians == 1 and rewards["ego"] > 0
     finally:
         env.close()

@@ -398,6 +398,12 @@ def test_the_combined_file_of_several_sites_is_named_as_such(tmp_path):
         w.writerow([*rows[0], "Location"])
         for site in ("i-80", "us-101"):
             w.writerows([*r, site] for r in rows[1:])
-    with pytest.raises(ReplayError, match=r"all.csv: vehicle '1' has two samples at frame 100; the file holds several "
-                                          r"NGSIM sites \(column Location: i-80, us-101\)"):  # fmt: skip
+    with pytest.raises(ReplayError, match=r"all.csv: the file holds several NGSIM sites \(column Location: i-80, "
+                                          r"us-101\), whose vehicle ids repeat: choose one with replay.scenario "
+                                          r"\(--location\)"):  # fmt: skip
         read_recording("ngsim", path)
+    one = read_recording("ngsim", path, scenario="US-101", swap_xy=True, flip_y=True)
+    assert one.ids == ["1", "2", "3"] and one.count.tolist() == [60, 80, 20]
+    with pytest.raises(ReplayError, match=r"all.csv: location 'peachtree': no rows of that site \(column Location: "
+                                          r"i-80, us-101\)"):  # fmt: skip
+        read_recording("ngsim", path, scenario="peachtree")

@@ -74,4 +74,4 @@ def test_show_draws_a_datasets_own_lanes(tmp_path, capsys):
     tf = write_waymo(tmp_path / "s.tfrecord")
     assert main(["replay", "info", str(tf), "--format", "waymo", "--json"]) == 0
     info = json.loads(capsys.readouterr().out.splitlines()[-1])
-    assert info["vehicles"] == 2 and info["frames"] == 91 and info["map_lanes"] == 4
+    assert info["vehicles"] == 3 and info["frames"] == 91 and info["map_lanes"] == 4

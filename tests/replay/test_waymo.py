@@ -42,11 +42,12 @@ def test_field_numbers_match_the_published_wire_format():
 
 def test_tracks_and_map_are_read(tmp_path):
     rec = read_recording("waymo", write_waymo(tmp_path / "s.tfrecord"))
-    assert rec.ids == ["7", "8"]  # the pedestrian and the never-valid vehicle are left out
-    assert rec.first.tolist() == [0, 10] and rec.count.tolist() == [91, 51] and rec.dt == 0.1
-    np.testing.assert_allclose(rec.track(1)[:, 0], 20.0 + 0.8 * np.arange(10, 61), atol=1e-9)
-    np.testing.assert_allclose(rec.track(1)[:, 3], 8.0, atol=1e-6)
-    assert rec.length == pytest.approx([4.8, 5.5]) and rec.width == pytest.approx([2.0, 2.2])
+    assert rec.ids == ["20", "7", "8"]  # the never-valid vehicle is left out; the pedestrian replays
+    assert rec.kind_name(0) == "pedestrian" and rec.skipped == {"9": "a passenger never valid"}
+    assert rec.first.tolist() == [0, 0, 10] and rec.count.tolist() == [91, 91, 51] and rec.dt == 0.1
+    np.testing.assert_allclose(rec.track(2)[:, 0], 20.0 + 0.8 * np.arange(10, 61), atol=1e-9)
+    np.testing.assert_allclose(rec.track(2)[:, 3], 8.0, atol=1e-6)
+    assert rec.length == pytest.approx([0.6, 4.8, 5.5]) and rec.width == pytest.approx([0.6, 2.0, 2.2])
     dm = rec.road_map
     assert dm.lane_ids == ["1001", "1002", "1003", "1004"] and dm.stop_signs.tolist() == [[195.0, -2.0]]
     m = compile_lane_map(dm)
@@ -81,15 +82,20 @@ def test_truncated_and_corrupted_records_name_file_and_record(tmp_path):
     cut.write_bytes(data[: second + 100])
     with pytest.raises(ReplayError) as err:
         list(read_records(cut))
-    assert str(cut) in str(err.value) and f"record 1 at byte {second}: truncated (88 of" in str(err.value)
+    assert str(cut) in str(err.value) and f"record 1 at byte {second}: truncated (the header claims {first_len} " \
+        "data bytes and a 4-byte checksum; 88 bytes follow it)" in str(err.value)
     bad = bytearray(data)
     bad[40] ^= 0xFF
     (tmp_path / "bad.tfrecord").write_bytes(bytes(bad))
     with pytest.raises(ReplayError, match=r"bad.tfrecord: record 0 at byte 0: the data's checksum does not match"):
         read_recording("waymo", tmp_path / "bad.tfrecord")
     (tmp_path / "text.tfrecord").write_text("this is not a tfrecord file at all")
-    with pytest.raises(ReplayError, match=r"text.tfrecord: record 0 at byte 0: the length's checksum does not match"):
+    with pytest.raises(ReplayError, match=r"text.tfrecord: is a text file \(NGSIM trajectories are read with --format "
+                                          r"ngsim\), not a waymo file"):  # fmt: skip
         read_recording("waymo", tmp_path / "text.tfrecord")
+    (tmp_path / "binary.tfrecord").write_bytes(bytes(range(200, 256)) * 4)
+    with pytest.raises(ReplayError, match=r"binary.tfrecord: record 0 at byte 0: the length's checksum does not match"):
+        read_recording("waymo", tmp_path / "binary.tfrecord")
     from smarts.replay.tfrecord import write_records
 
     write_records(tmp_path / "junk.tfrecord", [b"\xff\xff\xff"])
@@ -138,7 +144,10 @@ def test_env_drives_an_agent_among_the_recorded_vehicles(tmp_path):
         for _ in range(30):
             obs, rewards, terminations, *_ = env.step({"ego": np.array([1.0, 0.0, 0.0], np.float32)})
             assert env.observation_space("ego").contains(obs["ego"]) and not terminations["ego"]
-        assert (np.abs(obs["ego"]["neighbours"]).sum(axis=1) > 0).sum() == 1 and rewards["ego"] > 0
+        neighbours = obs["ego"]["neighbours"]
+        # vehicle 8 and the pedestrian (flagged as one) beside the road
+        assert (np.abs(neighbours).sum(axis=1) > 0).sum() == 2 and (neighbours[:, 8] == 1.0).sum() == 1
+        assert rewards["ego"] > 0
     finally:
         env.close()
 
