@@ -11,12 +11,12 @@ from pathlib import Path
 from typing import Any, Callable
 
 from agents.checkpoint import CheckpointError, checkpoint_format, read_checkpoint
-from agents.ppo import CHECKPOINT_FORMAT, PPOPolicy, check_checkpoint
+from agents.ppo import CHECKPOINT_FORMAT, PPOPolicy
 from agents.sb3_policy import SB3_FORMAT, SB3Policy
 
 
 def _ppo(blob: dict, path: Path) -> PPOPolicy:
-    return PPOPolicy(check_checkpoint(blob, path), str(path))
+    return PPOPolicy(blob, str(path))
 
 
 def _sb3(blob: dict, path: Path) -> SB3Policy:

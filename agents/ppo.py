@@ -5,22 +5,42 @@ then an MLP gives the mean of a Gaussian over the action box (log-std is a learn
 separate MLP gives the state value. Training (``train/ppo.py``) uses torchrl's losses on these
 modules; evaluation and the benchmark load a checkpoint into ``PPOPolicy`` (through
 ``agents.loader``), which acts with the mean action. Checkpoints are plain tensors and JSON-able
-metadata, loaded with ``torch.load(..., weights_only=True)``.
+metadata, loaded with ``torch.load(..., weights_only=True)`` and validated by
+:class:`PPOCheckpoint` before any network is built.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import torch
+from pydantic import Field, model_validator
 from torch import nn
 
-from agents.checkpoint import CheckpointError, checkpoint_format, read_checkpoint
+from agents.checkpoint import (
+    MAX_LAYERS,
+    CheckpointError,
+    CheckpointSchema,
+    Finite,
+    Label,
+    Weights,
+    Width,
+    check_size,
+    checkpoint_format,
+    mlp_size,
+    read_checkpoint,
+    validate_checkpoint,
+    write_checkpoint,
+)
 
 CHECKPOINT_FORMAT = "smarts-ppo-v1"
+MAX_ACTIONS = 16
+"""The most action dimensions a checkpoint may record."""
+MAX_INPUTS = 1 << 20
+"""The most observation numbers a recorded layout may flatten to."""
 
 
 @dataclass(frozen=True)
@@ -162,6 +182,75 @@ def scale_action(pre: torch.Tensor, low: torch.Tensor, high: torch.Tensor, mean_
     return low + (pre + 1.0) * 0.5 * (high - low)
 
 
+# ------------------------------------------------------------------------------ checkpoint schema
+Shape = Annotated[list[Width], Field(max_length=8)]
+"""An observation's shape: up to 8 dimensions of 1 to MAX_WIDTH."""
+
+
+class LayoutSchema(CheckpointSchema):
+    """The observation keys the network reads, in order, and their shapes."""
+
+    keys: Annotated[list[Label], Field(min_length=1, max_length=256)]
+    shapes: Annotated[list[Shape], Field(min_length=1, max_length=256)]
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "LayoutSchema":
+        if len(self.keys) != len(self.shapes):
+            raise ValueError(f"{len(self.keys)} keys but {len(self.shapes)} shapes; expected one shape per key")
+        if len(set(self.keys)) != len(self.keys):
+            raise ValueError(f"keys repeat: {self.keys}")
+        size = sum(int(np.prod(s)) for s in self.shapes)
+        if size > MAX_INPUTS:
+            raise ValueError(f"the shapes flatten to {size:,} inputs; at most {MAX_INPUTS:,}")
+        return self
+
+
+class ActionSchema(CheckpointSchema):
+    """How the policy's actions drive a vehicle, and their box (finite, ``low <= high``)."""
+
+    space: Label
+    controller: Label = "direct"
+    mean: Literal["linear", "tanh"] = "tanh"  # checkpoints of earlier versions squash with tanh
+    low: Annotated[list[Finite], Field(min_length=1, max_length=MAX_ACTIONS)]
+    high: Annotated[list[Finite], Field(min_length=1, max_length=MAX_ACTIONS)]
+
+    @model_validator(mode="after")
+    def _box(self) -> "ActionSchema":
+        if len(self.low) != len(self.high):
+            raise ValueError(f"low has {len(self.low)} numbers, high {len(self.high)}; expected one pair per dimension")
+        if any(lo > hi for lo, hi in zip(self.low, self.high)):
+            raise ValueError(f"low {self.low} exceeds high {self.high}; expected low <= high in every dimension")
+        return self
+
+
+Hidden = Annotated[list[Width], Field(min_length=1, max_length=MAX_LAYERS)]
+"""Hidden layer widths: 1 to MAX_LAYERS layers of 1 to MAX_WIDTH units."""
+
+
+class PPOCheckpoint(CheckpointSchema):
+    """A ``smarts-ppo-v1`` file: networks, observation statistics, layout, action box and the
+    settings it was trained with (``interface`` and ``lane_relative`` are plain data the simulator
+    validates where it builds the env)."""
+
+    format: Literal["smarts-ppo-v1"]
+    actor: Weights
+    critic: Weights
+    normalizer: Weights
+    layout: LayoutSchema
+    action: ActionSchema
+    hidden: Hidden
+    interface: Any = None
+    lane_relative: Any = None
+    config: dict[str, Any] = {}
+    step: Annotated[int, Field(ge=0)]
+    metrics: dict[str, float] = {}
+    optimizer: dict[str, Any] | None = None
+
+
+def size_of(layout: LayoutSchema) -> int:
+    return int(sum(int(np.prod(s)) for s in layout.shapes))
+
+
 def save_checkpoint(path: Path, *, actor: Actor, critic: Critic, normalizer: ObsNormalizer,
                     layout: ObservationLayout, low: np.ndarray, high: np.ndarray,
                     action_space: str, config: dict, step: int, metrics: dict,
@@ -173,8 +262,6 @@ def save_checkpoint(path: Path, *, actor: Actor, critic: Critic, normalizer: Obs
     plain-data form of ``smarts.sensors.interface.AgentInterface``) which observation the policy
     reads, so evaluation and the benchmark build the env this policy was trained in (and validate
     the interface and ``lane_relative`` settings there)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     blob = {
         "format": CHECKPOINT_FORMAT,
         "actor": actor.state_dict(),
@@ -192,21 +279,21 @@ def save_checkpoint(path: Path, *, actor: Actor, critic: Critic, normalizer: Obs
     }
     if optimizer_state is not None:
         blob["optimizer"] = optimizer_state
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(blob, tmp)
-    tmp.replace(path)
-    return path
+    return write_checkpoint(blob, path)
 
 
 def check_checkpoint(blob: Any, path: str | Path) -> dict:
-    """``blob`` if it is a complete PPO checkpoint; :class:`CheckpointError` naming ``path`` otherwise."""
+    """``blob`` if it is a valid PPO checkpoint (:class:`PPOCheckpoint`, and networks of at most
+    ``MAX_PARAMETERS``); :class:`CheckpointError` naming ``path`` and the field otherwise."""
     found = checkpoint_format(blob)
     if found != CHECKPOINT_FORMAT:
         shown = found if isinstance(blob, dict) else type(blob).__name__
         raise CheckpointError(f"{path}: expected a {CHECKPOINT_FORMAT} checkpoint, found {shown!r}")
-    for key in ("actor", "critic", "normalizer", "layout", "action", "hidden"):
-        if key not in blob:
-            raise CheckpointError(f"{path}: checkpoint lacks {key!r}")
+    checked = validate_checkpoint(PPOCheckpoint, blob, path)
+    inputs, actions = size_of(checked.layout), len(checked.action.low)
+    # actor (with its log-std), critic and observation statistics
+    check_size(mlp_size([inputs, *checked.hidden], actions) + actions + mlp_size([inputs, *checked.hidden], 1)
+               + 4 * inputs, path, "hidden")  # fmt: skip
     return blob
 
 
@@ -222,6 +309,7 @@ class PPOPolicy:
     interface, the default settings); ``source`` names the file for error messages."""
 
     def __init__(self, blob: dict, source: str = "<checkpoint>"):
+        check_checkpoint(blob, source)  # every field, and the network's size, before it is built
         layout = ObservationLayout(tuple(blob["layout"]["keys"]), tuple(tuple(s) for s in blob["layout"]["shapes"]))
         self.layout = layout
         self.action_space = blob["action"]["space"]
@@ -244,7 +332,7 @@ class PPOPolicy:
 
     @classmethod
     def load(cls, path: str | Path) -> "PPOPolicy":
-        return cls(load_checkpoint(Path(path)), str(path))
+        return cls(read_checkpoint(Path(path)), str(path))
 
     def check_space(self, space) -> None:
         """The env's observation space must have every key the policy reads, with its shape."""

@@ -8,15 +8,57 @@ but nothing of the trainer, so evaluation and the benchmark load it like the tor
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import torch
+from pydantic import Field
 
-from agents.checkpoint import CheckpointError
+from agents.checkpoint import (
+    CheckpointError,
+    CheckpointSchema,
+    Label,
+    Weights,
+    Width,
+    check_size,
+    mlp_size,
+    validate_checkpoint,
+)
+from agents.ppo import MAX_INPUTS, ActionSchema, Hidden, Shape
 
 SB3_FORMAT = "smarts-sb3-ppo-v1"
-REQUIRED = ("policy", "observation", "action", "net_arch")
+
+
+class SB3Checkpoint(CheckpointSchema):
+    """An exported SB3 policy: its tensors, the observation keys and shapes it reads, the action box
+    and the settings it was trained with (``interface`` and ``lane_relative`` are plain data the
+    simulator validates)."""
+
+    format: Literal["smarts-sb3-ppo-v1"]
+    policy: Weights
+    observation: Annotated[dict[Label, Shape], Field(min_length=1, max_length=256)]
+    action: ActionSchema
+    net_arch: Hidden
+    interface: Any = None
+    lane_relative: Any = None
+    config: dict[str, Any] = {}
+    step: Annotated[int, Field(ge=0)]
+    n_updates: Annotated[int, Field(ge=0)] = 0
+    metrics: dict[str, float] = {}
+    optimizer: dict[str, Any] | None = None
+
+
+def check_export(blob: Any, source: str) -> SB3Checkpoint:
+    """``blob`` validated as :class:`SB3Checkpoint`, its networks' size checked before they are
+    built; :class:`CheckpointError` naming ``source`` and the field otherwise."""
+    checked = validate_checkpoint(SB3Checkpoint, blob, source)
+    inputs = sum(int(np.prod(shape)) for shape in checked.observation.values())
+    if inputs > MAX_INPUTS:
+        raise CheckpointError(f"{source}: observation: the shapes flatten to {inputs:,} inputs; at most {MAX_INPUTS:,}")
+    actions = len(checked.action.low)
+    check_size(mlp_size([inputs, *checked.net_arch], actions) + actions + mlp_size([inputs, *checked.net_arch], 1),
+               source, "net_arch")  # fmt: skip
+    return checked
 
 
 class SB3Policy:
@@ -29,9 +71,7 @@ class SB3Policy:
         import gymnasium as gym
         from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 
-        missing = [key for key in REQUIRED if key not in blob]
-        if missing:
-            raise CheckpointError(f"{source}: SB3 export lacks {', '.join(map(repr, missing))}")
+        check_export(blob, source)
         self.source = source
         obs_space = gym.spaces.Dict(
             {k: gym.spaces.Box(-np.inf, np.inf, tuple(shape), np.float32) for k, shape in blob["observation"].items()}

@@ -38,7 +38,7 @@ import torch
 
 from agents.checkpoint import CheckpointError, checkpoint_format, read_checkpoint
 from agents.ppo import CHECKPOINT_FORMAT, check_checkpoint
-from agents.sb3_policy import SB3_FORMAT
+from agents.sb3_policy import SB3_FORMAT, check_export
 from train.config import ACTION_SPACES, TrainConfig
 
 SCALAR_TAGS = (
@@ -200,9 +200,7 @@ def check_resume(path: Path, cfg: TrainConfig) -> dict:
     if library == "torchrl":
         check_checkpoint(blob, path)
     else:
-        missing = [k for k in ("policy", "observation", "action", "net_arch", "step") if k not in blob]
-        if missing:
-            raise CheckpointError(f"{path}: SB3 export lacks {', '.join(map(repr, missing))}")
+        check_export(blob, str(path))
     theirs = checkpoint_setup(blob)
     for what, value in config_setup(cfg).items():
         if theirs[what] != value:

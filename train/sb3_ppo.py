@@ -12,6 +12,7 @@ loadable) so evaluation and the benchmark load it like the torchrl checkpoints
 
 from __future__ import annotations
 
+import io
 import time
 from pathlib import Path
 
@@ -20,7 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
-from agents.checkpoint import CheckpointError
+from agents.checkpoint import CheckpointError, write_checkpoint, write_file_atomically
 from agents.sb3_policy import SB3_FORMAT
 from smarts.dynamics.pose_control_torch import resolve_device
 from train.config import ACTION_SPACES, TrainConfig
@@ -194,13 +195,8 @@ def save_sb3(path: Path, model, vec, cfg: TrainConfig, metrics: dict | None = No
         "n_updates": int(model._n_updates),
         "metrics": {k: float(v) for k, v in (metrics or {}).items()},
     }
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(blob, tmp)
-    tmp.replace(path)
-    zipped = path.with_name(f"{path.stem}_sb3.zip")
-    tmp = zipped.with_name(zipped.name + ".tmp")
-    model.save(tmp)
-    tmp.replace(zipped)
+    path = write_checkpoint(blob, path)
+    buffer = io.BytesIO()  # SB3's own save, written the same way (a failed write leaves the old one)
+    model.save(buffer)
+    write_file_atomically(path.with_name(f"{path.stem}_sb3.zip"), buffer.getbuffer(), "SB3 save")
     return path

@@ -27,10 +27,15 @@ class StopMoveVote:
     def __init__(self, path: str | Path):
         import torch
 
+        from agents.checkpoint import CheckpointError
         from agents.planners.nets import load_net
+        from agents.planners.tf import FEATURES
 
         self.torch = torch
         self.net, self.metrics = load_net(path, "tf-stop-move")
+        if self.net.config["inputs"] != FEATURES:
+            raise CheckpointError(f"{path}: config.inputs: the vote reads {self.net.config['inputs']} features, "
+                                  f"agents.planners.tf.stop_move_features gives {FEATURES}: retrain it")  # fmt: skip
 
     def __call__(self, features: np.ndarray) -> bool:
         with self.torch.no_grad():
@@ -52,15 +57,18 @@ class EventRisk:
         import torch
 
         from agents.planners.nets import load_net
-        from agents.planners.vcr import NUMBERS
+        from agents.planners.vcr import NUMBERS, RASTERS
 
         self.torch = torch
         self.net, self.metrics = load_net(path, "vcr-classifier")
-        if self.net.config["numbers"] != NUMBERS:
-            from agents.checkpoint import CheckpointError
+        config = self.net.config
+        expected = {"numbers": NUMBERS, "channels": len(RASTERS["layers"]), "size": RASTERS["size"]}
+        for field, value in expected.items():
+            if config[field] != value:
+                from agents.checkpoint import CheckpointError
 
-            raise CheckpointError(f"{path}: the classifier reads {self.net.config['numbers']} numbers, "
-                                  f"agents.planners.vcr.classifier_numbers gives {NUMBERS}: retrain it")  # fmt: skip
+                raise CheckpointError(f"{path}: config.{field}: the classifier was trained for {config[field]}, "
+                                      f"agents.planners.vcr gives {value}: retrain it")  # fmt: skip
 
     def __call__(self, row: dict[str, np.ndarray], front: np.ndarray, plan: np.ndarray) -> float:
         from agents.planners.vcr import classifier_numbers

@@ -7,19 +7,33 @@
 - :class:`VCRClassifier`: VCR's CNN + MLP event classifier over rasters, with a reduced head.
 
 Checkpoints are ``{"format": "planner-net", "kind": ..., "config": {...}, "state_dict": ...,
-"metrics": {...}}`` read with ``torch.load(..., weights_only=True)``.
+"metrics": {...}}`` read with ``torch.load(..., weights_only=True)``; :data:`SCHEMAS` validates each
+kind's file (its config's every field within bounds, finite weights) before the network is built.
 """
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import torch
+from pydantic import Field, model_validator
 from torch import nn
 
-from agents.checkpoint import CheckpointError, read_checkpoint
+from agents.checkpoint import (
+    MAX_LAYERS,
+    CheckpointError,
+    CheckpointSchema,
+    Metrics,
+    Weights,
+    Width,
+    check_size,
+    mlp_size,
+    read_checkpoint,
+    validate_checkpoint,
+    write_checkpoint,
+)
 
 FORMAT = "planner-net"
 HISTORY, FUTURE, NEIGHBOURS, MODES = 11, 30, 5, 3
@@ -148,26 +162,109 @@ KINDS: dict[str, type[nn.Module]] = {
     "aid-predictor": AIDPredictor, "tf-stop-move": StopMoveNet, "vcr-classifier": VCRClassifier,
 }  # fmt: skip
 
+Dropout = Annotated[float, Field(ge=0.0, lt=1.0, allow_inf_nan=False)]
+
+
+class AIDConfig(CheckpointSchema):
+    d: Annotated[int, Field(ge=2, le=1024)]
+    heads: Annotated[int, Field(ge=1, le=64)]
+    ffn: Width
+    rounds: Annotated[int, Field(ge=1, le=MAX_LAYERS)]
+    dropout: Dropout
+
+    @model_validator(mode="after")
+    def _divisible(self) -> "AIDConfig":
+        if self.d % 2 or self.d % self.heads:  # the time code interleaves sin/cos; heads split d
+            raise ValueError(f"d ({self.d}) must be even and a multiple of heads ({self.heads})")
+        return self
+
+    def parameters(self) -> int:
+        """Numbers (parameters and buffers) of :class:`AIDPredictor` of this config, unbuilt."""
+        d, ffn, half = self.d, self.ffn, self.d // 2
+        encoder = mlp_size([5, half], d) + HISTORY * d
+        block = 4 * d * d + 4 * d + 4 * d + mlp_size([d, ffn], d)  # attention, two norms, feed-forward
+        heads = MODES * (mlp_size([d, d], FUTURE * 3) + mlp_size([2 * d, d], 1)) + (FUTURE * 3 + 1) * d
+        return encoder + 2 * self.rounds * block + heads
+
+
+class StopMoveConfig(CheckpointSchema):
+    hidden: Width
+    layers: Annotated[int, Field(ge=1, le=MAX_LAYERS)]
+    inputs: Width
+
+    def parameters(self) -> int:
+        """Numbers of :class:`StopMoveNet` of this config, unbuilt."""
+        return mlp_size([self.inputs] + [self.hidden] * self.layers, 2)
+
+
+class VCRConfig(CheckpointSchema):
+    channels: Annotated[int, Field(ge=1, le=64)]
+    size: Annotated[int, Field(ge=31, le=512)]  # four stride-2 3x3 convolutions leave at least one cell
+    numbers: Width
+    classes: Annotated[int, Field(ge=2, le=64)]
+
+    def parameters(self) -> int:
+        """Numbers (parameters and batch-norm statistics) of :class:`VCRClassifier`, unbuilt."""
+        side, convs = self.size, 0
+        for width in (self.channels, 32, 32, 32):
+            convs += width * 32 * 9 + 32 + 4 * 32 + 1
+            side = (side - 3) // 2 + 1
+        return convs + mlp_size([self.numbers], 64) + mlp_size([32 * side * side + 64, 256, 64], self.classes)
+
+
+class PlannerCheckpoint(CheckpointSchema):
+    """A ``planner-net`` file; each kind's subclass fixes ``kind`` and the type of ``config``."""
+
+    format: Literal["planner-net"]
+    kind: str
+    config: AIDConfig | StopMoveConfig | VCRConfig
+    state_dict: Weights
+    metrics: Metrics = {}
+
+
+class AIDCheckpoint(PlannerCheckpoint):
+    kind: Literal["aid-predictor"]
+    config: AIDConfig
+
+
+class StopMoveCheckpoint(PlannerCheckpoint):
+    kind: Literal["tf-stop-move"]
+    config: StopMoveConfig
+
+
+class VCRCheckpoint(PlannerCheckpoint):
+    kind: Literal["vcr-classifier"]
+    config: VCRConfig
+
+
+SCHEMAS: dict[str, type[PlannerCheckpoint]] = {
+    "aid-predictor": AIDCheckpoint, "tf-stop-move": StopMoveCheckpoint, "vcr-classifier": VCRCheckpoint,
+}  # fmt: skip
+"""kind -> the schema of its checkpoint file."""
+
 
 def save_net(path: str | Path, kind: str, net: nn.Module, metrics: dict[str, Any] | None = None) -> None:
-    """Write a weights-only checkpoint of one of :data:`KINDS`."""
+    """Write a weights-only checkpoint of one of :data:`KINDS` (atomically: a failed write leaves
+    the previous file)."""
     blob = {"format": FORMAT, "kind": kind, "config": dict(net.config),
             "state_dict": {k: v.detach().cpu() for k, v in net.state_dict().items()}, "metrics": metrics or {}}  # fmt: skip
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    torch.save(blob, path)
+    write_checkpoint(blob, path)
 
 
 def load_net(path: str | Path, kind: str) -> tuple[nn.Module, dict[str, Any]]:
     """The module a checkpoint holds (eval mode) and its recorded metrics; CheckpointError naming
-    the file when it is not a ``kind`` checkpoint."""
+    the file (and the field) when it is not a valid ``kind`` checkpoint. The file is validated and
+    the network's size checked before the network is built."""
     blob = read_checkpoint(path)
     if not isinstance(blob, dict) or blob.get("format") != FORMAT or blob.get("kind") != kind:
         found = blob.get("kind", blob.get("format")) if isinstance(blob, dict) else type(blob).__name__
         raise CheckpointError(f"{path}: expected a {FORMAT} checkpoint of kind {kind!r}, found {found!r}")
-    net = KINDS[kind](**blob["config"])
+    checked = validate_checkpoint(SCHEMAS[kind], blob, path)
+    check_size(checked.config.parameters(), path)
+    net = KINDS[kind](**checked.config.model_dump())
     try:
-        net.load_state_dict(blob["state_dict"])
+        net.load_state_dict(checked.state_dict)
     except RuntimeError as err:
         raise CheckpointError(f"{path}: weights do not fit the recorded config ({str(err).splitlines()[0]})") from None
     net.eval()
-    return net, blob.get("metrics", {})
+    return net, dict(checked.metrics)
