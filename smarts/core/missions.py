@@ -88,6 +88,25 @@ def _lane_of(road_map: RoadMap, road_id: str, lane_index: int, where: str) -> in
     return int(lanes[lane_index])
 
 
+def _route_back(road_map: RoadMap, start: int, goal: int, where: str) -> np.ndarray:
+    """Shortest route that leaves lane ``start`` forwards and comes back to lane ``goal`` of the
+    same road (a goal behind the start); MapError naming ``where`` when no road leads back."""
+    best, best_len = None, np.inf
+    for via in road_map.successors(start):
+        try:
+            back = shortest_route(road_map, int(via), goal)
+        except MapError:
+            continue
+        length = float(road_map.lane_length[back].sum())
+        if length < best_len:
+            best, best_len = back, length
+    if best is None:
+        road = road_map.road_ids[int(road_map.lane_road[start])]
+        raise MapError(f"{where}: lies behind the start on road {road!r}, and no route leaves that road and "
+                       "comes back to it, so the route cannot reach it; put the goal ahead of the start")  # fmt: skip
+    return np.concatenate([[start], best]).astype(np.int32)
+
+
 def _best_route(road_map: RoadMap, start: int, candidates: np.ndarray, where: str) -> np.ndarray:
     """Shortest route from ``start`` to any lane in ``candidates``."""
     best, best_len = None, np.inf
@@ -159,7 +178,13 @@ def resolve_mission(
         proj = project(road_map, goal_xy[None, :])
         if proj.lane[0] < 0:
             raise MapError(f"{where}.goal.position: {list(goal_xy)} is not near any lane")
-        tail = _best_route(road_map, legs_from, np.array([proj.lane[0]]), f"{where}.goal")
+        goal_lane_of_xy = int(proj.lane[0])
+        same_road = road_map.lane_road[goal_lane_of_xy] == road_map.lane_road[start_lane]
+        if not route_parts and same_road and proj.s[0] + goal_radius < start.offset:
+            # Behind the start on its road: the route must leave the road and come back to it.
+            tail = _route_back(road_map, start_lane, goal_lane_of_xy, f"{where}.goal.position")
+        else:
+            tail = _best_route(road_map, legs_from, np.array([goal_lane_of_xy]), f"{where}.goal")
     else:
         goal_kind = GOAL_ROAD
         try:
@@ -170,8 +195,16 @@ def resolve_mission(
         if goal.lane is not None:
             goal_lane = _lane_of(road_map, goal.road, goal.lane, f"{where}.goal")
             lanes = np.array([goal_lane])
-        tail = _best_route(road_map, legs_from, lanes, f"{where}.goal")
         goal_s = float(getattr(goal, "offset", None) or 0.0)
+        if int(road_map.lane_road[start_lane]) == int(goal_road) and goal_s <= start.offset:
+            # The goal test counts a vehicle on the goal road at or past goal_s as arrived: this
+            # one would be at its goal from the first step, whatever route it then drove.
+            raise MapError(
+                f"{where}.goal: offset {goal_s:g} on road {goal.road!r} is not ahead of the start (offset "
+                f"{start.offset:g} on the same road), so the route cannot reach it: the vehicle would count as "
+                "arrived at its first step; put the goal ahead of the start or on another road"
+            )
+        tail = _best_route(road_map, legs_from, lanes, f"{where}.goal")
         goal_xy, _ = lane_pose_at(road_map, int(tail[-1]), goal_s)
         goal_radius = float(road_map.lane_width[int(tail[-1])])
         goal_gate = goal_line(road_map, int(tail[-1]), lanes, goal_s)
