@@ -37,6 +37,8 @@ from smarts.replay.recording import (
 )
 
 FRAME_SECONDS = 0.1
+EGO_ID = "AV"
+"""The track id of the vehicle that recorded the scenario."""
 REQUIRED = ("track_id", "object_type", "timestep", "position_x", "position_y", "heading", "velocity_x", "velocity_y")
 OBJECT_KINDS = {
     "vehicle": ObjectKind.PASSENGER,
@@ -139,10 +141,12 @@ def read_argoverse2(
     heading = aligned_heading(cols["heading"][keep], swap_xy, flip_y)
     speed = np.hypot(cols["velocity_x"][keep], cols["velocity_y"][keep])
     road_map = read_map(map_json, swap_xy=swap_xy, flip_y=flip_y, offset=offset)
-    return from_samples(
+    rec = from_samples(
         str(parquet), "argoverse2", cols["track_id"][keep], cols["timestep"][keep], x, y, heading, speed,
         sizes[:, 0], sizes[:, 1], vtype, FRAME_SECONDS, road_map=road_map, kind=kind, skipped=skipped,
     )  # fmt: skip
+    rec.ego = EGO_ID if EGO_ID in rec.index_of else None
+    return rec
 
 
 def aligned_heading(heading: np.ndarray, swap_xy: bool, flip_y: bool) -> np.ndarray:

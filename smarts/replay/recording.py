@@ -142,6 +142,8 @@ class Recording:
     """int8[frames, S]: Waymo's signal state codes (0 unknown .. 8) of ``road_map.signal_lanes``."""
     skipped: dict[str, str] = field(default_factory=dict)
     """Ids of recorded objects that are not replayed, and what they are (for messages)."""
+    ego: str | None = None
+    """The recording vehicle's id (Waymo's self-driving car, Argoverse 2's AV), when it is replayed."""
     offsets: np.ndarray = field(init=False)
     index_of: dict[str, int] = field(init=False)
 
@@ -266,6 +268,7 @@ class Recording:
             times=self.times,
             signal_states=self.signal_states,
             skipped=dict(self.skipped),
+            ego=self.ego if self.ego is not None and self.ego in self.index_of and keep[self.index_of[self.ego]] else None,
         )
 
     # ------------------------------------------------------------------ state at a time

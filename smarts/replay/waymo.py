@@ -152,11 +152,15 @@ def read_waymo(
     states = None
     if road_map is not None:
         states = signal_states(msg, road_map, n_frames, where, swap_xy=swap_xy, flip_y=flip_y, offset=offset)
-    return from_samples(
+    rec = from_samples(
         where, "waymo", np.concatenate(vids), np.concatenate(frames), x, y, heading, np.concatenate(vs),
         np.concatenate(lengths), np.concatenate(widths), vtype, dt, road_map=road_map, kind=kind, times=times_arr,
         signal_states=states, skipped=skipped,
     )  # fmt: skip
+    if 0 <= msg.sdc_track_index < len(msg.tracks):
+        sdc = str(msg.tracks[msg.sdc_track_index].id)
+        rec.ego = sdc if sdc in rec.index_of else None
+    return rec
 
 
 STATE_FIELDS = ("center_x", "center_y", "heading", "velocity_x", "velocity_y", "length", "width")
