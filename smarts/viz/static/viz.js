@@ -8,6 +8,15 @@ const TRAIL_STEPS = 30;
 const LIVE_FRAMES = 20000;  // most steps of a live episode kept in the page
 
 const $ = (id) => document.getElementById(id);
+
+// Every text from an episode (names, ids, metadata, file names) goes in as textContent, never as
+// markup: recordings and live envs are untrusted input.
+function el(tag, text, attrs) {
+  const e = document.createElement(tag);
+  if (text !== undefined && text !== null) e.textContent = String(text);
+  if (attrs) for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, String(v));
+  return e;
+}
 const canvas = $("canvas");
 const ctx = canvas.getContext("2d");
 
@@ -93,7 +102,7 @@ function setEpisode(ep) {
   for (const f of ep.frames) for (const a of Object.values(f.agents)) a.events.forEach((e) => events.add(e));
   const sel = $("event");
   const names = ["collision", "off_road", "wrong_way", "reached_goal", ...events, ...(ep.meta.events || [])];
-  sel.innerHTML = [...new Set(names)].map((e) => `<option>${e}</option>`).join("");
+  sel.replaceChildren(...[...new Set(names)].map((e) => el("option", e)));
   updateSeek();
   showEpisode();
   showPanels();
@@ -124,7 +133,7 @@ function closeLive() { if (liveSocket) { liveSocket.onclose = null; liveSocket.c
 function connectLive() {
   closeLive();
   $("status").textContent = "live: waiting for an env…";
-  const ws = new WebSocket(`ws://${location.host}/ws/live`);
+  const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws/live`);
   liveSocket = ws;
   ws.onmessage = (msg) => {
     const data = JSON.parse(msg.data);
@@ -154,8 +163,8 @@ async function start() {
   const r = await fetch("/api/episodes");
   const list = await r.json();
   const sel = $("episode");
-  sel.innerHTML = list.episodes.map((e) => `<option value="${e.id}">${e.name} (${e.kind})</option>`).join("")
-    + `<option value="live">live</option>`;
+  sel.replaceChildren(...list.episodes.map((e) => el("option", `${e.name} (${e.kind})`, { value: e.id })),
+    el("option", "live", { value: "live" }));
   const want = new URLSearchParams(location.search).get("episode");
   const choice = want !== null ? want : list.episodes.length ? "0" : "live";
   sel.value = choice;
@@ -306,7 +315,11 @@ function draw() {
 const fmt = (v, d = 2) => (v === null || v === undefined ? "–" : typeof v === "number" ? (Number.isInteger(v) ? String(v) : v.toFixed(d)) : Array.isArray(v) ? v.map((x) => fmt(x, d)).join(", ") : String(v));
 
 function rows(table, entries) {
-  table.innerHTML = entries.map(([k, v]) => `<tr><td>${k}</td><td data-field="${k}">${v}</td></tr>`).join("");
+  table.replaceChildren(...entries.map(([k, v]) => {
+    const tr = el("tr");
+    tr.append(el("td", k), el("td", v, { "data-field": k }));
+    return tr;
+  }));
 }
 
 function showEpisode() {
@@ -341,8 +354,13 @@ function showPanels() {
     }
     rows($("agent-table"), entries);
     const costs = state.ep.metrics && state.ep.metrics.agents && state.ep.metrics.agents[id];
-    $("agent-metrics").innerHTML = costs ? "<h3>Benchmark costs (lower is better)</h3><table>" +
-      Object.entries(costs).map(([k, v]) => `<tr><td>${k}</td><td>${fmt(v, 3)}</td></tr>`).join("") + "</table>" : "";
+    const metrics = $("agent-metrics");
+    metrics.replaceChildren();
+    if (costs) {
+      const table = el("table");
+      rows(table, Object.entries(costs).map(([k, v]) => [k, fmt(v, 3)]));
+      metrics.append(el("h3", "Benchmark costs (lower is better)"), table);
+    }
   }
   const vp = $("vehicle-panel");
   const vid = state.selectedVehicle;
