@@ -27,10 +27,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pydantic import ValidationError
 
 from smarts.cache import atomic_write_bytes
 from smarts.core.errors import LogError
 from smarts.viz.capture import EVENTS, VEHICLE_COLUMNS, Frame, frame_json
+from smarts.viz.schema import Scene, describe
 
 FORMAT_NAME = "smarts-recording"
 FORMAT_VERSION = 1
@@ -205,15 +207,6 @@ def write_recording(recording: Recording, path: str | os.PathLike) -> Path:
     return path
 
 
-def is_recording(path: str | os.PathLike) -> bool:
-    """Whether ``path`` is an ``.npz`` whose metadata names the recording format."""
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            return "scene" in npz.files and json.loads(str(npz["metadata"])).get("format") == FORMAT_NAME
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile):
-        return False
-
-
 def read_recording(path: str | os.PathLike) -> Recording:
     """Read and check one recording; ``LogError`` names the file and the array or field at fault."""
     src = str(path)
@@ -225,20 +218,27 @@ def read_recording(path: str | os.PathLike) -> Recording:
     for name in ("metadata", "scene"):
         if name not in data:
             raise LogError(f"missing the {name!r} entry; not an episode recording", source=src, column=name)
+    scene_text = str(data.pop("scene"))
     try:
         meta = json.loads(str(data.pop("metadata")))
-        scene = json.loads(str(data.pop("scene")))
-    except json.JSONDecodeError as exc:
+        scene = json.loads(scene_text)
+    except (ValueError, RecursionError) as exc:
         raise LogError(f"metadata or scene is not valid JSON ({exc})", source=src) from None
+    try:  # the page draws it as it is: the same checks as a live env's map
+        Scene.model_validate_json(scene_text)
+    except ValidationError as exc:
+        raise LogError(f"scene.{describe(exc)}", source=src, column="scene") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
         raise LogError(f"metadata format is {meta.get('format') if isinstance(meta, dict) else meta!r}, expected "
                        f"{FORMAT_NAME!r}", source=src, column="metadata")  # fmt: skip
     if meta.get("version") != FORMAT_VERSION:
         raise LogError(f"version {meta.get('version')!r}; this viewer reads version {FORMAT_VERSION}",
                        source=src, column="metadata")  # fmt: skip
-    for key in ("agent_ids", "vehicle_ids"):
-        if not isinstance(meta.get(key), list):
-            raise LogError(f"metadata field {key!r} must be a list", source=src, column="metadata")
+    for key in ("agent_ids", "vehicle_ids", "events"):
+        if not isinstance(meta.get(key), list) or not all(isinstance(v, str) for v in meta[key]):
+            raise LogError(f"metadata field {key!r} must be a list of strings", source=src, column="metadata")
+    if not isinstance(meta.get("scenario"), str):
+        raise LogError("metadata field 'scenario' must be a string", source=src, column="metadata")
     _check_arrays(data, meta, src)
     return Recording(meta=meta, scene=scene, arrays=data, source=src)
 

@@ -11,6 +11,7 @@ log itself.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -20,7 +21,8 @@ import numpy as np
 
 from smarts.core.errors import LogError
 from smarts.core.vehicle_table import Role
-from smarts.viz.recording import is_recording, read_recording
+from smarts.viz.recording import FORMAT_NAME as RECORDING_FORMAT
+from smarts.viz.recording import read_recording
 from smarts.viz.scene import map_scene
 
 
@@ -33,32 +35,57 @@ class EpisodeEntry:
     name: str
 
 
-def find_episodes(path: str | Path) -> list[EpisodeEntry]:
+def find_episodes(path: str | Path, on_skip: Callable[[Path, str], None] | None = None) -> list[EpisodeEntry]:
     """The recordings and benchmark logs at ``path`` (a file, or every ``*.npz`` below a folder),
-    sorted by path. A missing path, or a file that is neither, is a ``LogError`` naming it."""
+    sorted by path. A missing path, or a named file that is neither, is a ``LogError`` naming it;
+    in a folder, such a file is skipped and ``on_skip(file, problem)`` told why."""
     root = Path(path)
     if not root.exists():
         raise LogError("no such file or folder", source=str(root))
     files = sorted(root.rglob("*.npz")) if root.is_dir() else [root]
     out = []
     for f in files:
-        kind = "recording" if is_recording(f) else "log" if _is_episode_log(f) else None
+        kind, problem = episode_kind(f)
         if kind is None:
             if root.is_file():
-                raise LogError("neither an episode recording nor a benchmark episode log", source=str(f))
+                raise LogError(problem, source=str(f))
+            if on_skip is not None:
+                on_skip(f, problem)
             continue
         out.append(EpisodeEntry(f, kind, str(f.relative_to(root)) if root.is_dir() else f.name))
     return out
 
 
-def _is_episode_log(path: Path) -> bool:
-    from smarts.benchmark.metrics.log import FORMAT_NAME
+NEITHER = "neither an episode recording nor a benchmark episode log"
+
+
+def episode_kind(path: Path) -> tuple[str | None, str]:
+    """``("recording" | "log", "")`` from a file's metadata alone, or ``(None, what is wrong)``."""
+    from smarts.benchmark.metrics.log import FORMAT_NAME as LOG_FORMAT
 
     try:
         with np.load(path, allow_pickle=False) as npz:
-            return json.loads(str(npz["metadata"])).get("format") == FORMAT_NAME
-    except Exception:
-        return False
+            if "metadata" not in npz.files:
+                return None, f"{NEITHER} (no 'metadata' entry)"
+            text, has_scene = str(npz["metadata"]), "scene" in npz.files
+    except Exception as exc:  # any file that cannot be read is skipped (a viewer of a folder must start)
+        return None, f"{NEITHER} (not a readable .npz: {type(exc).__name__}: {str(exc)[:200]})"
+    try:
+        meta = json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        return None, f"{NEITHER} (metadata is not valid JSON: {str(exc)[:200]})"
+    if not isinstance(meta, dict):
+        return None, f"{NEITHER} (metadata is a JSON {_json_kind(meta)}, expected an object)"
+    fmt = meta.get("format")
+    if fmt == RECORDING_FORMAT and has_scene:
+        return "recording", ""
+    if fmt == LOG_FORMAT:
+        return "log", ""
+    return None, f"{NEITHER} (metadata format {str(fmt)[:100]!r})"
+
+
+def _json_kind(value: Any) -> str:
+    return {list: "list", str: "string", bool: "boolean", int: "number", float: "number"}.get(type(value), "null")
 
 
 def episode_json(entry: EpisodeEntry) -> bytes:
