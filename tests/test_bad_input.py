@@ -107,3 +107,67 @@ def test_a_nan_action_names_the_agent_and_changes_nothing():
     assert (env.sim.time, env.sim.step_count) == before
     env.step(actions)  # the env goes on as if the bad step had never been asked for
     env.close()
+
+
+# ---------------------------------------------------------------------------- replay readers and views
+@pytest.fixture(scope="module")
+def replay_files(tmp_path_factory) -> dict[str, Path]:
+    import struct
+
+    from smarts.replay.tfrecord import masked_crc
+    from tests.replay.files import NGSIM_HEADER, three_vehicles, write_ngsim
+
+    tmp = tmp_path_factory.mktemp("replay_bad")
+    paths = {"tmp": tmp, "traj.csv": write_ngsim(tmp / "traj.csv", three_vehicles())}
+    lines = paths["traj.csv"].read_text().splitlines()
+    last = lines[4].split(",")
+    last[NGSIM_HEADER.index("Frame_ID")] = "300000000"
+    gap = [lines[0], *lines[1:4], ",".join(last)]  # four rows of one vehicle, the last 30,000 s later
+    (tmp / "gap.csv").write_text("\n".join(gap) + "\n")
+    cells = lines[75].split(",")  # a row of vehicle 2, not the first vehicle
+    cells[NGSIM_HEADER.index("Local_Y")] = "inf"
+    (tmp / "inf.csv").write_text("\n".join([*lines[:75], ",".join(cells), *lines[76:]]) + "\n")
+    length = struct.pack("<Q", 2**62)  # a 112-byte file whose one header claims 2**62 bytes
+    (tmp / "huge.tfrecord").write_bytes(length + struct.pack("<I", masked_crc(length)) + bytes(100))
+    for name in ("gap.csv", "inf.csv", "huge.tfrecord"):
+        paths[name] = tmp / name
+    return paths
+
+
+SHOW = ["-m", "smarts", "replay", "show", "{traj.csv}", "--format", "ngsim", "--out", "{tmp}/out.png"]
+REPLAY_CASES = [
+    ("replay show --fps 0", [*SHOW, "--fps", "0"], ["--fps: input should be greater than 0, got 0.0"]),
+    ("replay show --fps -5", [*SHOW, "--fps", "-5"], ["--fps: input should be greater than 0, got -5.0"]),
+    ("replay show --fps 1e9", [*SHOW, "--fps", "1e9"], ["--fps: input should be less than or equal to 120"]),
+    ("replay show --duration -3", [*SHOW, "--duration", "-3"], ["--duration: input should be greater than 0"]),
+    ("replay show --width 0", [*SHOW, "--width", "0"], ["--width: input should be greater than or equal to 16"]),
+    ("replay show --width 2000000", [*SHOW, "--width", "2000000"], ["--width: input should be less than or equal to 4096"]),
+    ("replay show --offset nan 0", [*SHOW, "--offset", "nan", "0"], ["--offset[0]: input should be a finite number"]),
+    ("replay info --offset inf 0", ["-m", "smarts", "replay", "info", "{traj.csv}", "--format", "ngsim", "--offset",
+                                    "inf", "0"], ["--offset[0]: input should be a finite number"]),
+    ("replay show --time nan", [*SHOW, "--time", "nan"], ["--time: input should be a finite number"]),
+    ("replay show --time past the end", [*SHOW, "--time", "60"], ["--time: the recording lasts 8.9 s, got 60"]),
+    ("NGSIM rows with a frame gap", ["-m", "smarts", "replay", "info", "{gap.csv}", "--format", "ngsim"],
+     ["gap.csv: vehicle '1' has no samples from frame 102 to frame 300000000"]),
+    ("NGSIM inf in a non-ego row", ["-m", "smarts", "replay", "info", "{inf.csv}", "--format", "ngsim"],
+     ["inf.csv: column Local_Y: expected a finite number, got inf in data row 75"]),
+    ("TFRecord header claiming 2**62 bytes", ["-m", "smarts", "replay", "info", "{huge.tfrecord}", "--format", "waymo"],
+     ["huge.tfrecord: record 0 at byte 0: truncated (the header claims 4611686018427387904 data bytes"]),
+    ("a folder read as Waymo", ["-m", "smarts", "replay", "info", "{tmp}", "--format", "waymo"],
+     ["is a folder; --format waymo reads a TFRecord file of Scenario records"]),
+]
+
+
+@pytest.mark.parametrize("name, command, fragments", REPLAY_CASES, ids=[c[0] for c in REPLAY_CASES])
+def test_bad_replay_input_is_one_clear_error(replay_files, name, command, fragments):
+    args = []
+    for part in command:
+        for key, path in replay_files.items():
+            part = part.replace("{" + key + "}", str(path))
+        args.append(part)
+    result = run(*args, cwd=replay_files["tmp"])
+    assert result.returncode == 1, (name, result.returncode, result.stdout[-1000:], result.stderr[-2000:])
+    assert "Traceback" not in result.stderr and "MemoryError" not in result.stderr, result.stderr[-3000:]
+    for fragment in fragments:
+        assert fragment in result.stderr, (name, fragment, result.stderr[-2000:])
+    assert not (replay_files["tmp"] / "out.png").exists()  # nothing drawn from refused options

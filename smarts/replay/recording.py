@@ -462,11 +462,6 @@ def from_samples(
 def _check_extent(source: str, vids: np.ndarray, frames: np.ndarray, starts: np.ndarray, ends: np.ndarray,
                   dt: float) -> None:  # fmt: skip
     """Refuse frame ranges that would need huge arrays, before they are allocated."""
-    span = int(frames.max()) - int(frames.min()) + 1
-    if span > MAX_FRAMES:
-        lo, hi = int(frames.min()), int(frames.max())
-        raise ReplayError(f"{source}: frames run from {lo} to {hi} ({span} frames); at most {MAX_FRAMES} are "
-                          "supported (a broken frame number?)")  # fmt: skip
     gap = np.diff(frames)
     gap[starts[1:] - 1] = 1  # across two tracks is no gap
     max_gap = max(int(round(MAX_GAP_SECONDS / dt)), 1)
@@ -477,6 +472,11 @@ def _check_extent(source: str, vids: np.ndarray, frames: np.ndarray, starts: np.
             f"{int(frames[i + 1])} (a gap of {(int(gap[i]) - 1) * dt:g} s); gaps of up to {MAX_GAP_SECONDS:g} s are "
             "filled by interpolation: a longer one is two road users with one id, or a broken frame number"
         )
+    span = int(frames.max()) - int(frames.min()) + 1
+    if span > MAX_FRAMES:
+        lo, hi = int(frames.min()), int(frames.max())
+        raise ReplayError(f"{source}: frames run from {lo} to {hi} ({span} frames); at most {MAX_FRAMES} are "
+                          "supported (a broken frame number?)")  # fmt: skip
     total = int((frames[ends - 1] - frames[starts] + 1).sum())
     if total > MAX_SAMPLES:
         raise ReplayError(f"{source}: the tracks hold {total} frames in all; at most {MAX_SAMPLES} are supported")
