@@ -1,6 +1,8 @@
 """The viewer page in a real headless browser (Debian's chromium through selenium): it loads a
 recorded episode and draws its vehicles, clicking an agent or a lane opens its panel, seeking
 moves time, a live env streams into it, a benchmark log shows its metrics; a screenshot is taken.
+Markup in a recording's metadata, a recording's file name or a live episode is shown as text and
+runs nothing, and the page's Content-Security-Policy blocks inline script.
 
 Run with ``python -m pytest -m browser tests/viz`` (the default test run leaves these out;
 .ci/run installs chromium and runs them). A missing browser fails, it does not skip.
@@ -8,6 +10,7 @@ Run with ``python -m pytest -m browser tests/viz`` (the default test run leaves 
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import tempfile
@@ -253,3 +256,97 @@ def test_jump_to_the_next_event(browser, finished):
         other = max(first.items(), key=lambda item: item[1])
         assert browser.execute_script("return window.viz.cur") == other[1]
         assert browser.find_element("id", "agent-id").text == other[0]
+
+
+# ------------------------------------------------------------------------------- hostile text
+def hostile_copy(source: Path, path: Path, text: str) -> Path:
+    """A copy of a recording whose scenario, one event name, its first agent and that agent's
+    vehicle are all called ``text``."""
+    with np.load(source, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    meta = json.loads(str(arrays["metadata"]))
+    agent = meta["agent_ids"][0]
+    meta["scenario"] = text
+    meta["events"] = [*meta["events"], text]
+    meta["agent_ids"][0] = text
+    meta["vehicle_ids"] = [text if v == agent else v for v in meta["vehicle_ids"]]
+    arrays["metadata"] = np.array(json.dumps(meta))
+    np.savez_compressed(path, **arrays)
+    return path
+
+
+def assert_no_script_ran(driver) -> None:
+    """The payload's handler did not run and no element was made from it."""
+    time.sleep(0.5)  # a failed image load would have fired its handler by now
+    assert driver.execute_script("return window.__pwned") is None
+    assert driver.title == "smarts viz"
+    assert driver.execute_script("return document.querySelectorAll('img, [onerror]').length") == 0
+
+
+def shown_literally(driver, payload: str) -> None:
+    """The payload is on the page as the text it is: scenario, event list, agents, agent panel."""
+    from selenium.webdriver.support.ui import Select
+
+    assert field(driver, "episode-table", "scenario") == payload
+    assert payload in field(driver, "episode-table", "agents").split(", ")
+    assert payload in [o.text for o in Select(driver.find_element("id", "event")).options]
+    driver.execute_script("window.viz.selectedAgent = arguments[0]; window.viz.goTo(0);", payload)
+    wait_for(driver, "return !document.getElementById('agent-panel').hidden")
+    assert driver.find_element("id", "agent-id").text == payload
+    assert field(driver, "agent-table", "vehicle") == payload
+
+
+def test_recording_metadata_is_shown_as_text_not_run(browser, recorded, tmp_path):
+    from tests.viz.messages import PAYLOAD
+
+    hostile_copy(recorded["path"], tmp_path / "hostile.rec.npz", PAYLOAD)
+    with BackgroundServer(tmp_path) as srv:
+        open_episode(browser, srv.url, "0")
+        assert PAYLOAD in browser.find_element("id", "status").text
+        shown_literally(browser, PAYLOAD)
+        assert_no_script_ran(browser)
+
+
+def test_recording_file_name_is_shown_as_text_not_run(browser, recorded, tmp_path):
+    from selenium.webdriver.support.ui import Select
+
+    from tests.viz.messages import PAYLOAD
+
+    (tmp_path / f"{PAYLOAD}.rec.npz").write_bytes(recorded["path"].read_bytes())
+    with BackgroundServer(tmp_path) as srv:
+        open_episode(browser, srv.url, "0")
+        options = [o.text for o in Select(browser.find_element("id", "episode")).options]
+        assert options == [f"{PAYLOAD}.rec.npz (recording)", "live"]
+        assert_no_script_ran(browser)
+
+
+def test_live_episode_is_shown_as_text_not_run(browser):
+    from tests.viz.messages import PAYLOAD, episode, frame, text, ws_connect
+
+    live_frame = frame()
+    f = live_frame["frame"]
+    f["ids"][0] = PAYLOAD
+    f["agents"] = {PAYLOAD: {**f["agents"]["agent_0"], "vehicle": PAYLOAD, "events": [PAYLOAD]}}
+    with BackgroundServer() as srv, ws_connect(srv.port, "/ws/source") as source:
+        source.send(text(episode(scenario=PAYLOAD, agent_ids=[PAYLOAD], events=[PAYLOAD])))
+        browser.get(f"{srv.url}/?episode=live")
+        wait_for(browser, "return window.viz.ep && window.viz.ep.kind === 'live'")
+        while json.loads(source.recv(timeout=30)) != {"type": "watching", "value": True}:
+            pass  # the page is watching: frames are kept and relayed
+        source.send(text(live_frame))
+        wait_for(browser, "return window.viz.ep.frames.length === 1")
+        assert browser.find_element("id", "status").text == f"live: {PAYLOAD} (seed 0)"
+        shown_literally(browser, PAYLOAD)
+        assert field(browser, "agent-table", "events") == PAYLOAD
+        assert_no_script_ran(browser)
+
+
+def test_content_security_policy_blocks_inline_script(browser, served):
+    open_episode(browser, served.url, "0")
+    browser.execute_script(
+        "const s = document.createElement('script'); s.textContent = 'window.__inline = 1;'; document.body.append(s);"
+        "const d = document.createElement('div'); d.setAttribute('onclick', 'window.__inline = 2'); "
+        "document.body.append(d); d.click();")  # fmt: skip
+    time.sleep(0.2)
+    assert browser.execute_script("return window.__inline") is None
+    assert browser.execute_script("return window.viz.ep.frames.length") > 0  # the page's own script runs
