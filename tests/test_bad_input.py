@@ -171,3 +171,66 @@ def test_bad_replay_input_is_one_clear_error(replay_files, name, command, fragme
     for fragment in fragments:
         assert fragment in result.stderr, (name, fragment, result.stderr[-2000:])
     assert not (replay_files["tmp"] / "out.png").exists()  # nothing drawn from refused options
+
+
+# ---------------------------------------------------------------------------------- the viewer
+def _viewer_folder(tmp: Path) -> dict[str, str]:
+    """A folder with one good recording (written by the recorder) and bad ones beside it; bad file
+    name -> what its warning must say."""
+    import json
+
+    import numpy as np
+
+    from smarts.viz.recording import build_recording, write_recording
+    from tests.viz.messages import scene
+
+    reset = {"time": 0.0, "vehicle_ids": ["agent_0"], "vehicle_state": np.zeros((1, 6), np.float32),
+             "vehicle_role": np.ones(1, np.int8), "vehicle_lane": np.zeros(1, np.int32),
+             "signal_colour": np.zeros(0, np.int8), "agent_vehicle": np.zeros(1, np.int64), "agents": {}}  # fmt: skip
+    meta = {"scenario": "hand_made", "seed": 0, "dt": 0.1}
+    write_recording(build_recording([reset], ["agent_0"], scene(), meta), tmp / "good.rec.npz")
+    (tmp / "empty.rec.npz").write_bytes(b"")
+    np.savez(tmp / "list.rec.npz", metadata=np.array(json.dumps(["format"])), scene=np.array("{}"))
+    return {"empty.rec.npz": "not a readable .npz", "list.rec.npz": "metadata is a JSON list"}
+
+
+def test_viewer_names_an_unreadable_recording_it_is_given(tmp_path):
+    for name, problem in _viewer_folder(tmp_path).items():
+        result = run("-m", "smarts.viz", str(tmp_path / name), "--port", "0", cwd=tmp_path)
+        assert result.returncode == 2, (name, result.returncode, result.stderr[-2000:])
+        assert "Traceback" not in result.stderr, result.stderr[-3000:]
+        assert f"error: {tmp_path / name}: " in result.stderr and problem in result.stderr, result.stderr[-2000:]
+
+
+def test_viewer_skips_bad_recordings_in_a_folder_with_one_warning_each(tmp_path):
+    import json
+    import socket
+    import time
+    import urllib.request
+
+    bad = _viewer_folder(tmp_path)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen([sys.executable, "-m", "smarts.viz", str(tmp_path), "--port", str(port)], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        started = proc.stdout.readline()
+        assert "1 recorded episode(s)" in started, (started, proc.stderr.read() if proc.poll() is not None else "")
+        listing = None
+        for _ in range(300):
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/episodes", timeout=30) as r:
+                    listing = json.loads(r.read())
+                break
+            except OSError:
+                time.sleep(0.1)
+        assert listing is not None and [e["name"] for e in listing["episodes"]] == ["good.rec.npz"]
+    finally:
+        proc.terminate()
+        _, err = proc.communicate(timeout=30)
+    assert "Traceback" not in err, err[-3000:]
+    warnings = [line for line in err.splitlines() if line.startswith("warning: skipping")]
+    assert len(warnings) == len(bad), err
+    for name, problem in bad.items():
+        assert any(f"{tmp_path / name}: " in w and problem in w for w in warnings), (name, warnings)
