@@ -116,14 +116,14 @@ def build_suite(
             replay["offset"] = [float(offset[0]), float(offset[1])]
         if reactive != "off":
             replay["reactive"] = reactive
-        spec = ReplaySpec(format=fmt, path=path, coordinates=coordinates, swap_xy=swap_xy, flip_y=flip_y,
-                          offset=(float(offset[0]), float(offset[1])), scenario=scenario)  # fmt: skip
+        spec = ReplaySpec(format=fmt, path=str(Path(source).resolve()), coordinates=coordinates, swap_xy=swap_xy,
+                          flip_y=flip_y, offset=(float(offset[0]), float(offset[1])), scenario=scenario)  # fmt: skip
         try:
-            rec = plan_replay(spec, base, label).recording
+            rec = plan_replay(spec, None, label).recording
             road_map = fixed_map if fixed_map is not None else (
                 compile_lane_map(rec.road_map) if rec.road_map is not None else None)  # fmt: skip
         except (ReplayError, ScenarioError, MapError) as err:
-            skipped.append(f"{label}: {err}")
+            skipped.append(str(err))
             continue
         if road_map is None:
             skipped.append(f"{label}: the recording has no map of its own; give --map")
