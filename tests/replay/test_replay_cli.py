@@ -75,3 +75,55 @@ def test_show_draws_a_datasets_own_lanes(tmp_path, capsys):
     assert main(["replay", "info", str(tf), "--format", "waymo", "--json"]) == 0
     info = json.loads(capsys.readouterr().out.splitlines()[-1])
     assert info["vehicles"] == 3 and info["frames"] == 91 and info["map_lanes"] == 4
+
+
+def _colour(image: np.ndarray, rgb, tolerance: int = 12) -> np.ndarray:
+    return np.abs(image - np.array(rgb)).sum(axis=2) <= tolerance
+
+
+def test_show_draws_edges_crosswalks_pedestrians_and_signal_states(tmp_path):
+    from smarts.replay.render import CROSSWALK_FILL, CYCLIST, EDGE, EGO, PEDESTRIAN, SIGNAL_COLOURS, WHITE
+    from tests.replay.files import waymo_junction, write_waymo
+
+    tf = write_waymo(tmp_path / "j.tfrecord", [waymo_junction()])
+    images = {}
+    for t in ("3.0", "6.0"):  # 201's signal is red at 3 s, green at 6 s
+        out = tmp_path / f"j{t}.png"
+        assert main(["replay", "show", str(tf), "--format", "waymo", "--time", t, "--width", "1600", "--out", str(out)]) == 0
+        images[t] = np.asarray(Image.open(out).convert("RGB")).astype(int)
+    image = images["3.0"]
+    # the map spans x -5 .. 335 m in 1600 pixels (the north road makes it tall)
+    scale = 1600 / 340.0
+
+    def column(x: float) -> int:
+        return int(round((x + 5.0) * scale))
+
+    assert _colour(image, EDGE).sum() > 500 and _colour(image, WHITE).sum() > 300  # road edges, painted lines
+    assert _colour(image, CROSSWALK_FILL)[:, column(238.5) : column(241.5)].sum() > 20  # the crosswalk at x 240
+    assert _colour(image, PEDESTRIAN)[:, column(239) : column(241)].sum() > 5  # the pedestrian on it
+    assert _colour(image, CYCLIST).sum() > 5 and _colour(image, EGO).sum() > 50
+    red, green = SIGNAL_COLOURS[1], SIGNAL_COLOURS[3]
+    near_stop = slice(column(200), column(206))
+    # at 3 s: 201 stop and 202 arrow stop are red, 203 go is green; at 6 s 201 has turned green
+    assert _colour(image, red)[:, near_stop].sum() > 1.5 * _colour(images["6.0"], red)[:, near_stop].sum() > 0
+    assert _colour(images["6.0"], green)[:, near_stop].sum() > 1.5 * _colour(image, green)[:, near_stop].sum() > 0
+
+
+def test_show_draws_argoverse2_crossings_and_ngsim_map_edges(tmp_path):
+    from smarts.replay.render import BIKE_FILL, CROSSWALK_FILL, EDGE, PEDESTRIAN
+    from tests.replay.files import av2_map_with_crossings, write_av2
+
+    folder = write_av2(tmp_path / "scn", map_data=av2_map_with_crossings())
+    out = tmp_path / "av2.png"
+    assert main(["replay", "show", str(folder), "--format", "argoverse2", "--time", "3", "--out", str(out)]) == 0
+    image = np.asarray(Image.open(out).convert("RGB")).astype(int)
+    assert _colour(image, CROSSWALK_FILL).sum() > 50 and _colour(image, BIKE_FILL).sum() > 500
+    assert _colour(image, PEDESTRIAN).sum() > 3 and _colour(image, EDGE).sum() > 500
+    path = write_ngsim(tmp_path / "traj.csv", three_vehicles())
+    out = tmp_path / "ngsim.png"
+    net = builtin_map_path("straight_2lane")
+    assert main(["replay", "show", str(path), "--format", "ngsim", "--swap-xy", "--flip-y", "--map", str(net),
+                 "--out", str(out)]) == 0  # fmt: skip
+    image = np.asarray(Image.open(out).convert("RGB")).astype(int)
+    rows = np.flatnonzero(_colour(image, EDGE).sum(axis=1) > 300)  # the road's two outer edges, end to end
+    assert len(rows) >= 2 and rows.max() - rows.min() > 10
