@@ -20,7 +20,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"interface to bind (default: {DEFAULT_HOST}; others need --allow-remote)")  # fmt: skip
     parser.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"port (default: {DEFAULT_PORT})")
     parser.add_argument("--allow-remote", action="store_true",
-                        help="allow a --host other than this machine (the viewer has no authentication)")  # fmt: skip
+                        help="allow a --host other than this machine, and pages that reach it by an IP address or "
+                             "this machine's name (default: only localhost, 127.0.0.1 and [::1] on the bound "
+                             "port); the viewer has no authentication")  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:

@@ -179,7 +179,13 @@ class GuardMiddleware:
         if scope["type"] not in ("http", "websocket"):
             await self.app(scope, receive, send)
             return
-        headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", [])}
+        headers: dict[str, str] = {}
+        for k, v in scope.get("headers", []):
+            name = k.decode("latin-1").lower()
+            if name in headers and name in ("host", "origin"):
+                headers[name] = "(more than one)"  # never allowed
+            else:
+                headers[name] = v.decode("latin-1")
         server = scope.get("server")
         port = server[1] if server and len(server) > 1 else None
         secure = scope.get("scheme") in ("https", "wss")
@@ -226,6 +232,10 @@ def _short(reason: str) -> str:
 
 
 # ---------------------------------------------------------------------------------- live episodes
+class MessageTooLarge(MessageError):
+    """A source's message over its byte limit (the websocket closes with code 1009)."""
+
+
 class LiveHub:
     """Relays the live env's episode and frames to every connected page; keeps the current
     episode and its newest frames (``LIVE_HISTORY``, ``LIVE_HISTORY_BYTES``) for pages that
@@ -247,7 +257,7 @@ class LiveHub:
         text to relay to the pages, or None when there is nothing to relay."""
         size = len(text.encode())
         if size > MAX_EPISODE_BYTES:
-            raise MessageError(f"a message of {size} bytes; the limit is {MAX_EPISODE_BYTES}")
+            raise MessageTooLarge(f"a message of {size} bytes; the limit is {MAX_EPISODE_BYTES}")
         message = parse_message(text, self.lanes, self.signals)
         if isinstance(message, EpisodeMessage):
             self.episode = message.model_dump_json()
@@ -256,7 +266,7 @@ class LiveHub:
             self.frame_bytes = 0
             return self.episode
         if size > MAX_FRAME_BYTES:
-            raise MessageError(f"frame: {size} bytes; the limit is {MAX_FRAME_BYTES}")
+            raise MessageTooLarge(f"frame: {size} bytes; the limit is {MAX_FRAME_BYTES}")
         if not self.pages:  # nobody watches (the source was told so): nothing is kept
             return None
         out = message.model_dump_json()
@@ -297,7 +307,7 @@ class LiveHub:
                 try:
                     out = self.accept(text)
                 except MessageError as err:
-                    await _refuse(ws, 1009 if "the limit is" in str(err) else 1008, str(err))
+                    await _refuse(ws, 1009 if isinstance(err, MessageTooLarge) else 1008, str(err))
                     return
                 if out is not None:
                     await self._send_all(self.pages, out)

@@ -90,3 +90,34 @@ def test_not_a_recording(tmp_path):
     with pytest.raises(LogError, match="junk.rec.npz: not a readable .npz episode recording"):
         read_recording(junk)
     assert not zipfile.is_zipfile(junk)
+
+
+def _edit_json(name: str, edit):
+    """A change to ``_rewrite`` that edits the JSON entry ``name`` (metadata or scene)."""
+
+    def change(arrays):
+        value = json.loads(str(arrays[name]))
+        edit(value)
+        arrays[name] = np.array(json.dumps(value))
+
+    return change
+
+
+@pytest.mark.parametrize(
+    "change, fragment",
+    [
+        (_edit_json("scene", lambda s: s["lanes"][0]["successors"].append(10**6)), "lanes.0.successors"),
+        (_edit_json("scene", lambda s: s.__setitem__("lanes", "<b>")), "scene.lanes"),
+        (_edit_json("scene", lambda s: s["lanes"][0].__setitem__("onclick", "x")), "onclick"),
+        (_edit_json("metadata", lambda m: m.__setitem__("scenario", {"html": "<b>"})), "'scenario'"),
+        (_edit_json("metadata", lambda m: m.__setitem__("events", 5)), "'events'"),
+    ],
+    ids=["successor out of range", "lanes not a list", "unknown lane field", "scenario not a string", "events not a list"],
+)
+def test_recording_map_and_names_are_checked_as_the_page_reads_them(recorded, tmp_path, change, fragment):
+    """The page draws a recording's map and lists its names as they are: a file that would break
+    it is refused naming the entry, like a live env's message."""
+    bad = _rewrite(recorded["path"], tmp_path / "bad.rec.npz", change)
+    with pytest.raises(LogError) as err:
+        read_recording(bad)
+    assert err.value.column in ("scene", "metadata") and fragment in str(err.value) and str(bad) in str(err.value)
