@@ -74,7 +74,10 @@ class ReplayFile(Schema):
     offset: Annotated[list[Annotated[float, Field(allow_inf_nan=False)]], Field(min_length=2, max_length=2)] = Field(
         default_factory=lambda: [0.0, 0.0], description="[x, y] m added after swapping and flipping."
     )
-    scenario: ScenarioId | None = Field(None, description="Waymo: scenario id or record index in the file; null: the first.")
+    scenario: ScenarioId | None = Field(
+        None, description="Waymo: scenario id or record index in the file (null: the first); NGSIM: the site "
+        "(Location column) to keep from the data portal's file of every site."
+    )
 
     def to_spec(self) -> ReplaySpec:
         return ReplaySpec(
