@@ -133,6 +133,7 @@ class AccessPolicy:
             self.names |= {socket.gethostname().lower(), socket.getfqdn().lower()}
 
     def allows_name(self, name: str) -> bool:
+        """Whether a Host may name this server ``name`` (loopback always; more with allow_remote)."""
         if is_loopback(name):
             return True
         if not self.allow_remote:
