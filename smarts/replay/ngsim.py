@@ -116,7 +116,8 @@ def check_file(path: Path, fmt: str) -> None:
                 "tfrecord": "a TFRecord file (Waymo Open Motion scenarios are read with --format waymo)",
                 "zip": "a zip archive (extract it first)", "gzip": "a gzip file (decompress it first)",
                 "text": "a text file (NGSIM trajectories are read with --format ngsim)"}  # fmt: skip
-        raise ReplayError(f"{path}: is {hint[kind]}, not {'an NGSIM trajectory file' if fmt == 'ngsim' else 'a ' + fmt + ' file'}")
+        wanted = "an NGSIM trajectory file" if fmt == "ngsim" else f"a {fmt} file"
+        raise ReplayError(f"{path}: is {hint[kind]}, not {wanted}")
 
 
 def sniff(head: bytes) -> str | None:
@@ -276,7 +277,8 @@ def _txt_problem(data: bytes, width: int, wanted: list[str], err: Exception) -> 
             except ValueError:
                 if c == "Vehicle_ID":
                     continue
-                return f"column {k + 1} ({c}): expected {'an integer' if c in ('Frame_ID', 'v_Class') else 'a number'}, got {cells[k]!r} in line {number}"
+                expected = "an integer" if c in ("Frame_ID", "v_Class") else "a number"
+                return f"column {k + 1} ({c}): expected {expected}, got {cells[k]!r} in line {number}"
     return str(err).strip()
 
 

@@ -102,7 +102,8 @@ class Scene:
             self.surfaces.append(np.concatenate([_side(line, half), _side(line, -half)[::-1]]))
             self.centres.append(line)
             outer_left = rm.lane_left[lane] < 0
-            self.lines.append((_side(line, half), EDGE if outer_left else WHITE, not outer_left and not rm.lane_internal[lane]))
+            divider = not outer_left and not rm.lane_internal[lane]
+            self.lines.append((_side(line, half), EDGE if outer_left else WHITE, divider))
             if rm.lane_right[lane] < 0 and not rm.lane_internal[lane]:
                 self.lines.append((_side(line, -half), EDGE, False))
         self.surfaces += [np.asarray(s) for s in rm.junction_shapes if len(s) >= 3]

@@ -21,7 +21,7 @@ from smarts.maps.road_map import MARK_BIKE_LANE, MARK_CROSSWALK, MARK_SPEED_BUMP
 from smarts.maps.routing import shortest_route
 from smarts.replay import read_recording
 from smarts.replay.lane_map import compile_lane_map
-from smarts.replay.recording import DatasetMap, ObjectKind
+from smarts.replay.recording import DatasetMap
 from smarts.scenario import load_scenario
 from smarts.traffic.signals import GREEN, RED
 from tests.replay.files import (
