@@ -196,16 +196,18 @@ def ahead_state(sim, agents: np.ndarray, sight: float = LEAD_SIGHT) -> AheadStat
     if n == 0:
         return out
     rm = sim.road_map
+    scope = sim.scope(agents)  # each agent among its own episode's road users
     _ahead_kernel(
-        sim.table.data, sim.table.lane, sim.agent_row[agents], sim.alive, rm.succ_offsets, rm.succ,
-        rm.lane_length, float(sight), out.present, out.gap, out.rel_speed, out.speed, out.accel,
+        sim.table.data, sim.table.lane, sim.agent_row[agents], scope.alive, scope.lo, scope.hi, rm.succ_offsets,
+        rm.succ, rm.lane_length, float(sight), out.present, out.gap, out.rel_speed, out.speed, out.accel,
     )  # fmt: skip
     return out
 
 
 @numba.njit(cache=True, nogil=True)
 def _ahead_kernel(
-    data, lane, rows, alive, succ_offsets, succ, lane_length, sight, present, gap, rel_speed, speed, accel
+    data, lane, rows, alive, alive_lo, alive_hi, succ_offsets, succ, lane_length, sight, present, gap, rel_speed,
+    speed, accel,
 ):  # pragma: no cover - compiled
     for i in range(rows.shape[0]):
         r = rows[i]
@@ -213,7 +215,7 @@ def _ahead_kernel(
             continue
         x, y, h, v = data[_X, r], data[_Y, r], data[_H, r], data[_SPEED, r]
         best = sight
-        for j in alive:
+        for j in alive[alive_lo[i]:alive_hi[i]]:
             if j == r or lane[j] < 0:
                 continue
             dx, dy = data[_X, j] - x, data[_Y, j] - y

@@ -176,11 +176,11 @@ def _time_sensors(builder, sim, parts: dict[str, list[float]]) -> None:
     agents = sim.active_agents
     rows = sim.agent_row[agents]
     t0 = time.perf_counter()
-    shadows = builder.shadows.scan(sim, rows)
+    shadows = builder.shadows.scan(sim, agents, rows)
     t1 = time.perf_counter()
     builder.rasters.observe(sim, agents, rows, shadows)
     t2 = time.perf_counter()
-    builder.lidar.observe(sim, rows)
+    builder.lidar.observe(sim, agents, rows)
     t3 = time.perf_counter()
     parts["shadows"].append((t1 - t0) * 1e3)
     parts["rasters"].append((t2 - t1) * 1e3)

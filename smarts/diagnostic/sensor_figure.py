@@ -77,7 +77,7 @@ def make_figure(
     agents = np.array([agent], dtype=np.int64)
     rows = sim.agent_row[agents]
     view = RasterSensor(RasterInterface(size=VIEW_SIZE, resolution=VIEW_RESOLUTION, layers=(), rgb=True), False)
-    rgb = view.observe(sim, agents, rows, env.builder.shadows.scan(sim, rows))["rgb"][0]
+    rgb = view.observe(sim, agents, rows, env.builder.shadows.scan(sim, agents, rows))["rgb"][0]
     mine = obs[env.agents[0]]
     env.close()
 

@@ -53,6 +53,15 @@ class AgentVehicle:
 
 
 class AgentProvider(ProviderBase):
+    """The batch provider of every agent of every episode (``smarts.core.simulation``).
+
+    Actions arrive as a dict by agent id or as one array ``[agents, k]`` (each action-space group
+    reads its first columns); either way every group is checked and stacked before any moves.
+    Continuous agents drive pybullet cars, one physics world per episode (so an episode's
+    physics is the same alone or in a batch, and cars of different episodes never touch).
+    ``device``: a torch device for the pose groups (``smarts.dynamics.pose_control_torch``);
+    None runs the compiled numpy kernels."""
+
     name = "agents"
 
     def __init__(
@@ -61,10 +70,12 @@ class AgentProvider(ProviderBase):
         limits: ReachLimits,
         dt: float,
         lane_relative: LaneRelativeParams | None = None,
+        device=None,
     ):
         self.vehicles = vehicles
         self.limits = limits
         self.dt = dt
+        self.device = device
         self.groups: dict[ActionSpaceType, np.ndarray] = {}
         for kind in ActionSpaceType:
             members = [i for i, v in enumerate(vehicles) if v.action_space is kind]
@@ -77,61 +88,64 @@ class AgentProvider(ProviderBase):
         self.lane_relative = (
             LaneRelativeController(len(vehicles), lane_relative) if self.commanded.any() else None
         )
-        self.world = None  # a pybullet PhysicsWorld, created only when an agent drives Continuous
+        self.physical = np.array([v.action_space is ActionSpaceType.CONTINUOUS for v in vehicles], dtype=bool)
+        self.worlds: dict[int, object] = {}  # episode -> pybullet PhysicsWorld (Continuous agents only)
         self.handles = np.full(len(vehicles), -1, dtype=np.int64)
+        self.mass = np.zeros(len(vehicles))  # whole-car mass of physics cars, kg
         self.lane_offset = np.zeros(len(vehicles), dtype=np.int64)  # lane agents: 0 route, +1 left, -1 right
         self.wheelbase = np.array([wheelbase_for_length(v.length) for v in vehicles])
-        self._taking: str | None = None  # agent whose take-over is in progress
+        self.width = max(len(action_components(v.action_space, v.controller)) for v in vehicles) if vehicles else 0
+        """Columns of an action array: the widest action of any agent."""
+        self._taking: int | None = None  # agent whose take-over is in progress
         self._group_commanded = {kind: bool(self.commanded[m].any()) for kind, m in self.groups.items()}
-        self._planned: tuple[dict, list] | None = None  # (actions, plans) of the last full check
+        self._planned: tuple[object, list] | None = None  # (actions, plans) of the last full check
 
     # ------------------------------------------------------------------ episode
-    def reset(self, sim: Simulation) -> None:
-        if ActionSpaceType.CONTINUOUS in self.groups:
-            if self.world is None:
+    def reset_episode(self, sim: Simulation, b: int, agents: np.ndarray) -> None:
+        """Put episode ``b``'s agents at their starts (in agent order, the first rows of its
+        block) and clear their controller state; take-overs wait for ``start_episode``."""
+        self._planned = None
+        if self.physical[agents].any():
+            world = self.worlds.get(b)
+            if world is None:
                 from smarts.dynamics.pybullet_chassis import PhysicsWorld  # loads pybullet
 
-                self.world = PhysicsWorld(dt=self.dt)
+                self.worlds[b] = PhysicsWorld(dt=self.dt)
             else:
-                self.world.reset()
-        self.handles[:] = -1
-        self.lane_offset[:] = 0
-        self._planned = None
+                world.reset()
+        self.handles[agents] = -1
+        self.lane_offset[agents] = 0
         if self.lane_relative is not None:
-            self.lane_relative.reset(sim)
-        for i, (vehicle, mission) in enumerate(zip(self.vehicles, sim.missions)):
+            self.lane_relative.reset_agents(sim, agents)
+        view = sim.views[b]
+        for a in agents.tolist():
+            vehicle, mission = self.vehicles[a], sim.missions[a]
             if vehicle.take_over is not None:
-                continue  # taken from traffic in start(), once traffic has created it
+                continue  # taken from traffic in start_episode, once traffic has created it
             x, y = mission.start_xy
-            row = sim.table.add(
-                vehicle.agent_id,
-                owner=self.provider_id,
-                role=vehicle.role,
-                x=float(x),
-                y=float(y),
-                heading=mission.start_heading,
-                speed=mission.start_speed,
-                vtype=vehicle.vtype,
-                length=vehicle.length,
-                width=vehicle.width,
-                height=vehicle.height,
-            )
-            sim.register_agent_vehicle(vehicle.agent_id, row)
-            self._add_physics(i, sim, row)
+            row = view.table.add(
+                sim.local_agent_ids[a], owner=self.provider_id, role=vehicle.role, x=float(x), y=float(y),
+                heading=mission.start_heading, speed=mission.start_speed, vtype=vehicle.vtype,
+                length=vehicle.length, width=vehicle.width, height=vehicle.height,
+            )  # fmt: skip
+            sim.agent_row[a] = view.base + row
+            self._add_physics(a, sim, view.base + row)
 
-    def start(self, sim: Simulation) -> None:
+    def start_episode(self, sim: Simulation, b: int, agents: np.ndarray) -> None:
         """Take over the traffic vehicles named by ``take_over`` missions (they exist by now)."""
-        for vehicle in self.vehicles:
+        view = sim.views[b]
+        for a in agents.tolist():
+            vehicle = self.vehicles[a]
             if vehicle.take_over is None:
                 continue
-            row = sim.table.row_of.get(vehicle.take_over)
+            row = view.table.row_of.get(vehicle.take_over)
             if row is None:
                 raise RuntimeError(
-                    f"{vehicle.agent_id}: mission.start.take_over: traffic created no vehicle "
+                    f"{sim.local_agent_ids[a]}: mission.start.take_over: traffic created no vehicle "
                     f"{vehicle.take_over!r} at reset (a trip departing at 0 s is needed)"
                 )
-            self._taking = vehicle.agent_id
-            sim.hand_over(np.array([row]), self, vehicle.role)
+            self._taking = a
+            sim.hand_over(np.array([view.base + row]), self, vehicle.role)
 
     def can_accept(self, sim: Simulation, rows: np.ndarray) -> np.ndarray:
         return np.full(len(rows), self._taking is not None)
@@ -139,37 +153,39 @@ class AgentProvider(ProviderBase):
     def accept(self, sim: Simulation, rows: np.ndarray) -> None:
         """A taken-over vehicle keeps its pose, speed and size; it becomes the agent's."""
         (row,) = np.asarray(rows).tolist()
-        agent = sim.agent_index[self._taking]
-        self._taking = None
-        sim.register_agent_vehicle(sim.agent_ids[agent], row)
+        agent, self._taking = self._taking, None
+        sim.agent_row[agent] = row
         self._add_physics(agent, sim, row)
 
     def _add_physics(self, agent: int, sim: Simulation, row: int) -> None:
-        vehicle = self.vehicles[agent]
-        if vehicle.action_space is not ActionSpaceType.CONTINUOUS:
+        if not self.physical[agent]:
             return
+        vehicle = self.vehicles[agent]
+        world = self.worlds[int(sim.agent_episode[agent])]
         t = sim.table
-        self.handles[agent] = self.world.add_vehicle(
+        self.handles[agent] = world.add_vehicle(
             float(t.x[row]), float(t.y[row]), float(t.heading[row]), float(t.speed[row]),
             float(t.length[row]), float(t.width[row]), float(t.height[row]), vehicle.mass,
-        )
+        )  # fmt: skip
+        self.mass[agent] = world.vehicle_mass([self.handles[agent]])[0]
+        self.wheelbase[agent] = world.wheelbase([self.handles[agent]])[0]
 
     def release(self, sim: Simulation, rows: np.ndarray) -> None:
-        if self.world is None:
+        if not self.worlds:
             return
         for row in np.asarray(rows).tolist():
             for agent in np.flatnonzero(sim.agent_row == row).tolist():
                 if self.handles[agent] >= 0:
-                    self.world.remove_vehicle(int(self.handles[agent]))
+                    self.worlds[int(sim.agent_episode[agent])].remove_vehicle(int(self.handles[agent]))
                     self.handles[agent] = -1
 
     def close(self) -> None:
-        if self.world is not None:
-            self.world.close()
-            self.world = None
+        for world in self.worlds.values():
+            world.close()
+        self.worlds = {}
 
     # ------------------------------------------------------------------ step
-    def check_actions(self, sim: Simulation, actions: dict, agents: np.ndarray | None = None) -> None:
+    def check_actions(self, sim: Simulation, actions, agents: np.ndarray | None = None) -> None:
         """Check the actions of every active agent (or of ``agents``, agent indices) in every group
         and controller at once; raise one ``ActionError`` naming every bad agent and what was
         expected. Nothing changes; a full check keeps the stacked arrays for the ``step`` that
@@ -178,9 +194,11 @@ class AgentProvider(ProviderBase):
         if agents is None:
             self._planned = (actions, plans)
 
-    def _plan(self, sim: Simulation, actions: dict, agents: np.ndarray | None) -> list:
+    def _plan(self, sim: Simulation, actions, agents: np.ndarray | None) -> list:
         """Per action-space group: ``(kind, members, commanded, direct, commands)``, the float64
         arrays of its direct actions and lane-relative commands (None when it has none)."""
+        if isinstance(actions, np.ndarray):
+            return self._plan_array(sim, actions, agents)
         plans = []
         problems: list[str] = []
         bad: list[str] = []
@@ -222,6 +240,44 @@ class AgentProvider(ProviderBase):
             raise ActionError("; ".join(problems), bad)
         return plans
 
+    def _plan_array(self, sim: Simulation, actions: np.ndarray, agents: np.ndarray | None) -> list:
+        """``_plan`` of an array: row ``a`` agent ``a``'s action, each group reads its first
+        columns (``width`` columns in all: the widest action)."""
+        n = len(sim.agent_ids)
+        if actions.ndim != 2 or actions.shape[0] != n or actions.shape[1] < self.width:
+            raise ActionError(
+                f"expected an action array of shape ({n}, {self.width}) (agents, action components), got {actions.shape}", []
+            )
+        if actions.dtype.kind not in REAL_KINDS:
+            raise ActionError(f"expected real-number actions, got dtype {actions.dtype}", [])
+        plans = []
+        bad: list[str] = []
+        for kind, members in self.groups.items():
+            members = members[sim.agent_active[members]]
+            if agents is not None:
+                members = members[np.isin(members, agents)]
+            if members.size == 0:
+                continue
+            commanded = self.commanded[members] if self._group_commanded[kind] else None
+            parts = []
+            for controller in ("direct", "lane_relative"):
+                if commanded is None:
+                    chosen = members if controller == "direct" else None
+                else:
+                    chosen = members[~commanded if controller == "direct" else commanded]
+                if chosen is None or chosen.size == 0:
+                    parts.append(None)
+                    continue
+                arr = np.asarray(actions[chosen, : len(action_components(kind, controller))], dtype=np.float64)
+                finite = np.isfinite(arr).all(axis=1)
+                if not finite.all():
+                    bad += [sim.agent_ids[a] for a in chosen[~finite].tolist()]
+                parts.append(arr)
+            plans.append((kind, members, commanded, *parts))
+        if bad:
+            raise ActionError(f"actions of agents {bad} are not finite numbers", bad)
+        return plans
+
     def step(self, sim: Simulation, dt: float) -> None:
         planned, self._planned = self._planned, None
         if planned is not None and planned[0] is sim.actions:
@@ -248,20 +304,27 @@ class AgentProvider(ProviderBase):
             return ctl.relative_pose_actions(sim, members, rows, commands, dt)
         if kind is ActionSpaceType.TARGET_POSE:
             return ctl.target_pose_actions(sim, members, rows, commands, dt)
-        return ctl.continuous_actions(sim, members, rows, commands, dt, self.world, self.handles[members])
+        world = next(iter(self.worlds.values()))  # the car model's constants (every world has the same)
+        return ctl.continuous_actions(sim, members, rows, commands, dt, world, self.mass[members], self.wheelbase[members])
 
     def _drive(self, kind, sim, members, rows, actions, dt) -> None:
-        if kind is ActionSpaceType.RELATIVE_TARGET_POSE:
+        if kind in (ActionSpaceType.RELATIVE_TARGET_POSE, ActionSpaceType.TARGET_POSE) and self.device is not None:
+            from smarts.dynamics.pose_control_torch import apply_pose_torch
+
+            apply_pose_torch(sim.table, rows, actions, kind is ActionSpaceType.TARGET_POSE, dt, self.limits, self.device)
+        elif kind is ActionSpaceType.RELATIVE_TARGET_POSE:
             apply_relative_pose(sim.table, rows, actions, dt, self.limits)
         elif kind is ActionSpaceType.TARGET_POSE:
             apply_target_pose(sim.table, rows, actions, dt, self.limits)
         elif kind is ActionSpaceType.CONTINUOUS:
             from smarts.dynamics.pybullet_chassis import apply_continuous
 
-            apply_continuous(self.world, sim.table, rows, self.handles[members], actions, dt)
+            episode = sim.agent_episode[members]
+            for b in np.unique(episode).tolist():  # one physics world per episode
+                mine = episode == b
+                apply_continuous(self.worlds[b], sim.table, rows[mine], self.handles[members[mine]], actions[mine], dt)
         else:
             self._lane_step(sim, members, rows, actions, dt)
-
     def _lane_step(self, sim: Simulation, members, rows, actions, dt) -> None:
         """Follow the route path or the path one lane left/right of it (see ``MissionArrays``)."""
         target_speed, change = lane_command(actions, self.limits)
@@ -279,6 +342,7 @@ class AgentProvider(ProviderBase):
         self.lane_offset[members] = offset
         target = ma.paths[members, idx, path, :2]
         lane_control_step(sim.table, rows, target_speed, target, dt, self.limits, self.wheelbase[members])
+
 
 
 def _stack(kind: ActionSpaceType, actions: dict, ids: list[str], controller: str) -> np.ndarray | None:

@@ -102,12 +102,17 @@ class LaneRelativeController:
         self._route_road: np.ndarray | None = None
 
     def reset(self, sim) -> None:
-        self.track[:] = -1
-        self.pending[:] = 0
-        self.profile_start[:] = 0.0
-        self.profile_age[:] = np.inf
-        self.branch[:] = 0
-        self._route_road = np.ascontiguousarray(sim.mission_arrays.on_route_road)
+        self.reset_agents(sim, np.arange(self.n))
+
+    def reset_agents(self, sim, agents: np.ndarray) -> None:
+        """Clear the state of ``agents`` (a new episode of theirs begins)."""
+        self.track[agents] = -1
+        self.pending[agents] = 0
+        self.profile_start[agents] = 0.0
+        self.profile_age[agents] = np.inf
+        self.branch[agents] = 0
+        if self._route_road is None:
+            self._route_road = np.ascontiguousarray(sim.mission_arrays.on_route_road)
 
     def targets(self, sim, members: np.ndarray, rows: np.ndarray, commands: np.ndarray, dt: float):
         """Advance the state of agents ``members`` (rows ``rows``) by one step of ``commands``.
@@ -159,23 +164,21 @@ class LaneRelativeController:
         heading = np.arctan2(np.sin(h + rel[:, 2]), np.cos(h + rel[:, 2]))
         return np.stack([x, y, heading], axis=1)
 
-    def continuous_actions(self, sim, members, rows, commands, dt: float, world, handles) -> np.ndarray:
+    def continuous_actions(self, sim, members, rows, commands, dt: float, world, mass, wheelbase) -> np.ndarray:
         """Continuous actions ``[n, 3]`` (throttle, brake, steering) for pybullet cars.
 
         Throttle and brake come from the car's torque model (the force that gives the asked
         acceleration, plus rolling resistance) and steering from the pursued curvature through the
-        car's wheelbase; the physics decides what actually happens.
+        car's wheelbase; the physics decides what actually happens. ``world`` gives the car
+        model's constants, ``mass`` and ``wheelbase`` each car's.
         """
         accel, kappa, _, _ = self.targets(sim, members, rows, commands, dt)
-        handles = np.asarray(handles, dtype=np.int64)
-        mass = world.vehicle_mass(handles)
         from smarts.dynamics.pybullet_chassis import WHEEL_RADIUS
 
         rolling = world.rolling_resistance * 9.81
         drive = np.clip(mass * (accel + rolling) * WHEEL_RADIUS / world.max_drive_torque, 0.0, 1.0)
         brake = np.clip(mass * np.maximum(-accel - rolling, 0.0) * WHEEL_RADIUS / world.max_brake_torque, 0.0, 1.0)
         drive = np.where(accel + rolling > 0.0, drive, 0.0)
-        wheelbase = world.wheelbase(handles)
         steering = np.clip(np.arctan(kappa * wheelbase) / world.max_steer, -1.0, 1.0)
         return np.stack([drive, brake, steering], axis=1)
 

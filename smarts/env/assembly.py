@@ -7,6 +7,7 @@ provider protocol, so adding traffic or replay providers changes this file, not 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -17,13 +18,14 @@ from smarts.core.missions import resolve_mission
 from smarts.core.provider import ProviderBase
 from smarts.core.spec import REPLAY_MAP
 from smarts.core.spec import ScenarioSpec as PlainScenarioSpec
-from smarts.core.simulation import EventConfig, Simulation, check_seed
+from smarts.core.simulation import EpisodeSetup, EventConfig, Simulation, check_seed
 from smarts.core.vehicle_table import Role, VehicleType
 from smarts.dynamics.action_spaces import ActionSpaceType
 from smarts.dynamics.agent_provider import AgentProvider, AgentVehicle
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
 from smarts.maps import RoadMap, load_map
+from smarts.maps.stack import stack_maps
 from smarts.scenario import ScenarioSpec, load_scenario
 from smarts.traffic.signals import FixedTimeSignals, SignalState
 
@@ -51,13 +53,71 @@ def scenario_map(spec: ScenarioSpec) -> RoadMap:
 
 
 def build_simulation(
-    spec: ScenarioSpec,
+    specs: ScenarioSpec | Sequence[ScenarioSpec],
     limits: ReachLimits | None = None,
     road_map: RoadMap | None = None,
     lane_relative: LaneRelativeParams | None = None,
+    *,
+    seeds: Sequence[int] | None = None,
+    device: str = "cpu",
 ) -> Simulation:
-    road_map = road_map or scenario_map(spec)
+    """One simulation of ``specs`` (one scenario: a single episode; a list: episode ``b`` runs
+    ``specs[b]`` with seed ``seeds[b]``, default each scenario's seed). Scenarios on different
+    maps share it through a stack of their maps (``smarts.maps.stack``). ``road_map``: the map of
+    every scenario, when it is loaded already. ``device``: where stages with a torch version run
+    (``smarts.dynamics.pose_control_torch.resolve_device``; "cpu": the compiled kernels)."""
+    from smarts.dynamics.pose_control_torch import resolve_device
+
+    torch_device = resolve_device(device)
+    specs = [specs] if not isinstance(specs, (list, tuple)) else list(specs)
+    if not specs:
+        raise ValueError("build_simulation needs at least one scenario")
+    seeds = [s.seed for s in specs] if seeds is None else list(seeds)
+    if len(seeds) != len(specs):
+        raise ValueError(f"seeds: expected {len(specs)} seeds (one per scenario), got {len(seeds)}")
+    first = specs[0]
     limits = limits or ReachLimits()
+    for spec in specs[1:]:
+        if spec.step_length != first.step_length:
+            raise ScenarioError(
+                f"{spec.source}: step_length {spec.step_length} differs from {first.source}'s "
+                f"{first.step_length}; the episodes of one simulation share the step"
+            )
+    map_number: dict = {}
+    maps: list[RoadMap] = []
+    for spec in specs:
+        key = _map_key(spec)
+        if key not in map_number:
+            if road_map is not None and maps:
+                raise ScenarioError(f"{spec.source}: map {spec.map} differs from {first.source}'s, but one road_map was given for all")
+            map_number[key] = len(maps)
+            maps.append(road_map if road_map is not None else scenario_map(spec))
+    stack = stack_maps(maps)
+    vehicles: list[AgentVehicle] = []
+    episodes: list[EpisodeSetup] = []
+    for b, spec in enumerate(specs):
+        m = map_number[_map_key(spec)]
+        episode_map = stack.windows[m]  # the scenario's map in the simulation's lane indices
+        setup, agents = _episode(spec, episode_map, check_seed(seeds[b], f"{spec.source}: seed"), limits)
+        setup.map_index = m
+        episodes.append(setup)
+        vehicles += agents
+    providers = [AgentProvider(vehicles, limits, first.step_length, lane_relative, torch_device)]
+    capacity = max(s.vehicle_capacity for s in specs)
+    return Simulation(stack, episodes, providers, dt=first.step_length, capacity=capacity)
+
+
+def _map_key(spec: ScenarioSpec) -> tuple:
+    """What makes two scenarios' maps the same map: the file (and, for a dataset's own lanes,
+    the scenario of the recording)."""
+    if spec.map == REPLAY_MAP and spec.replay is not None:
+        return (str(spec.map_path()), spec.replay.scenario)
+    return (str(spec.map_path()),)
+
+
+def _episode(spec: ScenarioSpec, road_map: RoadMap, seed: int, limits: ReachLimits) -> tuple[EpisodeSetup, list[AgentVehicle]]:
+    """One episode of ``spec`` on ``road_map`` (its window of the simulation's maps): its
+    missions, own providers, rules and signals, and its agents' vehicles."""
     replay = _replay_plan(spec)
     taken = {t.agent_id: t for t in replay.take_overs} if replay is not None else {}
     missions = [
@@ -66,7 +126,7 @@ def build_simulation(
             f"{spec.source}: agents[{i}].mission", spec.traffic,
         )
         for i, agent in enumerate(spec.agents)
-    ]
+    ]  # fmt: skip
     vehicles = []
     for agent in spec.agents:
         dims = agent.vehicle.dimensions()
@@ -93,22 +153,11 @@ def build_simulation(
         not_moving_distance=spec.events.not_moving_distance,
     )
     signals = SignalState(road_map) if road_map.tls_ids else None
-    providers = [AgentProvider(vehicles, limits, spec.step_length, lane_relative)]
-    providers += traffic_providers(spec, road_map, signals)
+    providers = traffic_providers(spec, road_map, signals)
     if replay is not None:
-        providers.insert(1, _replay_provider(spec, replay, road_map, providers, signals))
-    sim = Simulation(
-        road_map,
-        missions,
-        providers,
-        dt=spec.step_length,
-        episode_steps=spec.episode_steps,
-        events=events,
-        capacity=spec.vehicle_capacity,
-        seed=check_seed(spec.seed, f"{spec.source}: seed"),
-    )
-    sim.signals = signals
-    return sim
+        providers.insert(0, _replay_provider(spec, replay, road_map, providers, signals))
+    setup = EpisodeSetup(missions, providers, episode_steps=spec.episode_steps, events=events, seed=seed, signals=signals)
+    return setup, vehicles
 
 
 def _replay_plan(spec: ScenarioSpec):
@@ -138,7 +187,7 @@ def _replay_provider(spec: ScenarioSpec, replay, road_map: RoadMap, providers: l
 
     target = None
     if spec.replay.reactive != "off":
-        target = next((p for p in providers[1:] if type(p).can_accept is not ProviderBase.can_accept), None)
+        target = next((p for p in providers if type(p).can_accept is not ProviderBase.can_accept), None)
         if target is None:
             from smarts.core.spec.traffic import TrafficSpec
             from smarts.traffic.builtin import BuiltinTrafficProvider

@@ -115,9 +115,10 @@ class TaskReward:
             self._lat = np.zeros(len(sim.agent_ids))
             self._step = np.full(len(sim.agent_ids), -10, dtype=np.int64)
         lat = t.lat_accel[rows]
-        previous = np.where(self._step[agents] == sim.step_count - 1, self._lat[agents], lat)
+        step = sim.agent_step(agents)  # each agent's episode's step
+        previous = np.where(self._step[agents] == step - 1, self._lat[agents], lat)
         lat_jerk = (lat - previous) / sim.dt
-        self._lat[agents], self._step[agents] = lat, sim.step_count
+        self._lat[agents], self._step[agents] = lat, step
         uncomfortable = (
             (np.abs(t.jerk[rows]) > w.jerk_long_max)
             | (np.abs(lat_jerk) > w.jerk_lat_max)

@@ -34,8 +34,10 @@ class LidarSensor:
     def __init__(self, config: LidarInterface, stream: int = 0):
         self.config = config
         self._stream = stream
-        self._rng: np.random.Generator | None = None
-        self._rng_key: tuple[int, int] | None = None
+        self.episode_streams: dict[int, int] = {}
+        """Episode -> the stream this sensor's group has in it (its rank among the episode's own
+        interface groups, as a simulation of that episode alone numbers them); default ``stream``."""
+        self._rngs: dict[int, tuple] = {}  # episode -> (noise generator, (seed, step) it last drew at)
 
     def spaces(self) -> dict[str, gym.spaces.Box]:
         r, rng = self.config.rays, np.float32(self.config.range)
@@ -44,37 +46,50 @@ class LidarSensor:
             "lidar_hit": gym.spaces.Box(0.0, float(HIT_ROAD_EDGE), (r,), np.float32),
         }
 
-    def observe(self, sim: Simulation, rows: np.ndarray) -> dict[str, np.ndarray]:
+    def observe(self, sim: Simulation, agents: np.ndarray, rows: np.ndarray) -> dict[str, np.ndarray]:
+        """Scans of ``agents`` (rows ``rows``), each among its own episode's road users, on its
+        own map; the noise of each episode comes from that episode's seed."""
         cfg = self.config
         n = rows.shape[0]
         dist = np.empty((n, cfg.rays), dtype=np.float32)
         hit = np.empty((n, cfg.rays), dtype=np.float32)
-        f = map_fields(sim.road_map)
-        lidar_scan(
-            sim.table.data, sim.table.role, sim.alive, rows, cfg.range,
-            f.origin, f.inv_res, f.cell_max, f.width, f.road_clearance, dist, hit,
-        )
+        scope = sim.scope(agents)
+        maps = sim.episode_map[sim.agent_episode[agents]]
+        for m in np.unique(maps).tolist() if n else []:
+            idx = np.flatnonzero(maps == m)
+            f = map_fields(sim.map_stack.maps[m])
+            d, h = (dist, hit) if len(idx) == n else (np.empty((len(idx), cfg.rays), np.float32), np.empty((len(idx), cfg.rays), np.float32))
+            lidar_scan(
+                sim.table.data, sim.table.role, scope.alive, scope.lo[idx], scope.hi[idx], rows[idx], cfg.range,
+                f.origin, f.inv_res, f.cell_max, f.width, f.road_clearance, d, h,
+            )  # fmt: skip
+            if len(idx) != n:
+                dist[idx], hit[idx] = d, h
         if cfg.noise > 0 and n:
-            noise = self._generator(sim).standard_normal(dist.shape, dtype=np.float32)
-            noise *= np.float32(cfg.noise)
-            noise[hit == HIT_NONE] = 0.0
-            dist += noise
+            episode = sim.agent_episode[agents]
+            for b in np.unique(episode).tolist():
+                mine = np.flatnonzero(episode == b)
+                noise = self._generator(b, sim.episode_seed[b], int(sim.episode_step[b])).standard_normal(
+                    (len(mine), cfg.rays), dtype=np.float32
+                )
+                noise *= np.float32(cfg.noise)
+                noise[hit[mine] == HIT_NONE] = 0.0
+                dist[mine] += noise
             np.clip(dist, 0.0, np.float32(cfg.range), out=dist)
         return {"lidar": dist, "lidar_hit": hit}
 
-    def _generator(self, sim: Simulation) -> np.random.Generator:
-        # A new episode (step 0, or time went back) restarts the noise sequence of this seed.
-        key = (sim.seed, sim.step_count)
-        last = self._rng_key
-        if self._rng is None or last is None or key[0] != last[0] or key[1] == 0 or key[1] < last[1]:
-            self._rng = np.random.default_rng([sim.seed, _NOISE_STREAM, self._stream])
-        self._rng_key = key
-        return self._rng
+    def _generator(self, episode: int, seed: int, step: int) -> np.random.Generator:
+        # A new episode (step 0, or time went back) restarts the noise sequence of its seed.
+        rng, last = self._rngs.get(episode, (None, None))
+        if rng is None or last is None or seed != last[0] or step == 0 or step < last[1]:
+            rng = np.random.default_rng([seed, _NOISE_STREAM, self.episode_streams.get(episode, self._stream)])
+        self._rngs[episode] = (rng, (seed, step))
+        return rng
 
 
 @numba.njit(cache=True, nogil=True)
 def lidar_scan(
-    data, role, alive, rows, max_range, origin, inv_res, cell_max, width, clearance, dist, hit,
+    data, role, alive, alive_lo, alive_hi, rows, max_range, origin, inv_res, cell_max, width, clearance, dist, hit,
 ):  # pragma: no cover - compiled
     n_rays = dist.shape[1]
     step = 2.0 * math.pi / n_rays
@@ -83,7 +98,7 @@ def lidar_scan(
         px, py, h = data[_X, r], data[_Y, r], data[_H, r]
         dist[i, :] = max_range
         hit[i, :] = HIT_NONE
-        for j in alive:
+        for j in alive[alive_lo[i]:alive_hi[i]]:
             if j == r:
                 continue
             bx, by, bh = data[_X, j], data[_Y, j], data[_H, j]

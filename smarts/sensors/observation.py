@@ -220,23 +220,22 @@ class ObservationBuilder:
         ma = sim.mission_arrays
         n = len(agents)
         rows = sim.agent_row[agents]
-        shadows: Shadows | None = self.shadows.scan(sim, rows) if self.shadows is not None else None
+        shadows: Shadows | None = self.shadows.scan(sim, agents, rows) if self.shadows is not None else None
         obs = self.empty_basic(n)
-        signals = getattr(sim, "signals", None)
-        via_colour = signals.via_colour if signals is not None else self._no_signals(sim.road_map)
         if interface.ego.extended and self._yaw.shape[1] != len(sim.agent_ids):
             self._yaw = np.zeros((3, len(sim.agent_ids)))
             self._yaw[1] = -2.0
+        scope = sim.scope(agents)
         _observe(
-            sim.table.data, sim.table.lane, sim.table.role, sim.table.vtype, sim.alive, agents, rows,
-            self._lane_info(sim.road_map), ma.flat_paths, ma.flat_valid, ma.stride,
+            sim.table.data, sim.table.lane, sim.table.role, sim.table.vtype, scope.alive, scope.lo, scope.hi,
+            scope.base, agents, rows, self._lane_info(sim.road_map), ma.flat_paths, ma.flat_valid, ma.stride,
             sim.route_index, self._offsets, ma.goal_kind, ma.goal_xy, ma.route_length,
-            sim.route_progress, ma.signal_via, ma.signal_s, via_colour, sim.agent_events,
+            sim.route_progress, ma.signal_via, ma.signal_s, sim.via_colour, sim.agent_episode, sim.agent_events,
             interface.neighbours.radius**2, interface.neighbours.extended,
             shadows.visible if shadows is not None and self._vis_mode != _VIS_OFF else self._no_visible,
-            self._vis_mode, interface.ego.extended, self._yaw, sim.step_count, sim.dt,
+            self._vis_mode, interface.ego.extended, self._yaw, sim.episode_step, sim.dt,
             *obs.values(),
-        )
+        )  # fmt: skip
         if not interface.signals:
             del obs["signal"]
         if interface.lead:
@@ -247,13 +246,8 @@ class ObservationBuilder:
         if self.rasters is not None:
             obs.update(self.rasters.observe(sim, agents, rows, shadows))
         if self.lidar is not None:
-            obs.update(self.lidar.observe(sim, rows))
+            obs.update(self.lidar.observe(sim, agents, rows))
         return obs
-
-    def _no_signals(self, rm) -> np.ndarray:
-        if getattr(self, "_no_signal_colours", None) is None or len(self._no_signal_colours) != rm.num_lanes:
-            self._no_signal_colours = np.zeros(rm.num_lanes, dtype=np.int8)
-        return self._no_signal_colours
 
     def _lane_info(self, rm) -> np.ndarray:
         """(width, speed limit, road, index on the road) per lane, stacked once per map."""
@@ -280,17 +274,24 @@ def lead_features(sim: Simulation, agents: np.ndarray) -> np.ndarray:
 
 @numba.njit(cache=True, nogil=True)
 def _observe(
-    data, lane, role, vtype, alive, agents, rows, lane_info, flat_paths, flat_valid, stride, route_index,
-    offsets, goal_kind, goal_xy, route_length, route_progress, signal_via, signal_s, via_colour,
-    events, radius2, extended, visible, vis_mode, ego_extended, yaw, step, dt,
+    data, lane, role, vtype, alive, alive_lo, alive_hi, row_base, agents, rows, lane_info, flat_paths, flat_valid,
+    stride, route_index, offsets, goal_kind, goal_xy, route_length, route_progress, signal_via, signal_s,
+    via_colours, agent_episode, events, radius2, extended, visible, vis_mode, ego_extended, yaw, episode_step, dt,
     ego, neighbours, neighbour_mask, waypoints, waypoint_mask, goal, signal, events_out,
 ):  # pragma: no cover - compiled
+    """The basic observation of each agent ``agents[i]`` (row ``rows[i]``) among the live rows of
+    its own episode (``alive[alive_lo[i]:alive_hi[i]]``; ``visible`` is indexed by the row within
+    the episode, ``row - row_base[i]``), with its episode's signal colours and step."""
     k_max = neighbours.shape[1]
     vis_col = neighbours.shape[2] - 1
     near_d2 = np.empty(k_max)
     near_row = np.empty(k_max, dtype=np.int64)
     for i in range(agents.shape[0]):
         a, r = agents[i], rows[i]
+        b = agent_episode[a]
+        via_colour = via_colours[b]
+        step = episode_step[b]
+        base = row_base[i]
         x, y, h = data[_X, r], data[_Y, r], data[_H, r]
         c, s = math.cos(h), math.sin(h)
         speed = data[_SPEED, r]
@@ -317,13 +318,13 @@ def _observe(
 
         # K nearest by insertion into a sorted list (K is small); equal distances keep row order.
         m = 0
-        for j in alive:
+        for j in alive[alive_lo[i]:alive_hi[i]]:
             if j == r:
                 continue
             d2 = (data[_X, j] - x) ** 2 + (data[_Y, j] - y) ** 2
             if d2 > radius2 or (m == k_max and d2 >= near_d2[m - 1]):
                 continue
-            if vis_mode == _VIS_HIDE and visible[i, j] <= 0.0:
+            if vis_mode == _VIS_HIDE and visible[i, j - base] <= 0.0:
                 continue
             pos = m if m < k_max else k_max - 1
             while pos > 0 and near_d2[pos - 1] > d2:
@@ -360,7 +361,7 @@ def _observe(
                 if 0 <= vtype[j] < _NUM_TYPES:
                     neighbours[i, q, 14 + vtype[j]] = 1.0
             if vis_mode != _VIS_OFF:
-                neighbours[i, q, vis_col] = visible[i, j]
+                neighbours[i, q, vis_col] = visible[i, j - base]
             neighbour_mask[i, q] = 1.0
 
         # Indices past a path's end clip onto the padding rows, which are marked invalid.

@@ -36,7 +36,8 @@ class Shadows:
 
     depth: np.ndarray  # float64[n, SHADOW_BINS] metres to the nearest box, inf where none
     owner: np.ndarray  # int64[n, SHADOW_BINS] table row of that box, -1 where none
-    visible: np.ndarray  # float32[n, capacity] visible fraction of each live row (0 elsewhere)
+    visible: np.ndarray  # float32[n, capacity] visible fraction of each live row of the agent's
+    # episode, by its row within the episode (0 elsewhere)
     range: float
 
 
@@ -49,21 +50,25 @@ class ShadowCaster:
         self._owner = np.empty((0, SHADOW_BINS), dtype=np.int64)
         self._visible = np.empty((0, 0), dtype=np.float32)
 
-    def scan(self, sim: Simulation, rows: np.ndarray) -> Shadows:
-        n, cap = rows.shape[0], sim.table.capacity
+    def scan(self, sim: Simulation, agents: np.ndarray, rows: np.ndarray) -> Shadows:
+        """Shadows of ``agents`` (rows ``rows``), each among its own episode's road users."""
+        n, cap = rows.shape[0], sim.episode_capacity
         if self._depth.shape[0] < n or self._visible.shape[1] != cap:
             m = max(n, self._depth.shape[0])
             self._depth = np.empty((m, SHADOW_BINS))
             self._owner = np.empty((m, SHADOW_BINS), dtype=np.int64)
             self._visible = np.zeros((m, cap), dtype=np.float32)
         depth, owner, visible = self._depth[:n], self._owner[:n], self._visible[:n]
-        cast_shadows(sim.table.data, sim.alive, rows, self.range, depth, owner, visible)
+        scope = sim.scope(agents)
+        cast_shadows(sim.table.data, scope.alive, scope.lo, scope.hi, scope.base, rows, self.range, depth, owner, visible)
         return Shadows(depth, owner, visible, self.range)
 
 
 @numba.njit(cache=True, nogil=True)
-def cast_shadows(data, alive, rows, sensor_range, depth, owner, visible):  # pragma: no cover - compiled
-    """Fill ``depth``/``owner`` [n, bins] and ``visible`` [n, capacity] for the agents' rows."""
+def cast_shadows(data, alive, alive_lo, alive_hi, row_base, rows, sensor_range, depth, owner, visible):  # pragma: no cover - compiled
+    """Fill ``depth``/``owner`` [n, bins] and ``visible`` [n, capacity] for the agents' rows, each
+    among ``alive[alive_lo[i]:alive_hi[i]]`` (``visible`` by row within the episode, ``row -
+    row_base[i]``; ``owner`` holds global rows)."""
     n_bins = depth.shape[1]
     bin_width = 2.0 * math.pi / n_bins
     turn_c, turn_s = math.cos(bin_width), math.sin(bin_width)
@@ -76,8 +81,9 @@ def cast_shadows(data, alive, rows, sensor_range, depth, owner, visible):  # pra
         depth[i, :] = math.inf
         owner[i, :] = -1
         m = 0
-        for j in alive:
-            visible[i, j] = 0.0
+        base = row_base[i]
+        for j in alive[alive_lo[i]:alive_hi[i]]:
+            visible[i, j - base] = 0.0
             if j == r:
                 continue
             bx, by, bh = data[_X, j], data[_Y, j], data[_H, j]
@@ -86,7 +92,7 @@ def cast_shadows(data, alive, rows, sensor_range, depth, owner, visible):  # pra
                 continue
             lo, hi, inside = box_interval(px, py, h, bx, by, bh, hl, hw)
             if inside:
-                visible[i, j] = 1.0
+                visible[i, j - base] = 1.0
                 continue
             b0 = int(math.floor((lo + math.pi) / bin_width))
             b1 = int(math.floor((hi + math.pi) / bin_width))
@@ -114,7 +120,7 @@ def cast_shadows(data, alive, rows, sensor_range, depth, owner, visible):  # pra
                 k = b % n_bins
                 if owner[i, k] == j and depth[i, k] <= sensor_range:
                     seen += 1
-            visible[i, j] = seen / bin_count[q]
+            visible[i, j - base] = seen / bin_count[q]
 
 _X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
 _LENGTH, _WIDTH = COLUMN["length"], COLUMN["width"]

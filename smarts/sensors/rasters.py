@@ -108,22 +108,16 @@ class RasterSensor:
         n, s = rows.shape[0], cfg.size
         layers = np.empty((n, len(cfg.layers), s, s), dtype=np.uint8)
         rgb = np.empty((n, s, s, 3) if cfg.rgb else (0, s, s, 3), dtype=np.uint8)
-        f = map_fields(sim.road_map)
-        ma = sim.mission_arrays
-        # A pixel is on a lane line within half a pixel of it (at least one map cell).
-        lane_cells = max(0.5 * cfg.resolution * f.inv_res, 1.0)
-        draw_rasters(
-            sim.table.data, sim.table.role, sim.alive, agents, rows,
-            self._ex, self._ey, self._bin, self._dist, s, cfg.resolution,
-            f.origin, f.inv_res, f.cell_max, f.width, f.drivable, f.lane_distance, lane_cells,
-            ma.flat_paths, ma.flat_valid, ma.stride, ma.path_len, sim.route_index,
-            shadows.depth if shadows is not None else self._no_shadow,
-            shadows.visible if shadows is not None else self._no_visible,
-            shadows.range if shadows is not None else math.inf,
-            shadows is not None, self.hide_hidden and shadows is not None,
-            self._occupant, self._route, self._cell, self._on_road, self._on_lane, self._shade,
-            self._slot, layers, cfg.rgb, rgb, SHADED_PALETTE,
-        )
+        scope = sim.scope(agents)
+        for m, idx in _by_map(sim, agents):
+            part = slice(None) if idx is None else idx
+            out_layers = layers if idx is None else np.empty((len(idx), *layers.shape[1:]), dtype=np.uint8)
+            out_rgb = rgb if idx is None or not cfg.rgb else np.empty((len(idx), s, s, 3), dtype=np.uint8)
+            self._draw(sim, sim.map_stack.maps[m], agents[part], rows[part], scope, part, shadows, out_layers, out_rgb)
+            if idx is not None:
+                layers[idx] = out_layers
+                if cfg.rgb:
+                    rgb[idx] = out_rgb
         out = {}
         if cfg.layers:
             out["rasters"] = layers
@@ -131,10 +125,39 @@ class RasterSensor:
             out["rgb"] = rgb
         return out
 
+    def _draw(self, sim, road_map, agents, rows, scope, part, shadows, layers, rgb) -> None:
+        """Draw the agents on one map (the map's own fields: every agent here drives on it)."""
+        cfg = self.config
+        f = map_fields(road_map)
+        ma = sim.mission_arrays
+        # A pixel is on a lane line within half a pixel of it (at least one map cell).
+        lane_cells = max(0.5 * cfg.resolution * f.inv_res, 1.0)
+        draw_rasters(
+            sim.table.data, sim.table.role, scope.alive, scope.lo[part], scope.hi[part], scope.base[part], agents, rows,
+            self._ex, self._ey, self._bin, self._dist, cfg.size, cfg.resolution,
+            f.origin, f.inv_res, f.cell_max, f.width, f.drivable, f.lane_distance, lane_cells,
+            ma.flat_paths, ma.flat_valid, ma.stride, ma.path_len, sim.route_index,
+            shadows.depth[part] if shadows is not None else self._no_shadow,
+            shadows.visible[part] if shadows is not None else self._no_visible,
+            shadows.range if shadows is not None else math.inf,
+            shadows is not None, self.hide_hidden and shadows is not None,
+            self._occupant, self._route, self._cell, self._on_road, self._on_lane, self._shade,
+            self._slot, layers, cfg.rgb, rgb, SHADED_PALETTE,
+        )  # fmt: skip
+
+
+def _by_map(sim: Simulation, agents: np.ndarray):
+    """``(map number, agent positions)`` per map the agents drive on; positions None when they all
+    drive on one map (the usual case: no gathering)."""
+    maps = sim.episode_map[sim.agent_episode[agents]]
+    if sim.map_stack.num_maps == 1 or len(maps) == 0 or (maps == maps[0]).all():
+        return [(int(maps[0]) if len(maps) else 0, None)]
+    return [(int(m), np.flatnonzero(maps == m)) for m in np.unique(maps).tolist()]
+
 
 @numba.njit(cache=True, nogil=True)
 def draw_rasters(
-    data, role, alive, agents, rows, px_ex, px_ey, px_bin, px_dist, size, res,
+    data, role, alive, alive_lo, alive_hi, row_base, agents, rows, px_ex, px_ey, px_bin, px_dist, size, res,
     origin, inv_res, cell_max, width, drivable, lane_distance, lane_cells,
     flat_paths, flat_valid, stride, path_len, route_index,
     depth, visible, sensor_range, have_shadows, hide_hidden,
@@ -150,8 +173,8 @@ def draw_rasters(
 
         # Boxes: ego = -1, other road users = row + 1, into the pixels whose centre they cover.
         occupant[:] = 0
-        for j in alive:
-            if j != r and hide_hidden and visible[i, j] <= 0.0:
+        for j in alive[alive_lo[i]:alive_hi[i]]:
+            if j != r and hide_hidden and visible[i, j - row_base[i]] <= 0.0:
                 continue
             dx, dy = data[_X, j] - x, data[_Y, j] - y
             bx, by = c * dx + s * dy, -s * dx + c * dy
@@ -269,7 +292,7 @@ class EgoViewRenderer:
     def render(self, sim: Simulation, agent: int) -> np.ndarray:
         agents = np.array([agent], dtype=np.int64)
         rows = sim.agent_row[agents]
-        return self.sensor.observe(sim, agents, rows, self.shadows.scan(sim, rows))["rgb"][0]
+        return self.sensor.observe(sim, agents, rows, self.shadows.scan(sim, agents, rows))["rgb"][0]
 
 _X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
 _LENGTH, _WIDTH = COLUMN["length"], COLUMN["width"]

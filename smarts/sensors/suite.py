@@ -21,15 +21,34 @@ Batch = tuple[np.ndarray, dict[str, np.ndarray]]
 
 
 class ObservationSuite:
-    def __init__(self, interfaces: Sequence[AgentInterface]):
-        """``interfaces[i]`` is agent i's interface (agent indices as in ``Simulation``)."""
-        groups: dict[AgentInterface, int] = {}
-        for interface in interfaces:
-            groups.setdefault(interface, len(groups))
+    def __init__(self, interfaces: Sequence[AgentInterface], keys: Sequence | None = None, episode_of: Sequence[int] | None = None):
+        """``interfaces[i]`` is agent i's interface (agent indices as in ``Simulation``);
+        ``keys[i]`` (default: the interface) groups agents whose observations have the same
+        layout, when something else adds to them (V2V messages in some episodes only);
+        ``episode_of[i]``: agent i's episode (its groups' noise streams are numbered per episode,
+        so an episode draws the same noise alone or among others)."""
+        keys = list(interfaces) if keys is None else list(keys)
+        groups: dict = {}
+        first: dict = {}
+        for interface, key in zip(interfaces, keys):
+            if key not in groups:
+                groups[key] = len(groups)
+                first[key] = interface
         if not groups:
             groups[AgentInterface()] = 0
-        self.builders = [ObservationBuilder(interface, stream=g) for interface, g in groups.items()]
-        self.group_of = np.array([groups[i] for i in interfaces], dtype=np.int64)
+            first[AgentInterface()] = AgentInterface()
+        self.builders = [ObservationBuilder(first[key], stream=g) for key, g in groups.items()]
+        self.group_of = np.array([groups[k] for k in keys], dtype=np.int64)
+        if episode_of is not None:
+            ranks: dict[int, list[int]] = {}
+            for g, b in zip(self.group_of.tolist(), list(episode_of)):
+                seen = ranks.setdefault(int(b), [])
+                if g not in seen:
+                    seen.append(g)
+            for b, order in ranks.items():
+                for rank, g in enumerate(order):
+                    if self.builders[g].lidar is not None:
+                        self.builders[g].lidar.episode_streams[b] = rank
 
     def space(self, agent: int) -> gym.spaces.Dict:
         return self.builders[self.group_of[agent]].space

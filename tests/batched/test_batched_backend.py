@@ -149,9 +149,9 @@ def test_unsupported_scenarios_are_refused_naming_the_field():
     sumo = dataclasses.replace(suite["a01_straight_free"], traffic=dataclasses.replace(suite["a01_straight_free"].traffic, engine="sumo"))
     with pytest.raises(BatchedSetupError, match=r"traffic\.engine: sumo .*per-env backend"):
         BatchedDriving([sumo])
-    cont = dataclasses.replace(sumo, traffic=None, agents=[dataclasses.replace(a, action_space="continuous") for a in sumo.agents])
-    with pytest.raises(BatchedSetupError, match=r"agents\[0\]\.action_space: continuous"):
-        BatchedDriving([cont])
+    social = dataclasses.replace(sumo, traffic=None, agents=[dataclasses.replace(a, policy="zoo:keep-lane") for a in sumo.agents])
+    with pytest.raises(BatchedSetupError, match=r"agents\[0\]\.policy: social agents"):
+        BatchedDriving([social])
 
 
 def test_bad_actions_raise_naming_the_agents_and_change_nothing():

@@ -19,7 +19,7 @@ def _place(env, vehicle_id, lane_id, s):
     (x, y), h = lane_pose_at(rm, rm.lane(lane_id), s)
     row = sim.table.row_of[vehicle_id]
     sim.table.x[row], sim.table.y[row], sim.table.heading[row] = x, y, h
-    sim._update_map_state()
+    sim.update_map_state()
 
 
 def _spec(map_name, road, follower, lead, follower_lane=0, lead_lane=0):

@@ -54,7 +54,7 @@ def _state(env):
     ctl = provider.lane_relative
     live = sim.table.alive_rows
     handles = provider.handles[provider.handles >= 0]
-    physics = provider.world.read_state(handles) if handles.size else None
+    physics = provider.worlds[0].read_state(handles) if handles.size else None
     return {
         "table": sim.table.data.copy(),
         "ids": [sim.table.ids[r] for r in live.tolist()],

@@ -128,9 +128,8 @@ def test_connected_traffic_is_heard_from_reset_and_social_agents_only_listen():
     np.testing.assert_allclose(traffic_msg[6:], sim.table.data[:3, lead], atol=1e-3)  # its x, y, heading
     obs, _, _, _, infos = env.step({"agent_0": _act([0.7, 0.7, 0.7])})
     assert [s[:2] for s in _senders(obs, "agent_0")] == [(0, 1)]  # nothing from the social agent
-    (members, batch), = env._last  # the social agent's observation heard the learner
-    social = int(np.flatnonzero(members == 1)[0])
-    heard = batch["messages"][social][batch["message_mask"][social] > 0]
+    last = env.driving._social_obs  # the social agent's (agent 1) last observation heard the learner
+    heard = last["messages"][1][last["message_mask"][1] > 0]
     assert sorted(heard[:, :2].tolist()) == [[0, 1], [1, 0]]
     np.testing.assert_allclose(heard[heard[:, 0] == 1][0, 6:], [0.7, 0.7, 0.7], rtol=1e-6)
 

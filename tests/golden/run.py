@@ -190,6 +190,8 @@ def _run_batched(bd, specs: list, seeds: list[int], max_steps: int) -> list[Epis
     slot_copy = np.array([c for c, _ in slots])
     local = np.array([[a.id for a in specs[c].agents].index(aid) for c, aid in slots])
     kinds = [_kinds(specs[c], [aid])[0] for c, aid in slots]
+    links = [link for g in bd.groups for link in g.driving.links if link is not None]
+    message = len(links[0].message_components) if links else 0
     seen: dict = {}
 
     slot_agent: list[tuple] = [None] * len(slots)  # slot -> (group simulation, union agent)
@@ -228,8 +230,8 @@ def _run_batched(bd, specs: list, seeds: list[int], max_steps: int) -> list[Epis
             r = sim.agent_row[a]
             if r >= 0:
                 poses[j] = (sim.table.x[r], sim.table.y[r], sim.table.heading[r])
-        acts = golden_actions(obs, kinds, poses, local, step - 1, specs[0].step_length)
-        acts = acts[:, : bd.action_space.shape[0]]
+        acts = golden_actions(obs, kinds, poses, local, step - 1, specs[0].step_length, message)
+        acts = acts[:, : bd.action_width]
         result = bd.step(acts)
         obs = result.obs
         for c in np.flatnonzero(~done_copies).tolist():
@@ -244,3 +246,82 @@ def _run_batched(bd, specs: list, seeds: list[int], max_steps: int) -> list[Epis
             if result.restarted[slot_copy == c].any():
                 done_copies[c] = True
     return records
+
+
+# ---------------------------------------------------------------------------- one simulation
+def run_engine(specs: list, seeds: list[int], max_steps: int = MAX_STEPS) -> list[EpisodeRecord]:
+    """The first episode of each of ``specs`` (with ``seeds``) as one simulation of the env engine
+    (``smarts.env.driving.Driving``): every case together, whatever its maps, sensors, action
+    spaces, social agents and V2V."""
+    from smarts.env.driving import Driving
+
+    engine = Driving(specs, seeds=seeds)
+    try:
+        return _run_engine(engine, specs, max_steps)
+    finally:
+        engine.close()
+
+
+def _run_engine(engine, specs: list, max_steps: int) -> list[EpisodeRecord]:
+    sim = engine.sim
+    n = len(specs)
+    learner = engine.learner
+    kinds = [_kinds(specs[b], [aid])[0] for b, aid in zip(sim.agent_episode.tolist(), sim.local_agent_ids)]
+    local = np.array([[a.id for a in specs[b].agents].index(aid) for b, aid in zip(sim.agent_episode.tolist(), sim.local_agent_ids)])
+    message = np.array([len(link.message_components) if link is not None else 0 for link in engine.links])
+    width = int(max(engine.action_space(a).shape[0] for a in range(len(sim.agent_ids))))
+    seen: dict = {}
+
+    def tables() -> list[bytes]:
+        return [table_bytes(v.table.ids, v.table.alive, v.table.x, v.table.y, v.table.heading, v.table.speed) for v in sim.views]
+
+    def listener(s) -> None:
+        seen["tables"] = tables()
+        seen["events"] = s.agent_events.copy()
+        seen["active"] = s.agent_active.copy()
+
+    engine.add_step_listener(listener)
+    agents, batches, _ = engine.reset(np.arange(n))
+    obs = _per_agent(batches)
+    records = [EpisodeRecord() for _ in range(n)]
+    for b, tb in enumerate(tables()):
+        mine = [a for a in agents.tolist() if sim.agent_episode[a] == b and learner[a]]
+        records[b].add(tb, obs_bytes([obs[a] for a in mine]), b"", events_bytes(sim.agent_events[mine], [], []))
+    over = np.zeros(n, dtype=bool)
+    for step in range(1, max_steps + 1):
+        active = sim.active_agents
+        acting = active[learner[active]]
+        if acting.size == 0:
+            break
+        actions = np.zeros((len(sim.agent_ids), width), dtype=np.float32)
+        for b in np.unique(sim.agent_episode[acting]).tolist():
+            mine = acting[sim.agent_episode[acting] == b]
+            batch = {k: np.stack([obs[a][k] for a in mine.tolist()]) for k in obs[int(mine[0])]}
+            rows = sim.agent_row[mine]
+            poses = np.stack([sim.table.x[rows], sim.table.y[rows], sim.table.heading[rows]], axis=1)
+            acts = golden_actions(batch, [kinds[a] for a in mine.tolist()], poses, local[mine], step - 1,
+                                  specs[b].step_length, int(message[b]))  # fmt: skip
+            actions[mine, : acts.shape[1]] = acts[:, :width]
+        res = engine.step(actions)
+        obs.update(_per_agent(res.batches))
+        for b in np.flatnonzero(~over).tolist():
+            sel = np.flatnonzero(sim.agent_episode[res.agents] == b)
+            mine = res.agents[sel]
+            records[b].add(
+                seen["tables"][b],
+                obs_bytes([obs[a] for a in mine.tolist()]),
+                reward_bytes(res.reward[sel]),
+                events_bytes(seen["events"][mine], res.terminated[sel], res.truncated[sel]),
+            )
+        sim.remove_done_agents()
+        ended = sim.episodes_over()
+        over[ended] = True
+    return records
+
+
+def _per_agent(batches) -> dict[int, dict[str, np.ndarray]]:
+    out = {}
+    for members, batch in batches:
+        for i, a in enumerate(members.tolist()):
+            out[a] = {k: np.array(v[i]) for k, v in batch.items()}
+    return out

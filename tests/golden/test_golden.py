@@ -15,22 +15,13 @@ import pytest
 
 from tests.golden.cases import MAX_STEPS, SEEDS, all_cases
 from tests.golden.record import GOLDEN
-from tests.golden.run import run_batched, run_single
+from tests.golden.run import run_batched, run_engine, run_single
 
 CASES = {c.name: c for c in all_cases()}
 GOLD = json.loads(GOLDEN.read_text())
 
-NOT_BATCHED = {
-    name for name, c in CASES.items()
-    if c.sumo or name in {
-        "library/intersection_v2v", "library/straight_takeover", "library/t_junction_social",
-        "readme/readme_all_sensors", "readme/readme_v2v", "feature/feature_occlusion_flag",
-        "feature/feature_continuous", "feature/feature_lane", "feature/feature_mixed_spaces",
-        "feature/replay_ngsim",
-    }
-}  # fmt: skip
-"""Cases the batched backend refuses today (SUMO, comms, social agents, take-over, occlusion,
-lidar and rasters, Continuous and Lane actions, replay)."""
+NOT_BATCHED = {name for name, c in CASES.items() if c.sumo}
+"""SUMO cases: libsumo holds one simulation per process, so they run in worker processes."""
 
 
 @pytest.fixture(scope="module")
@@ -72,18 +63,16 @@ def test_batched_copies_of_one_case_match_the_golden_trajectories(name, work):
     assert not problems, f"{name}: batched copies differ from the golden trajectories: {problems}"
 
 
-def test_one_batch_of_every_batched_case_matches_the_golden_trajectories(work):
+def test_one_simulation_of_every_batched_case_matches_the_golden_trajectories(work):
+    """Every case but SUMO's in one simulation of the env engine (maps, sensors, action spaces,
+    social agents, V2V, replay all mixed), each episode as it runs alone."""
     names = sorted(set(CASES) - NOT_BATCHED)
     specs = [_specs(work, n) for n in names]
-    # Today's batched backend steps one action space and controller per batch.
-    kinds = [{(a.action_space, a.controller) for a in s.agents} for s in specs]
-    keep = [i for i, k in enumerate(kinds) if k == {("relative_target_pose", "direct")}]
-    names, specs = [names[i] for i in keep], [specs[i] for i in keep]
     seeds = [SEEDS[i % len(SEEDS)] for i in range(len(names))]
-    records = run_batched(specs, seeds)
+    records = run_engine(specs, seeds)
     problems = {}
     for name, seed, record in zip(names, seeds, records):
         diff = record.first_difference(GOLD["cases"][name][str(seed)])
         if diff is not None:
             problems[f"{name} seed {seed}"] = diff
-    assert not problems, f"copies differ from the golden trajectories in one batch: {problems}"
+    assert not problems, f"episodes differ from the golden trajectories in one simulation: {problems}"

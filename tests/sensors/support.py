@@ -36,7 +36,7 @@ def place(env: DrivingParallelEnv, agent_index: int, x: float, y: float, heading
     table.x[row], table.y[row], table.heading[row] = x, y, heading
     for name, value in columns.items():
         getattr(table, name)[row] = value
-    env.sim._update_map_state()  # lane, s, t of the new pose, as after a step
+    env.sim.update_map_state()  # lane, s, t of the new pose, as after a step
     return row
 
 

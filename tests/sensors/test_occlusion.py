@@ -23,7 +23,9 @@ def _scan(boxes, sensor_range=50.0):
     depth = np.empty((1, SHADOW_BINS))
     owner = np.empty((1, SHADOW_BINS), dtype=np.int64)
     visible = np.zeros((1, 16), dtype=np.float32)
-    cast_shadows(table.data, table.alive_rows, rows, sensor_range, depth, owner, visible)
+    alive = table.alive_rows
+    one = np.ones(1, dtype=np.int64)
+    cast_shadows(table.data, alive, 0 * one, len(alive) * one, 0 * one, rows, sensor_range, depth, owner, visible)
     return visible[0], depth[0], owner[0]
 
 

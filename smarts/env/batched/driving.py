@@ -4,9 +4,10 @@ Every learning agent of every copy is a slot (copies in order, agents in scenari
 takes ``actions[slots, k]`` and gives per slot the observation, reward and end flags of the agent
 that acted; copies whose agents have all finished are reset at once (auto-reset) and their first
 observations are returned beside (``StepResult.first``), so no copy ever waits for another.
-All copies form one ``BatchedSimulation`` (one call per stage), whatever their maps; only copies
-that cannot share one (another step length or event set, or another reward section when no task
-reward is given) form further ones.
+All copies of one step length form one simulation (``smarts.core.simulation``, one call per
+stage) whatever their maps, events, rewards, action spaces and sensors; the env engine
+(``smarts.env.driving``) adds social agents, V2V, observations and rewards, as it does for
+``DrivingParallelEnv`` with one episode.
 
 Seeds are those of ``SmartsBatchedEnv``: after ``set_seed(s)`` copy ``i`` starts at seed
 ``s + i * 100_003`` and counts up by one per episode, so both backends play the same episodes.
@@ -22,19 +23,17 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from smarts.core.batched import BatchedSimulation, EpisodeSim
-from smarts.core.events import Event
-from smarts.core.simulation import check_seed, derived_seed
-from smarts.dynamics.action_spaces import agent_action_space
+from smarts.core.errors import ActionError
+from smarts.core.policies import PolicyResolver
+from smarts.core.simulation import EpisodeSim, check_seed, derived_seed
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
 from smarts.env.assembly import as_spec
-from smarts.env.batched.assembly import BatchedSetupError, build_batched_simulation, check_batchable
-from smarts.env.batched.observe import BatchedObserver
-from smarts.env.reward import default_rewards
+from smarts.env.batched.assembly import BatchedSetupError, check_batchable
+from smarts.env.driving import Driving
 from smarts.scenario import ScenarioSpec
 from smarts.sensors.interface import AgentInterface
-from smarts.sensors.observation import ObservationConfig, as_interface
+from smarts.sensors.observation import ObservationConfig
 
 COPY_SEED_STRIDE = 100_003
 """Seed distance between copies after ``set_seed`` (as ``SmartsBatchedEnv``)."""
@@ -56,38 +55,28 @@ class StepResult:
     first: dict[str, np.ndarray]  # first observation of the new episode where ``restarted``
 
 
-class _StepView:
-    """The batch as a reward function sees it: ``step_count`` per asked agent (its episode's)."""
-
-    def __init__(self, sim: BatchedSimulation, agents: np.ndarray):
-        self._sim = sim
-        self.step_count = sim.episode_step[sim.agent_episode[agents]]
-
-    def __getattr__(self, name: str):
-        return getattr(self._sim, name)
-
-
 class _Group:
-    """Copies stepped as one ``BatchedSimulation``, with its reward function and its slots."""
+    """Copies stepped as one simulation (the env engine ``Driving``), and their slots."""
 
-    def __init__(self, sim: BatchedSimulation, copies: list[int], reward, reward_spec, agent_slot: np.ndarray):
-        self.sim, self.copies, self.reward, self.reward_spec = sim, copies, reward, reward_spec
-        self.agent_slot = agent_slot  # slot of each union agent
-        # Events that end an agent as terminated (the step limit truncates): the group's own set.
-        self.terminal = sim.event_config.terminate_on.copy()
-        self.terminal[Event.MAX_STEPS] = False
+    def __init__(self, driving: Driving, copies: list[int], agent_slot: np.ndarray):
+        self.driving, self.copies = driving, copies
+        self.sim = driving.sim
+        self.agent_slot = agent_slot  # slot of each agent (-1: a social agent, not a slot)
+        self.learners = np.flatnonzero(agent_slot >= 0)
+        self.learner_slots = agent_slot[self.learners]
 
 
 class BatchedDriving:
     """``scenarios`` (names, YAML paths or specs; one copy each) stepped by the batched backend.
 
-    ``observation``: one interface for every agent (None: the scenarios' own, which must agree);
-    ``reward_factory`` builds one task reward per group (``smarts.env.task_rewards``; None:
-    each scenario's default reward); ``lane_relative`` and ``limits`` as for ``DrivingParallelEnv``;
-    ``sim_device``: where simulation stages with a torch version run ("cpu": the compiled numpy
-    kernels; "cuda", "torch-cpu": see ``smarts.dynamics.pose_control_torch.resolve_device``).
-    Refuses what it cannot batch (SUMO traffic, social agents, comms, Continuous...) with a
-    ``BatchedSetupError`` naming the scenario and field.
+    ``observation``: one interface for every agent (None: the scenarios' own; the learners' must
+    agree); ``reward_factory`` builds one task reward per simulation (``smarts.env.task_rewards``;
+    None: each scenario's default reward); ``lane_relative`` and ``limits`` as for
+    ``DrivingParallelEnv``; ``sim_device``: where simulation stages with a torch version run
+    ("cpu": the compiled numpy kernels; "cuda", "torch-cpu": see
+    ``smarts.dynamics.pose_control_torch.resolve_device``); ``policy_resolver`` turns social
+    agents' locators into policies. Every copy of one step length is one simulation; what cannot
+    share a process (SUMO) is refused with a ``BatchedSetupError`` naming the scenario and field.
     """
 
     render_mode = None  # nothing is drawn (vector-env wrappers ask)
@@ -101,78 +90,87 @@ class BatchedDriving:
         lane_relative: LaneRelativeParams | None = None,
         reward_factory: Callable[[], Any] | None = None,
         sim_device: str = "cpu",
+        policy_resolver: PolicyResolver | None = None,
     ):
         if not scenarios:
             raise ValueError("BatchedDriving needs at least one scenario")
         self.specs = [as_spec(s) for s in scenarios]
         for spec in self.specs:
             check_batchable(spec)
-        self.interface = self._interface(observation)
-        self.observer = BatchedObserver(self.interface)
         self.limits = limits or ReachLimits()
-        first = self.specs[0]
-        agent0 = first.agents[0]
-        self.action_space = agent_action_space(agent0.action_space, agent0.controller, self.limits, first.step_length)
-        self.observation_space: gym.spaces.Dict = self.observer.space
-        self.slots: list[tuple[int, str]] = [(i, a.id) for i, s in enumerate(self.specs) for a in s.agents]
+        self.slots: list[tuple[int, str]] = [(i, a.id) for i, s in enumerate(self.specs) for a in s.agents if not a.is_social]
+        if not self.slots:
+            raise BatchedSetupError(f"{self.specs[0].source}: every agent has a policy; at least one must learn")
         slot_index = {key: j for j, key in enumerate(self.slots)}
-        by_kind: dict[tuple, list[int]] = {}
+        by_step: dict[float, list[int]] = {}
         for i, spec in enumerate(self.specs):
-            reward_key = None if reward_factory is not None else repr(spec.reward)
-            by_kind.setdefault((spec.step_length, repr(spec.events), reward_key), []).append(i)
+            by_step.setdefault(spec.step_length, []).append(i)
         self.groups: list[_Group] = []
         self.copy_place: list[tuple[int, int]] = [(0, 0)] * len(self.specs)  # copy -> (group, episode)
-        for copies in by_kind.values():
+        for copies in by_step.values():
             specs = [self.specs[i] for i in copies]
-            sim = build_batched_simulation(specs, [s.seed for s in specs], limits=self.limits,
-                                           lane_relative=lane_relative, device=sim_device)  # fmt: skip
-            agent_slot = np.array([slot_index[(copies[sim.agent_episode[a]], sim.local_agent_ids[a])]
+            driving = Driving(specs, observation=observation, limits=self.limits, lane_relative=lane_relative,
+                              reward=reward_factory() if reward_factory else None, policy_resolver=policy_resolver,
+                              device=sim_device)  # fmt: skip
+            sim = driving.sim
+            agent_slot = np.array([slot_index.get((copies[sim.agent_episode[a]], sim.local_agent_ids[a]), -1)
                                    for a in range(len(sim.agent_ids))], dtype=np.int64)  # fmt: skip
             g = len(self.groups)
-            self.groups.append(_Group(sim, copies, reward_factory() if reward_factory else None, specs[0].reward, agent_slot))
+            self.groups.append(_Group(driving, copies, agent_slot))
             for b, i in enumerate(copies):
                 self.copy_place[i] = (g, b)
-        for spec in self.specs:
-            for agent in spec.agents:
-                box = agent_action_space(agent.action_space, agent.controller, self.limits, spec.step_length)
-                if box != self.action_space:
-                    raise BatchedSetupError(
-                        f"{spec.source}: {agent.id}'s action space {box} differs from {first.source}'s "
-                        f"{agent0.id} ({self.action_space}); batched scenarios share one"
-                    )
+        self.action_space, self.observation_space = self._shared_spaces()
         n = len(self.slots)
         self._obs = {k: np.zeros((n, *s.shape), dtype=s.dtype) for k, s in self.observation_space.spaces.items()}
         self._first = {k: np.zeros_like(v) for k, v in self._obs.items()}
-        self._arange: np.ndarray | None = None
         self._next_seed: list[int | None] = [None] * len(self.specs)
         self._listeners: list[Callable[[], Any]] = []
         self.seed_schedule: Callable[[int], int | None] | None = None
         """When set, ``seed_schedule(copy)`` gives each new episode's seed instead (adapters with
         their own seeding convention)."""
+        self._arange: np.ndarray | None = None
+
+    def _shared_spaces(self) -> tuple[gym.spaces.Box | None, gym.spaces.Dict]:
+        """The action space every slot shares (None when scenarios mix action spaces: then
+        ``action_low``/``action_high`` bound each slot's columns) and the one observation space
+        (a batch of observations is one array per key)."""
+        g0 = self.groups[0]
+        a0 = int(g0.learners[0])
+        obs = g0.driving.observation_space(a0)
+        first = self.specs[self.slots[0][0]]
+        boxes: list[gym.spaces.Box] = [None] * len(self.slots)  # type: ignore[list-item]
+        for g in self.groups:
+            for a in g.learners.tolist():
+                boxes[g.agent_slot[a]] = g.driving.action_space(a)
+                if g.driving.observation_space(a) != obs:
+                    copy, aid = self.slots[g.agent_slot[a]]
+                    raise BatchedSetupError(
+                        f"{self.specs[copy].source}: {aid}'s observation space differs from {first.source}'s "
+                        f"{self.slots[0][1]}; give one interface (observation=...) for all"
+                    )
+        width = max(b.shape[0] for b in boxes)
+        self.action_low = np.zeros((len(boxes), width), dtype=np.float32)
+        self.action_high = np.zeros((len(boxes), width), dtype=np.float32)
+        for j, box in enumerate(boxes):
+            self.action_low[j, : box.shape[0]] = box.low
+            self.action_high[j, : box.shape[0]] = box.high
+        self.action_width = width
+        """Columns of an action array (the widest slot's action; narrower ones read their first)."""
+        shared = boxes[0] if all(b == boxes[0] for b in boxes) else None
+        return shared, obs
 
     # ------------------------------------------------------------------ per-episode readers
     def episode_sim(self, copy: int) -> EpisodeSim:
         """Copy ``copy``'s current episode as a single simulation (its agents by their scenario
         ids), for per-episode readers such as the benchmark's ``EpisodeRecorder``."""
         g, b = self.copy_place[copy]
-        return EpisodeSim(self.groups[g].sim, b)
+        return self.groups[g].sim.episode_sim(b)
 
     def add_step_listener(self, listener: Callable[[], Any]) -> None:
         """Call ``listener()`` after every step, before finished agents leave and finished copies
         restart (as ``DrivingParallelEnv.add_step_listener``: an ``EpisodeRecorder`` of each copy
         records its final step there; ``StepResult.restarted`` says which copies start anew)."""
         self._listeners.append(listener)
-
-    def _interface(self, observation) -> AgentInterface:
-        if observation is not None:
-            return as_interface(observation)
-        found = {a.interface or AgentInterface() for s in self.specs for a in s.agents}
-        if len(found) != 1:
-            raise BatchedSetupError(
-                f"{self.specs[0].source}: the scenarios' agents have different observation interfaces; "
-                "give one interface (observation=...) for all"
-            )
-        return found.pop()
 
     # ------------------------------------------------------------------ seeding
     @property
@@ -205,16 +203,17 @@ class BatchedDriving:
         return self._obs
 
     def _restart(self, group: _Group, episodes: np.ndarray, out: dict[str, np.ndarray]) -> np.ndarray:
-        """Reset ``episodes`` of ``group`` and write their agents' first observations into ``out``;
-        returns those agents' slots."""
-        sim = group.sim
+        """Reset ``episodes`` of ``group`` and write their learners' first observations into
+        ``out``; returns those learners' slots."""
         seeds = [self._take_seed(group.copies[b]) for b in episodes.tolist()]
-        sim.reset_episodes(episodes, seeds)
-        agents = sim.active_agents[np.isin(sim.agent_episode[sim.active_agents], episodes)]
-        obs = self.observer.build(sim, agents)
-        slots = group.agent_slot[agents]
-        for key, value in obs.items():
-            out[key][slots] = value
+        agents, batches, _ = group.driving.reset(episodes, seeds)
+        slots = np.zeros(0, dtype=np.int64)
+        for members, obs in batches:
+            keep = group.agent_slot[members] >= 0
+            mine = group.agent_slot[members[keep]]
+            for key, value in obs.items():
+                out[key][mine] = value if keep.all() else value[keep]
+            slots = np.concatenate([slots, mine])
         return slots
 
     def step(self, actions: np.ndarray) -> StepResult:
@@ -222,42 +221,37 @@ class BatchedDriving:
         ignored); copies that end are reset before this returns."""
         actions = np.asarray(actions)
         n = len(self.slots)
-        if actions.ndim != 2 or actions.shape[0] != n:
-            raise ValueError(f"actions: expected shape ({n}, {self.action_space.shape[0]}) (slots, action), got {actions.shape}")
+        k = self.action_width
+        if actions.ndim != 2 or actions.shape != (n, k):
+            raise ActionError(f"actions: expected shape ({n}, {k}) (slots, action), got {actions.shape}", [])
+        if actions.dtype.kind not in "fiu":
+            raise ActionError(f"actions: expected real numbers, got dtype {actions.dtype}", [])
         reward = np.zeros(n, dtype=np.float32)
         terminated = np.zeros(n, dtype=bool)
         truncated = np.zeros(n, dtype=bool)
         acted = np.zeros(n, dtype=bool)
         restarted = np.zeros(n, dtype=bool)
         out = self._obs
-        stepped = []
+        full = []
         for group in self.groups:
-            sim = group.sim
-            group_actions = actions[group.agent_slot]
-            if not np.isfinite(group_actions[sim.active_agents]).all():
-                sim.check_actions(group_actions)  # raises ActionError naming the agents
-            stepped.append(group_actions)
-        for group, group_actions in zip(self.groups, stepped):
-            sim = group.sim
-            sim.step(group_actions)
-            agents = sim.active_agents
-            slots = group.agent_slot[agents]
-            obs = self.observer.build(sim, agents)
-            if len(self.groups) == 1 and len(slots) == n and self._identity(slots):
-                out = obs  # every slot acted, in slot order: the built arrays are the result
-            else:
-                for key, value in obs.items():
-                    out[key][slots] = value
-            if group.reward is not None:
-                r = group.reward(_StepView(sim, agents), agents)
-            else:
-                r = default_rewards(sim, agents, group.reward_spec)
-            events = sim.agent_events[agents]
-            done = sim.agent_done[agents]
-            term = (events & group.terminal).any(axis=1)
-            reward[slots] = r
-            terminated[slots] = term
-            truncated[slots] = done & ~term
+            arr = np.zeros((len(group.agent_slot), k), dtype=np.float64)
+            arr[group.learners] = actions[group.learner_slots]
+            if len(self.groups) > 1:
+                group.driving.check_actions(arr)  # every group checks before any moves
+            full.append(arr)
+        for group, arr in zip(self.groups, full):
+            res = group.driving.step(arr)
+            slots = group.agent_slot[res.agents]
+            for members, obs in res.batches:
+                mine = group.agent_slot[members]
+                if len(self.groups) == 1 and len(mine) == n and self._identity(mine):
+                    out = obs  # every slot acted, in slot order: the built arrays are the result
+                else:
+                    for key, value in obs.items():
+                        out[key][mine] = value
+            reward[slots] = res.reward
+            terminated[slots] = res.terminated
+            truncated[slots] = res.truncated
             acted[slots] = True
         for listener in self._listeners:
             listener()  # sees this step's state before finished agents leave

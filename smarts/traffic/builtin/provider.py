@@ -339,36 +339,13 @@ class BuiltinTrafficProvider(ProviderBase):
         pass
 
     # ------------------------------------------------------------------ step
-    def step(self, sim: Simulation, dt: float) -> None:
-        self.step_count += 1
-        table = sim.table
-        own = np.flatnonzero(self.mine)
-        foreign, f_lane, f_s, f_t, f_dh = self._others(table)
-        if own.size:
-            via = self.signals.via_colour if self.signals is not None else self.no_signals
-            e_s, e_half, e_v = self.e_f
-            K.build_occupancy(
-                own, foreign, f_lane, f_s, f_t, f_dh, table.data, self.si, self.st,
-                self.routes.slot_int, self.lane_f, self.lane_lr, self.pred_off, self.pred,
-                self.lane_off, self.raw_lane, self.raw_f[0], self.raw_f[1], self.raw_f[2],
-                self.raw_row, self.raw_kind, e_s, e_half, e_v, self.e_row, self.e_kind,
-            )
-            jt = self.junctions
-            K.step_vehicles(
-                own, table.data, self.si, self.st, self.pa, self.mine, self.arrived, self.acc,
-                self.guard, self.change, self.turn, self.lane_off, e_s, e_half, e_v, self.e_row, self.e_kind,
-                self.lane_f, self.lane_lr, self.point_off, self.point_s, self.points,
-                self.seg_heading,
-                self.pred_off, self.pred, self.routes.slot_int, self.routes.slot_cost,
-                self.conn_int, jt.conn_length, jt.lanes_offsets, jt.lanes, jt.conn_of_lane,
-                jt.offset_of_lane, jt.foe_offsets, jt.foe, jt.foe_kind, jt.zone, via, dt,
-                self.step_count,
-            )
-            gone = own[self.arrived[: own.size]]
-            if gone.size:
-                table.remove(gone)
-                self.mine[gone] = False
-        self._depart(sim, sim.time, foreign, f_lane, f_s)
+    @property
+    def batch_stage(self):
+        """Every built-in traffic provider of a simulation is stepped by one ``BuiltinTrafficStage``
+        (``smarts.traffic.builtin.stage``), whatever the number of episodes."""
+        from smarts.traffic.builtin.stage import BuiltinTrafficStage
+
+        return BuiltinTrafficStage
 
     def _others(self, table):
         """Rows of other providers with their current lane coordinates (projected now: agents

@@ -1,8 +1,9 @@
-"""Built-in traffic of every episode of a batch in one compiled call per traffic spec.
+"""The step of the built-in traffic: every episode's ``BuiltinTrafficProvider`` in one compiled call.
 
-Each episode keeps its own ``BuiltinTrafficProvider`` (its departures, random stream, vehicle
-ids), but the provider's per-row state arrays are views into stacked ``[episodes, ...]`` blocks
-owned here, so one step of all of them is: one map projection of every other road user of every
+The simulation steps every built-in traffic provider through this batch stage (the provider's
+``batch_stage``), whether it runs one episode or thousands. Each episode keeps its own provider
+(its departures, random stream, vehicle ids), but the provider's per-row state arrays are views
+into stacked ``[providers, ...]`` blocks owned here, so one step of all of them is: one map projection of every other road user of every
 episode, one compiled loop that hands each episode's rows to the provider's own kernels
 (``build_occupancy``, ``step_vehicles``) on its block of the table, then Python only for the few
 episodes where a vehicle arrives or a departure is due. Episodes with equal traffic specs on the
@@ -17,17 +18,14 @@ import numba
 import numpy as np
 
 import smarts.traffic.builtin.kernels as K
-from smarts.core.batched import BatchedSimulation
-from smarts.traffic.builtin.provider import BuiltinTrafficProvider
+from smarts.core.simulation import Simulation
 
 
-class BatchedBuiltinTraffic:
-    """The batch stage that steps the built-in traffic providers of ``sim``'s episodes."""
+class BuiltinTrafficStage:
+    """The batch stage that steps the built-in traffic providers ``members`` (episode, provider)
+    of ``sim``'s episodes."""
 
-    def __init__(self, sim: BatchedSimulation):
-        members = [(b, p) for b, provs in enumerate(sim.episode_providers) for p in provs
-                   if isinstance(p, BuiltinTrafficProvider)]  # fmt: skip
-        self.providers = {id(p) for _, p in members}
+    def __init__(self, sim: Simulation, members: list[tuple[int, object]]):
         self.episode = np.array([b for b, _ in members], dtype=np.int64)
         self.provider = [p for _, p in members]
         m, cap, lanes = len(members), sim.episode_capacity, sim.road_map.num_lanes
@@ -78,10 +76,7 @@ class BatchedBuiltinTraffic:
         self._rows_of_members = np.zeros(sim.episodes * cap, dtype=bool)
         self._rows_of_members.reshape(sim.episodes, cap)[self.episode] = True
 
-    def steps(self, provider) -> bool:
-        return id(provider) in self.providers
-
-    def after_reset(self, sim: BatchedSimulation, episodes: np.ndarray) -> None:
+    def after_reset(self, sim: Simulation, episodes: np.ndarray) -> None:
         for k in self.member_of[episodes]:
             if k >= 0:
                 self._note_departures(k)
@@ -91,7 +86,7 @@ class BatchedBuiltinTraffic:
         self.next_due[k] = p.next_time.min() if p.next_time.size else np.inf
         self.waiting[k] = bool(p.pending.any())
 
-    def step(self, sim: BatchedSimulation, dt: float) -> None:
+    def step(self, sim: Simulation, dt: float) -> None:
         cap = sim.episode_capacity
         table = sim.table
         union_mine = self._union_mine
@@ -131,7 +126,6 @@ class BatchedBuiltinTraffic:
         for k in due.tolist():
             b, p = int(self.episode[k]), self.provider[k]
             view = sim.views[b]
-            view.time = float(sim.episode_time[b])
             lo, hi = f_lo[k], f_hi[k]
             p._depart(view, view.time, f_local[lo:hi], f_lane[lo:hi], f_s[lo:hi])
             self._note_departures(k)
