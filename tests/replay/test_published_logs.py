@@ -433,3 +433,47 @@ def test_frame_ranges_are_checked_before_anything_is_allocated():
                                           rf"{MAX_FRAMES} are supported"):  # fmt: skip
         rec(["a", "a", "b", "b"], [0, 1, 10**9, 10**9 + 1])
     assert rec(["a", "a", "a"], [0, 1, 90]).count.tolist() == [91]  # a gap of up to 10 s is filled
+
+
+def test_a_recorded_pedestrian_hides_behind_a_recorded_vehicle(tmp_path):
+    from smarts.env import DrivingParallelEnv
+
+    # the pedestrian stands at (200, 4); vehicle 2 waits in the pocket at (190, 3.7), between it and
+    # the ego (coming along y = 0) until the ego is close to the pocket
+    write_waymo(tmp_path / "j.tfrecord", [waymo_junction(pedestrian_at=(200.0, 4.0))])
+    seen = {}
+    for occlusion in (False, True):
+        agent = {"id": "ego", "action_space": "relative_target_pose",
+                 "interface": {"occlusion": {"enabled": occlusion}}}  # fmt: skip
+        body = {"map": "replay", "replay": {"format": "waymo", "path": "j.tfrecord", "take_over": {"ego": 1}},
+                "agents": [agent]}  # fmt: skip
+        env = DrivingParallelEnv(str(_scenario(tmp_path, body)))
+        try:
+            env.reset(seed=0)
+            flags = []
+            for _ in range(45):
+                obs, *_ = env.step({"ego": np.array([1.5, 0.0, 0.0], np.float32)})
+                flags.append(int((obs["ego"]["neighbours"][:, 8] == 1.0).sum()))
+            seen[occlusion] = flags
+        finally:
+            env.close()
+    assert seen[False][27] == 1 and seen[True][27] == 0  # ego at x 162: the waiting car hides the pedestrian
+    assert seen[True][44] == 1  # ego at x 187.5, beside the car: in view again
+
+
+def test_the_viewer_scene_shows_the_recorded_signals_and_a_bad_drivable_area_is_named(tmp_path):
+    from smarts.viz.scene import map_scene
+
+    m = compile_lane_map(read_recording("waymo", write_waymo(tmp_path / "j.tfrecord", [waymo_junction()])).road_map)
+    signals = map_scene(m)["signals"]
+    assert sorted({s["tls"] for s in signals}) == ["signal_201", "signal_202", "signal_203"]
+    assert {(m.lane_ids[s["from_lane"]], m.lane_ids[s["via_lane"]]) for s in signals} == {
+        ("101#2", "201"), ("102", "202"), ("102", "203")}  # fmt: skip
+    assert all(s["stop"] == [200.0, 0.0] or s["stop"] == [200.0, 3.7] for s in signals)
+    from tests.replay.files import av2_map
+
+    data = av2_map()
+    data["drivable_areas"] = "everywhere"
+    with pytest.raises(ReplayError, match=r"log_map_archive_.*\.json: drivable_areas: expected a mapping of id -> "
+                                          r"entry \(or a list of entries\), got str"):  # fmt: skip
+        read_recording("argoverse2", write_av2(tmp_path / "scn", map_data=data))
