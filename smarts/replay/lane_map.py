@@ -124,7 +124,8 @@ def compile_lane_map(dm: DatasetMap, content_hash: str | None = None) -> RoadMap
     index_of = {dm.lane_ids[i]: k for k, i in enumerate(usable)}
     shapes = [np.asarray(dm.polylines[i], dtype=np.float64) for i in usable]
     widths = np.array([float(dm.widths[i]) if dm.widths[i] > 0 else DEFAULT_WIDTH for i in usable])
-    internal = np.array([bool(dm.internal[i]) for i in usable]) | _crossing_lanes(shapes, dm, usable, index_of)
+    flagged = np.array([bool(dm.internal[i]) for i in usable])
+    internal = flagged | _crossing_lanes(shapes, dm, usable, index_of, flagged)
     pairs = _neighbour_pairs(dm, usable, index_of, shapes, internal)
     pieces, piece_of = _cut(shapes, pairs)
     left = _pair_pieces(pairs, pieces, piece_of, shapes, widths)
@@ -298,15 +299,17 @@ def _piece_ids(dm: DatasetMap, usable: list[int], pieces: list) -> list[str]:
     return ids
 
 
-def _crossing_lanes(shapes: list[np.ndarray], dm: DatasetMap, usable: list[int], index_of: dict) -> np.ndarray:
+def _crossing_lanes(shapes: list[np.ndarray], dm: DatasetMap, usable: list[int], index_of: dict,
+                    flagged: np.ndarray) -> np.ndarray:  # fmt: skip
     """bool per usable lane: it crosses another lane's centre line at more than
-    :data:`CROSSING_ANGLE`, away from both lanes' ends (lanes that meet end to end do not cross)."""
+    :data:`CROSSING_ANGLE`, away from both lanes' ends (lanes that meet end to end do not cross).
+    Two lanes the dataset already calls junction lanes are not compared."""
     n = len(shapes)
     lengths = np.array([_arc(line)[-1] for line in shapes])
     lo = np.array([line.min(axis=0) for line in shapes])
     hi = np.array([line.max(axis=0) for line in shapes])
     near = (lo[:, None, :] <= hi[None, :, :]).all(axis=2) & (lo[None, :, :] <= hi[:, None, :]).all(axis=2)
-    near &= ~np.eye(n, dtype=bool)
+    near &= ~np.eye(n, dtype=bool) & ~(flagged[:, None] & flagged[None, :])
     linked = np.zeros((n, n), dtype=bool)
     for k, i in enumerate(usable):
         for succ in dm.successors[i]:
