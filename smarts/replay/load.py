@@ -187,10 +187,12 @@ def most_at_once(rec: Recording, start: float = 0.0, duration: float | None = No
     inside = first <= last
     if not inside.any():
         return 0
-    delta = np.zeros(int(hi - lo) + 2, dtype=np.int64)
-    np.add.at(delta, first[inside] - lo, 1)
-    np.add.at(delta, last[inside] - lo + 1, -1)
-    return int(np.cumsum(delta).max())
+    # entries (+1) and exits (-1, the frame after the last) in frame order, exits first on a tie:
+    # memory for the road users, not for the frames between them
+    frames = np.concatenate([first[inside], last[inside] + 1])
+    change = np.concatenate([np.ones(int(inside.sum()), np.int64), -np.ones(int(inside.sum()), np.int64)])
+    order = np.lexsort((change, frames))
+    return int(np.cumsum(change[order]).max())
 
 
 def check_capacity(plan: ReplayPlan, capacity: int, agents: int, source: str = "<dict>") -> None:
