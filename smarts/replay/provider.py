@@ -143,6 +143,8 @@ class ReplayProvider(ProviderBase):
 
             index = {tls: t for t, tls in enumerate(sim.road_map.tls_ids)}
             self._signal_tls = np.array([index.get(SIGNAL_PREFIX + lane, -1) for lane in rec.road_map.signal_lanes])
+        if not (self._signal_tls >= 0).any():  # another map (its own signals, if any, are not recorded ones)
+            return
         frame = self.frame_at(sim.time)
         rel = int(np.floor(frame - rec.start_frame + FRAME_EPS))
         rel = min(max(rel, 0), len(rec.signal_states) - 1)
