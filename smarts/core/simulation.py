@@ -42,7 +42,7 @@ from smarts.core.events import NUM_EVENTS, Event, NotMovingTracker, agent_events
 from smarts.core.missions import MissionArrays, ResolvedMission, stack_missions
 from smarts.core.provider import Provider, ProviderBase
 from smarts.core.vehicle_table import COLUMN, Role, VehicleTable
-from smarts.maps import RoadMap
+from smarts.maps import RoadMap, project
 from smarts.maps.stack import MapStack, stack_maps
 
 SEED_MAX = 2**64 - 1
@@ -385,6 +385,9 @@ class Simulation:
         self.actions: dict | np.ndarray = {}
         self.alive = np.zeros(0, dtype=np.int64)  # live rows after the last map update
         self._all_episodes = np.arange(n, dtype=np.int64)
+        self._zero1 = np.zeros(1, dtype=np.int64)
+        self._scope_zero = np.zeros(0, np.int64)
+        self._scope_hi = np.zeros(0, np.int64)
         self._active = np.zeros(0, dtype=np.int64)
         self._active_rows = np.zeros(0, dtype=np.int64)
 
@@ -654,6 +657,8 @@ class Simulation:
     def episode_ranges(self, sorted_rows: np.ndarray, sorted_agents: np.ndarray) -> tuple[np.ndarray, ...]:
         """Per episode, ``[lo, hi)`` into ``sorted_rows`` (global rows) and into ``sorted_agents``
         (agent indices), both ascending: the episode's share of each."""
+        if self.episodes == 1:
+            return self._zero1, np.array([len(sorted_rows)]), self._zero1, np.array([len(sorted_agents)])
         bounds = np.arange(self.episodes + 1, dtype=np.int64)
         row_cut = np.searchsorted(sorted_rows, bounds * self.episode_capacity)
         agent_cut = np.searchsorted(sorted_agents, self.episode_agent_start)
@@ -662,10 +667,15 @@ class Simulation:
     def scope(self, agents: np.ndarray) -> Scope:
         """``Scope`` of ``agents``: each sees only the live rows of its own episode."""
         alive = self.alive
-        episode = self.agent_episode[agents]
-        if self.episodes == 1:
+        if self.episodes == 1:  # everyone sees every live row (arrays kept between calls)
             n = len(agents)
-            return Scope(alive, np.zeros(n, np.int64), np.full(n, len(alive), np.int64), np.zeros(n, np.int64))
+            if len(self._scope_zero) < n:
+                self._scope_zero = np.zeros(2 * n, np.int64)
+                self._scope_hi = np.zeros(2 * n, np.int64)
+            hi = self._scope_hi[:n]
+            hi[:] = len(alive)
+            return Scope(alive, self._scope_zero[:n], hi, self._scope_zero[:n])
+        episode = self.agent_episode[agents]
         cap = self.episode_capacity
         lo = np.searchsorted(alive, episode * cap)
         hi = np.searchsorted(alive, (episode + 1) * cap)
@@ -680,6 +690,8 @@ class Simulation:
     def project_rows(self, rows: np.ndarray):
         """``LaneProjection`` of ``rows``, each on its episode's map (stacked lanes)."""
         t = self.table
+        if self.map_stack.num_maps == 1:  # one map: no map numbers to gather or check
+            return project(self.road_map, gather_xy(t, rows), t.heading[rows])
         return self.map_stack.project(gather_xy(t, rows), t.heading[rows], self.row_map[rows])
 
     def _project(self, rows: np.ndarray) -> None:
@@ -705,6 +717,21 @@ class Simulation:
         ma, st = self.mission_arrays, self.map_stack
         self.agent_events[~self.agent_active] = False
         agents = self._active
+        if self.episodes == 1:  # the kernel itself: no episode ranges to cut
+            if agents.size == 0:
+                return
+            agent_events(
+                self.table.data, self.table.lane, self.alive, agents, self.agent_row[agents],
+                st.raster_flat, st.raster_width[0], st.raster_origin[0], st.raster_inv_res[0], st.raster_cell_max[0],
+                self.road_map.lane_internal, self.road_map.lane_road, ma.on_route_road,
+                ma.goal_kind, ma.goal_xy, ma.goal_radius, ma.goal_road, ma.goal_lane, ma.goal_s,
+                ma.goal_gate, self.agent_prev_xy, self.agent_prev_row,
+                self.not_moving.anchor, self.not_moving.anchor_time,
+                self.event_configs[0].not_moving_seconds, self.event_configs[0].not_moving_distance,
+                float(self.episode_time[0]), bool(self.episode_step[0] >= self.episode_limit[0]),
+                self.terminate_on[0], self.agent_events, self.agent_done,
+            )  # fmt: skip
+            return
         alive_lo, alive_hi, agent_lo, agent_hi = self.episode_ranges(self.alive, agents)
         _episode_events(
             episodes, alive_lo, alive_hi, agent_lo, agent_hi,

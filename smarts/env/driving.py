@@ -27,7 +27,7 @@ from smarts.dynamics.action_spaces import REAL_KINDS, agent_action_space
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
 from smarts.env.assembly import as_spec, build_simulation
-from smarts.env.reward import RewardFunction, default_rewards
+from smarts.env.reward import RewardFunction, default_rewards, reward_weights
 from smarts.env.social import SocialAgents
 from smarts.env.v2v import V2VLink
 from smarts.scenario import ScenarioSpec
@@ -82,9 +82,13 @@ class Driving:
         self.social = SocialAgents(self.specs, sim, policy_resolver)
         self.learner = ~self.social.is_social
         self.reward_fn = reward
-        self._weights = _reward_weights([self.specs[b].reward for b in sim.agent_episode.tolist()])
+        self._weights = reward_weights([self.specs[b].reward for b in sim.agent_episode.tolist()])
+        self._one_reward = bool((self._weights == self._weights[:, :1]).all())
+        if self._one_reward:  # every agent's weights are the same: one column (no gathering)
+            self._weights = np.ascontiguousarray(self._weights[:, :1])
         self.terminal = sim.terminate_on.copy()
         self.terminal[:, Event.MAX_STEPS] = False
+        self._one_rule = bool((self.terminal == self.terminal[:1]).all())
         self.driving_spaces = [
             agent_action_space(a.action_space, a.controller, self.limits, spec.step_length)
             for spec in self.specs for a in spec.agents
@@ -153,9 +157,10 @@ class Driving:
         and finished agents are ignored). Atomic: a refused action changes nothing."""
         sim = self.sim
         active = sim.active_agents
-        senders = active[self.learner[active]]
-        driving, payloads, channels = self._split(actions, senders)
-        if self.social.any:
+        social = self.social.any
+        senders = active[self.learner[active]] if social else active
+        driving, payloads, channels = self._split(actions, senders) if self.comms else (actions, None, None)
+        if social:
             sim.check_actions(driving, senders)  # the policies must not run on a refused step
             driving = self._with_social(driving, active)
         sim.step(driving)
@@ -164,17 +169,19 @@ class Driving:
         count = None
         if self.comms:
             count = self._merge(batches, agents, self._exchange(senders, payloads, channels))
-        if self.social.any:
+        if social:
             self._keep_social(batches)
             keep = self.learner[agents]
             batches = _learners(batches, self.learner)
             agents = agents[keep]
             count = None if count is None else count[keep]
-        reward = (
-            default_rewards(sim, agents, self._weights[:, agents]) if self.reward_fn is None else self.reward_fn(sim, agents)
-        )
+        if self.reward_fn is not None:
+            reward = self.reward_fn(sim, agents)
+        else:
+            reward = default_rewards(sim, agents, self._weights if self._one_reward else self._weights[:, agents])
         events = sim.agent_events[agents]
-        terminated = (events & self.terminal[sim.agent_episode[agents]]).any(axis=1)
+        terminal = self.terminal[0] if self._one_rule else self.terminal[sim.agent_episode[agents]]
+        terminated = (events & terminal).any(axis=1)
         truncated = sim.agent_done[agents] & ~terminated
         for listener in self._listeners:
             listener(sim)  # sees this step's state before finished agents leave the table
@@ -314,9 +321,3 @@ def _learners(batches: list[Batch], learner: np.ndarray) -> list[Batch]:
         elif keep.any():
             out.append((members[keep], {k: v[keep] for k, v in batch.items()}))
     return out
-
-
-def _reward_weights(specs) -> np.ndarray:
-    """float64[5, agents]: progress weight, collision, off-road penalties, goal bonus, step penalty."""
-    names = ("progress_weight", "collision_penalty", "off_road_penalty", "goal_bonus", "step_penalty")
-    return np.array([[getattr(r, n) for r in specs] for n in names], dtype=np.float64).reshape(len(names), len(specs))

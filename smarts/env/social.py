@@ -53,9 +53,8 @@ class SocialAgents:
                     )
             self.groups.append((policy, np.array(members, dtype=np.int64)))
 
-    @property
-    def any(self) -> bool:
-        return bool(self.is_social.any())
+        self.any = bool(self.is_social.any())
+        """Whether any agent is social (read every step)."""
 
     def actions_of(self, agents: np.ndarray, observations: dict[str, np.ndarray]) -> np.ndarray:
         """float64[n, k] actions of the live social ``agents`` (ascending); ``observations[key][a]``
