@@ -37,12 +37,28 @@ def files(tmp_path_factory) -> dict[str, Path]:
         "suite.yaml": b"task: adaptive\nepisodes: 0\nscenarioz: []\n",
         "train.yaml": b"task: platoon\nlr: 0.001\nepochz: 3\n",
     }
+    made["behind.yaml"] = (b"name: x\nmap: builtin:straight_2lane\nagents:\n"
+                           b"  - mission: {start: {road: main, offset: 50}, goal: {road: main, offset: 10}}\n")  # fmt: skip
     paths = {}
     for name, data in made.items():
         (tmp / name).write_bytes(data)
         paths[name] = tmp / name
+    for name, edit in CHECKPOINT_EDITS.items():  # shipped checkpoints, edited in memory
+        import torch
+
+        blob = torch.load(ROOT / "zoo" / "checkpoints" / "drive.pt", weights_only=True)
+        edit(blob)
+        torch.save(blob, tmp / name)
+        paths[name] = tmp / name
     paths["tmp"] = tmp
     return paths
+
+
+CHECKPOINT_EDITS = {
+    "no_space.pt": lambda blob: blob["action"].pop("space"),
+    "huge.pt": lambda blob: blob.update(hidden=[10**9]),
+    "nan_bounds.pt": lambda blob: blob["action"]["low"].__setitem__(0, float("nan")),
+}
 
 
 CASES = [
@@ -70,6 +86,18 @@ CASES = [
      ["missing.net.xml"]),
     ("scenario that is not YAML", ["-m", "smarts", "scenario", "show", "{not_yaml.yaml}"], ["not_yaml.yaml"]),
     ("episode log that is not one", ["-m", "smarts.benchmark.metrics", "{log.npz}"], ["log.npz"]),
+    ("checkpoint without its action space", ["-m", "train", "eval", "--agent", "{no_space.pt}", "--suite", "collaborative"],
+     ["no_space.pt: action.space: required field missing"]),
+    ("checkpoint asking for a 10**9-unit layer", ["-m", "train", "eval", "--agent", "{huge.pt}", "--suite", "collaborative"],
+     ["huge.pt: hidden[0]: input should be less than or equal to 8192, got 1000000000"]),
+    ("checkpoint with a NaN action bound", ["-m", "train", "eval", "--agent", "{nan_bounds.pt}", "--suite", "collaborative"],
+     ["nan_bounds.pt: action.low[0]: input should be a finite number, got nan"]),
+    ("goal behind the start on a one-way road", ["-m", "smarts", "scenario", "show", "--build", "{behind.yaml}"],
+     ["behind.yaml: agents[0].mission.goal: offset 10 on road 'main' is not ahead of the start (offset 50"]),
+    ("training into a folder that cannot be made", ["-m", "train", "ppo", "--task", "platoon", "--out-dir", "{garbage.pt}/run"],
+     ["run folder", "garbage.pt/run: cannot be made there"]),
+    ("benchmark into a folder that cannot be made", ["-m", "train", "benchmark", "--suite", "adaptive", "--out", "{garbage.pt}/b"],
+     ["output folder", "garbage.pt/b: cannot be made there"]),
 ]
 
 

@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import sys
 from pathlib import Path
 
@@ -51,10 +52,11 @@ def _ppo(args: argparse.Namespace) -> int:
 
     overrides = {name: getattr(args, name) for name in TrainConfig.model_fields if name != "task"}
     cfg = load_config(args.task, args.config, {k: v for k, v in overrides.items() if v is not None})
-    from train.run import run_folder
+    from train.run import check_run_folder, run_folder
 
     resume = Path(args.resume) if args.resume else None
     out = run_folder(cfg, resume)
+    check_run_folder(out)  # fail fast, before the trainer and its envs are built
     cfg = cfg.model_copy(update={"out": str(out)})
     if cfg.lib == "sb3":
         from train.sb3_ppo import train_sb3
@@ -176,6 +178,16 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # what was saved has been said already; no traceback
         print("interrupted", file=sys.stderr)
         return 130
+    except OSError as err:  # a disk that fills up or a folder that stops taking files mid-run
+        if err.errno not in WRITE_ERRORS:
+            raise
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"error: {where}{err.strerror or err} (the files written before it are kept)", file=sys.stderr)
+        return 1
+
+
+WRITE_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM)
+"""Errors of writing that a user fixes (free space, permissions), reported without a traceback."""
 
 
 if __name__ == "__main__":

@@ -63,6 +63,10 @@ TRAIN_SEED_BASE = 100_000
 """Training episodes use seeds from here up (``seed * 1_000_003`` further on); evaluation uses
 ``eval_seed`` and the benchmark suites their own seeds, so neither is seen in training."""
 
+RUN_FREE_BYTES = 128 * 2**20
+"""Free space a run folder must have when training starts: checkpoints (with the optimiser's state),
+TensorBoard events and the held-out evaluations' logs, plots and videos."""
+
 Save = Callable[[Path], Path]
 """A trainer's ``save(path) -> path``: its checkpoint of the current step and metrics."""
 
@@ -134,6 +138,14 @@ def lane_relative_dict(cfg: TrainConfig) -> dict | None:
 
 
 # ------------------------------------------------------------------ resuming
+def check_run_folder(out: Path) -> None:
+    """Before anything is built: the run folder (or where it will be made) takes files and has
+    :data:`RUN_FREE_BYTES` free; ``OutputError`` naming it otherwise (fail fast, not mid-run)."""
+    from smarts.benchmark.runner import check_output_folder
+
+    check_output_folder(out, RUN_FREE_BYTES, "run folder")
+
+
 def run_folder(cfg: TrainConfig, resume: Path | None = None) -> Path:
     """The folder a run writes to: ``out`` when given; else the resumed checkpoint's folder; else
     the next numbered folder under ``runs_dir`` (``001``, ``002``, ...). Nothing is created here:
@@ -226,6 +238,7 @@ class Run:
         if held and not continuing:
             raise ValueError(f"{out} already holds a training run ({', '.join(held)}): give another --out-dir, "
                              f"or continue it with --resume {out / 'last.pt'}")  # fmt: skip
+        check_run_folder(out)
         self.cfg, self.out = cfg, out
         self.progress = progress  # a bar for the final evaluation (periodic ones run under training's bar)
         out.mkdir(parents=True, exist_ok=True)

@@ -14,11 +14,19 @@ import numpy as np
 CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
 
 
+def _from_file(planner, path: str | Path):
+    """``planner`` with ``source``: the file its learned part came from (error messages name it, and
+    the benchmark keys resumed episodes by its contents)."""
+    planner.source = str(path)
+    return planner
+
+
 def aid(checkpoint: str | Path | None = None):
     """AID over its learned motion predictor."""
     from agents.planners.aid import AIDPlanner, LearnedPredictor
 
-    return AIDPlanner(predictor=LearnedPredictor(checkpoint or CHECKPOINTS / "aid-predictor.pt"))
+    path = checkpoint or CHECKPOINTS / "aid-predictor.pt"
+    return _from_file(AIDPlanner(predictor=LearnedPredictor(path)), path)
 
 
 class StopMoveVote:
@@ -47,7 +55,8 @@ def tf(checkpoint: str | Path | None = None):
     """TF's rules with the behaviour-cloned stop/move veto."""
     from agents.planners.tf import TFPlanner
 
-    return TFPlanner(stop_move=StopMoveVote(checkpoint or CHECKPOINTS / "tf-stop-move.pt"))
+    path = checkpoint or CHECKPOINTS / "tf-stop-move.pt"
+    return _from_file(TFPlanner(stop_move=StopMoveVote(path)), path)
 
 
 class EventRisk:
@@ -87,4 +96,5 @@ def vcr(checkpoint: str | Path | None = None):
     """VCR's follower with the learned event classifier over rasters."""
     from agents.planners.vcr import LEARNED_INTERFACE, VCRPlanner
 
-    return VCRPlanner(risk=EventRisk(checkpoint or CHECKPOINTS / "vcr-classifier.pt"), interface=LEARNED_INTERFACE)
+    path = checkpoint or CHECKPOINTS / "vcr-classifier.pt"
+    return _from_file(VCRPlanner(risk=EventRisk(path), interface=LEARNED_INTERFACE), path)

@@ -24,6 +24,10 @@ the episodes whose logs are already there and read back valid for the same job; 
 Reference agents (:data:`REFERENCE_AGENTS`) are benchmarked beside the requested ones with the
 same suite, seeds and episode count, so every report has its floor and its simple baseline.
 
+The output folder is checked before any episode runs (:func:`check_output_folder`: it takes files
+and has room for the planned logs and the report; training checks its run folder the same way),
+so a read-only or full ``--out`` fails at once, naming the folder, instead of after every episode.
+
 Agents are locators (``zoo:keep-lane``, a checkpoint path) that a policy resolver turns into
 policies (``smarts.core.policies``): the installed default (the zoo), or ``policy_resolver=``
 given to :func:`plan_jobs` and :func:`run_jobs` alike (a module-level function, so that worker
@@ -36,11 +40,15 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import errno
 import hashlib
 import multiprocessing
 import multiprocessing.connection
+import os
 import re
+import shutil
 import signal
+import tempfile
 import threading
 import time
 import traceback
@@ -53,7 +61,7 @@ from typing import Any
 import numpy as np
 
 from smarts.benchmark.suites import Suite, SuiteScenario, load_suite
-from smarts.core.errors import AgentSetupError
+from smarts.core.errors import AgentSetupError, OutputError
 from smarts.core.policies import Policy, PolicyResolver, resolve_policy
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.scenario.spec import ACTION_SPACES, CONTROLLERS, LANE_RELATIVE_SPACES, ScenarioSpec
@@ -65,6 +73,37 @@ REFERENCE_AGENTS = ("zoo:keep-lane", "zoo:random", "zoo:stand-still")
 RETRIES = 1
 """How many times an episode whose worker process died runs again, in a fresh worker, before it is
 recorded as failed (on Ray: the task's ``max_retries``)."""
+
+REPORT_BYTES = 32 * 2**20
+"""Free space a benchmark report needs (results, plots, TensorBoard events) besides its logs."""
+EPISODE_LOG_BYTES = 256 * 2**10
+"""Free space reserved per planned episode log (a few seconds of a few agents take tens of kB)."""
+
+
+def check_output_folder(folder: str | os.PathLike, need_bytes: int, what: str = "output folder") -> None:
+    """Fail fast, before a run starts: ``folder`` (or, when it does not exist yet, the nearest
+    existing folder above it, where it will be made) must take a new file and have ``need_bytes``
+    free on its disk. :class:`OutputError` naming ``folder`` otherwise; nothing is left behind.
+
+    Writability is tried with a real file, not judged from permission bits (which do not bind
+    every user, and say nothing of a read-only file system)."""
+    folder = Path(folder)
+    base = folder
+    while not base.exists() and not base.is_symlink() and base.parent != base:
+        base = base.parent
+    if not base.is_dir():
+        raise OutputError(f"{what} {folder}: cannot be made there: {base} is not a folder")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".write-check-", dir=base)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as err:
+        why = "its file system is read-only" if err.errno == errno.EROFS else (err.strerror or str(err)).lower()
+        raise OutputError(f"{what} {folder}: cannot write there ({why}); give a folder this user can write to") from None
+    free = shutil.disk_usage(base).free
+    if free < need_bytes:
+        raise OutputError(f"{what} {folder}: {free / 2**20:.0f} MiB free on its disk; the run needs about "
+                          f"{need_bytes / 2**20:.0f} MiB: free some space or give a folder on another disk")  # fmt: skip
 
 
 class BenchmarkInterrupted(KeyboardInterrupt):
@@ -117,6 +156,9 @@ class Job:
     log_path: str
     reuse: bool = False
     """Reuse ``log_path`` when it already holds a readable log (cached reference episodes)."""
+    agent_files: str = ""
+    """Content hash of the files the agent's policy was loaded from (:func:`policy_files_digest`:
+    the checkpoint of a ``zoo:`` agent or of a path), part of :func:`job_inputs`."""
 
 
 def agent_label(locator: str) -> str:
@@ -202,12 +244,29 @@ def check_agents(
 ) -> dict[str, PolicySetup]:
     """Load every agent and check the suite hosts its action space, before any episode runs;
     returns each agent's setup. An unknown locator or unloadable checkpoint raises too."""
-    setups = {}
+    return _checked_agents(agents, suite, policy_resolver)[0]
+
+
+def _checked_agents(
+    agents: list[str], suite: Suite, policy_resolver: PolicyResolver | None
+) -> tuple[dict[str, PolicySetup], dict[str, str]]:
+    """:func:`check_agents`, and each agent's :func:`policy_files_digest` from the same load."""
+    setups, digests = {}, {}
     for locator in agents:
-        setup = policy_setup(load_policy(locator, policy_resolver=policy_resolver), locator)
+        policy = load_policy(locator, policy_resolver=policy_resolver)
+        setup = policy_setup(policy, locator)
         check_hosted(locator, setup, suite)
-        setups[locator] = setup
-    return setups
+        setups[locator], digests[locator] = setup, policy_files_digest(policy)
+    return setups, digests
+
+
+def policy_files_digest(policy: Any) -> str:
+    """Content hash of the file a policy was loaded from (its ``source`` when that names a file,
+    as a checkpoint policy's does, ``zoo:`` agents' included); "" for a policy of code alone. An
+    updated checkpoint behind an unchanged locator changes it, so its old episodes are not reused."""
+    source = getattr(policy, "source", None)
+    digest = _digest_of(str(source)) if isinstance(source, (str, os.PathLike)) else b""
+    return digest.hex()[:16]
 
 
 def scenario_for(spec: ScenarioSpec, setup: PolicySetup) -> ScenarioSpec:
@@ -242,11 +301,15 @@ def _digest_of(path: str) -> bytes:
 
 def job_inputs(job: Job) -> str:
     """A digest of what an episode depends on besides its seed: the suite file's contents, the
-    scenario's place in it, the agent locator and, when it names a file (a checkpoint), that
-    file's contents. Every log records it (``info["inputs"]``); ``resume`` reuses a log only when
-    it matches, so a changed suite or retrained checkpoint is run again."""
+    scenario's place in it, the agent locator and the contents of the checkpoint its policy was
+    loaded from (the locator's file, or a ``zoo:`` agent's: ``Job.agent_files``). Every log
+    records it (``info["inputs"]``); ``resume`` reuses a log only when it matches, so a changed
+    suite or a retrained or updated checkpoint is run again."""
     h = hashlib.sha256()
-    parts = (str(job.scenario_index).encode(), job.agent.encode(), _digest_of(job.suite_source), _digest_of(job.agent))
+    own = _digest_of(job.agent)  # a locator that is a checkpoint path
+    parts = [str(job.scenario_index).encode(), job.agent.encode(), _digest_of(job.suite_source), own]
+    if job.agent_files and not own:  # a zoo: agent's checkpoint (code-only agents keep their keys)
+        parts.append(job.agent_files.encode())
     for part in parts:
         h.update(part + b"\0")
     return h.hexdigest()[:16]
@@ -365,13 +428,23 @@ def plan_jobs(
     evaluations during training; the logs do not depend on the agent under test). ``check``:
     load every agent and refuse one whose action space the suite does not host
     (:func:`check_agents`) before any job exists. ``policy_resolver``: turns the agents' locators
-    into policies (None: the installed default); give :func:`run_jobs` the same one."""
+    into policies (None: the installed default); give :func:`run_jobs` the same one.
+
+    ``out_dir`` (and ``reference_cache``) must take files and have room for the report and
+    :data:`EPISODE_LOG_BYTES` per episode: ``OutputError`` naming the
+    folder before any episode runs otherwise. Each job carries the content hash of its agent's
+    checkpoint (``Job.agent_files``, when ``check`` loads the agents), so ``resume`` runs an
+    updated checkpoint's episodes again."""
     base = suite.seed if seed is None else seed
     out_dir = Path(out_dir)
     agents = list(agents)
     extra = [a for a in REFERENCE_AGENTS if a not in agents] if references else []
-    if check:
-        check_agents(agents + extra, suite, policy_resolver)
+    planned = len(agents + extra) * len(suite.scenarios) * episodes
+    check_output_folder(out_dir, REPORT_BYTES + planned * EPISODE_LOG_BYTES)
+    if reference_cache is not None:
+        check_output_folder(reference_cache, len(REFERENCE_AGENTS) * len(suite.scenarios) * episodes * EPISODE_LOG_BYTES,
+                            "reference cache")  # fmt: skip
+    digests = _checked_agents(agents + extra, suite, policy_resolver)[1] if check else {}
     cache = Path(reference_cache) / reference_cache_key(suite, base) if reference_cache is not None else None
     jobs = []
     for agent in agents + extra:
@@ -380,7 +453,7 @@ def plan_jobs(
         for i, scenario in enumerate(suite.scenarios):
             for episode in range(episodes):
                 path = root / agent_label(agent) / scenario.name / f"episode_{episode:03d}.npz"
-                jobs.append(Job(agent, suite.source, i, episode, base + episode, str(path), reuse))
+                jobs.append(Job(agent, suite.source, i, episode, base + episode, str(path), reuse, digests.get(agent, "")))
     return jobs
 
 

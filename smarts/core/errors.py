@@ -26,6 +26,7 @@ __all__ = [
     "NetconvertError",
     "NoResolverError",
     "NoRouteError",
+    "OutputError",
     "ReplayError",
     "ScenarioError",
     "WorkerError",
@@ -118,6 +119,11 @@ def _rebuild_log_error(
     problem: str, source: str, agent: str | None, column: str | None
 ) -> LogError:
     return LogError(problem, source=source, agent=agent, column=column)
+
+
+class OutputError(ValueError):
+    """An output folder that cannot take a run's files (it refuses writes, it cannot be made, its
+    disk has too little free space); the message names the folder. Checked before a run starts."""
 
 
 class WorkerError(RuntimeError):

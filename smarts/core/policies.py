@@ -37,7 +37,9 @@ class Policy(Protocol):
     ``action_space`` names a simulator action space (``relative_target_pose`` ...). Optional:
     ``controller`` (``direct`` or ``lane_relative``), ``interface`` and ``lane_relative`` (the
     settings the policy was trained with, as the simulator's objects or their plain-data form,
-    validated where the env is built), ``dt`` (set to the scenario's step), ``seed(int)``."""
+    validated where the env is built), ``dt`` (set to the scenario's step), ``seed(int)``,
+    ``source`` (the checkpoint file it was loaded from: errors name it, and the benchmark's resume
+    keys its episodes by that file's contents)."""
 
     action_space: str
 

@@ -165,6 +165,44 @@ def test_resume_runs_again_what_a_changed_suite_invalidates(tmp_path):
     assert read_episode(results[1]["log"]).time_limit == 2
 
 
+def test_resume_runs_again_the_episodes_of_a_zoo_agent_whose_checkpoint_changed(tmp_path, monkeypatch):
+    """A ``zoo:`` locator names the same agent after its checkpoint is updated: resume keys its
+    episodes by the checkpoint's contents, so the old episodes are not reused."""
+    import shutil
+
+    import torch
+
+    import zoo.registry
+
+    checkpoint = tmp_path / "drive.pt"
+    shutil.copy(Path(zoo.registry.ZOO_DIR) / "checkpoints" / "drive.pt", checkpoint)  # the shipped file stays as it is
+    monkeypatch.setitem(zoo.registry.ZOO, "updated", (zoo.registry.CHECKPOINT, str(checkpoint), "a test entry"))
+    suite = load_suite(TINY)
+    jobs = plan_jobs(["zoo:updated"], suite, 1, tmp_path / "run", references=False)
+    run_jobs(jobs, progress=False)
+    assert all(finished_episode(j) for j in plan_jobs(["zoo:updated"], suite, 1, tmp_path / "run", references=False))
+    before = {j.log_path: read_episode(j.log_path).info["inputs"] for j in jobs}
+    blob = torch.load(checkpoint, weights_only=True)
+    blob["actor"]["net.4.bias"] += 0.5  # retrained: other actions
+    torch.save(blob, checkpoint)
+    jobs = plan_jobs(["zoo:updated"], suite, 1, tmp_path / "run", references=False)
+    assert not any(finished_episode(j) for j in jobs)
+    run_jobs(jobs, progress=False, resume=True)
+    assert all(finished_episode(j) for j in jobs)  # run again, for this checkpoint
+    assert all(read_episode(j.log_path).info["inputs"] != before[j.log_path] for j in jobs)
+
+
+def test_every_zoo_agent_with_learned_weights_is_keyed_by_its_checkpoint_file():
+    import zoo.registry
+    from smarts.benchmark.runner import policy_files_digest
+    from zoo import make_policy
+
+    learned = {"platoon-rtp", "drive", "platoon-c", "tf", "vcr", "aid"}
+    for name in zoo.registry.ZOO:
+        digest = policy_files_digest(make_policy(f"zoo:{name}"))
+        assert bool(digest) == (name in learned), name
+
+
 def _overall(doc):
     return {a: v["scores"]["overall"] for a, v in doc["agents"].items()}
 
