@@ -90,6 +90,15 @@ def test_a_run_folder_that_cannot_be_made_fails_before_training(tmp_path, capsys
     assert sorted(tmp_path.iterdir()) == [blocker]
 
 
+@pytest.mark.parametrize("command", ["tf-bc", "vcr-classifier", "aid-predictor"])
+def test_the_planner_trainers_check_their_out_folder_before_generating_data(tmp_path, capsys, command):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    assert main([command, "--out", str(blocker / "run"), "--quiet"]) == 2
+    assert capsys.readouterr().err.strip() == (f"error: run folder {blocker / 'run'}: cannot be made there: "
+                                               f"{blocker} is not a folder")  # fmt: skip
+
+
 @PERMISSIONS_SKIP
 def test_a_read_only_run_folder_fails_before_training(tmp_path, capsys):
     read_only = tmp_path / "ro"

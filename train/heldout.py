@@ -4,6 +4,7 @@ held-out split by scenario and the cars and envs of scripted situations."""
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import TypeVar
 
 T = TypeVar("T")
@@ -28,9 +29,14 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
 
 
 def apply_run_options(args: argparse.Namespace) -> None:
-    """Seed torch and set its threads from ``add_run_options``' values."""
+    """Seed torch and set its threads from ``add_run_options``' values, and check the output folder
+    (``--out``) before any data is generated: one that refuses writes or lacks room fails now."""
     import torch
 
+    from train.run import check_run_folder
+
+    if getattr(args, "out", None):
+        check_run_folder(Path(args.out))
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
 
