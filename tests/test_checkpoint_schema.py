@@ -176,3 +176,39 @@ def test_a_refused_checkpoint_leaves_the_policy_usable_elsewhere(tmp_path):
     policy = load_policy_file(SHIPPED / "platoon-rtp.pt")
     obs = {k: np.zeros((2, *shape), np.float32) for k, shape in zip(policy.layout.keys, policy.layout.shapes)}
     assert np.isfinite(policy.act(obs)).all()
+
+
+def _sb3_export() -> dict:
+    """A small SB3 export, as ``train.sb3_ppo.save_sb3`` writes one."""
+    import gymnasium as gym
+    from stable_baselines3.common.policies import MultiInputActorCriticPolicy
+
+    from agents.sb3_policy import SB3_FORMAT
+
+    shapes = {"ego": [4], "lead": [2, 3]}
+    space = gym.spaces.Dict({k: gym.spaces.Box(-np.inf, np.inf, tuple(v), np.float32) for k, v in shapes.items()})
+    policy = MultiInputActorCriticPolicy(space, gym.spaces.Box(-1.0, 1.0, (2,), np.float32), lambda _: 0.0, net_arch=[8])
+    return {"format": SB3_FORMAT, "policy": policy.state_dict(), "observation": shapes, "net_arch": [8], "step": 0,
+            "action": {"space": "relative_target_pose", "low": [-1.0, -1.0], "high": [1.0, 1.0]}}  # fmt: skip
+
+
+SB3_CASES = [
+    ("action missing", lambda b: b.pop("action"), "action: required field missing"),
+    ("a huge layer", lambda b: b.update(net_arch=[10**9]), "net_arch[0]: input should be less than or equal to 8192"),
+    ("a NaN bound", lambda b: b["action"]["high"].__setitem__(0, math.nan), "action.high[0]: input should be a finite number"),
+    ("a shape that is text", lambda b: b["observation"].update(ego="4"), "observation['ego']: input should be a valid list"),
+    ("NaN weights", lambda b: next(iter(b["policy"].values())).fill_(math.nan), "policy: tensor"),
+]
+
+
+@pytest.mark.parametrize("name, edit, message", SB3_CASES, ids=[c[0] for c in SB3_CASES])
+def test_an_sb3_export_field_is_refused_naming_the_file_and_field(tmp_path, name, edit, message):
+    blob = _sb3_export()
+    assert load_policy_file(_saved(tmp_path / "good.pt", blob)).action_space == "relative_target_pose"
+    edit(blob)
+    refused(load_policy_file, _saved(tmp_path / "bad.pt", blob), message)
+
+
+def _saved(path: Path, blob: dict) -> Path:
+    torch.save(blob, path)
+    return path
