@@ -48,22 +48,27 @@ class EpisodeRecord:
     def to_json(self) -> dict:
         return {"steps": "".join(self.steps), **{k: v.hex() for k, v in self.chains.items()}}
 
-    def first_difference(self, golden: dict) -> str | None:
-        """None when this episode is the golden one; else where it first differs."""
+    def first_difference(self, golden: dict, streams: tuple[str, ...] = STREAMS) -> str | None:
+        """None when this episode is the golden one in ``streams``; else where it first differs."""
         mine = self.to_json()
-        if mine == golden:
-            return None
+        keep = [STREAMS.index(s) for s in streams]
         width = 2 * len(STREAMS)
         theirs = golden["steps"]
+
+        def part(code: str) -> str:
+            return "".join(code[2 * i:2 * i + 2] for i in keep)
+
+        if mine["steps"] != theirs and len(mine["steps"]) != len(theirs):
+            pass
         for k in range(max(len(self.steps), len(theirs) // width)):
             a, b = mine["steps"][k * width:(k + 1) * width], theirs[k * width:(k + 1) * width]
-            if a != b:
-                streams = [s for i, s in enumerate(STREAMS) if a[2 * i:2 * i + 2] != b[2 * i:2 * i + 2]]
-                if not a or not b:
-                    return f"length {len(self.steps)} steps, golden {len(theirs) // width}"
-                return f"step {k}: {', '.join(streams)}"
-        streams = [s for s in STREAMS if mine[s] != golden[s]]
-        return f"chained digests of {', '.join(streams)}"
+            if not a or not b:
+                return f"length {len(self.steps)} steps, golden {len(theirs) // width}"
+            if part(a) != part(b):
+                differ = [STREAMS[i] for i in keep if a[2 * i:2 * i + 2] != b[2 * i:2 * i + 2]]
+                return f"step {k}: {', '.join(differ)}"
+        differ = [s for s in streams if mine[s] != golden[s]]
+        return f"chained digests of {', '.join(differ)}" if differ else None
 
 
 def table_bytes(ids: list, alive: np.ndarray, x, y, heading, speed) -> bytes:
@@ -177,14 +182,16 @@ def run_batched(specs: list, seeds: list[int], max_steps: int = MAX_STEPS) -> li
 
 
 def _episode_table(bd, copy: int):
+    """The copy's simulation, its episode's table and index; None for a copy in a worker process
+    (SUMO), whose table this process cannot see."""
+    if bd.copy_place[copy] is None:
+        return None
     g, b = bd.copy_place[copy]
     sim = bd.groups[g].sim
     return sim, sim.views[b].table, b
 
 
 def _run_batched(bd, specs: list, seeds: list[int], max_steps: int) -> list[EpisodeRecord]:
-    pending = {i: s for i, s in enumerate(seeds)}
-    bd.seed_schedule = lambda copy: pending.pop(copy, 0)
     n_copies = len(specs)
     slots = bd.slots
     slot_copy = np.array([c for c, _ in slots])
@@ -194,28 +201,30 @@ def _run_batched(bd, specs: list, seeds: list[int], max_steps: int) -> list[Epis
     message = len(links[0].message_components) if links else 0
     seen: dict = {}
 
-    slot_agent: list[tuple] = [None] * len(slots)  # slot -> (group simulation, union agent)
+    slot_agent: list[tuple | None] = [None] * len(slots)  # slot -> (group simulation, agent); None: remote
     for g in bd.groups:
         for a, j in enumerate(g.agent_slot.tolist()):
-            slot_agent[j] = (g.sim, a)
+            if j >= 0:
+                slot_agent[j] = (g.sim, a)
 
     def tables() -> list[bytes]:
         out = []
         for c in range(n_copies):
-            _, t, _ = _episode_table(bd, c)
-            out.append(table_bytes(t.ids, t.alive, t.x, t.y, t.heading, t.speed))
+            found = _episode_table(bd, c)
+            out.append(b"" if found is None else table_bytes(found[1].ids, found[1].alive, found[1].x, found[1].y,
+                                                             found[1].heading, found[1].speed))  # fmt: skip
         return out
 
     def events_of(sel: np.ndarray) -> np.ndarray:
-        return np.array([slot_agent[j][0].agent_events[slot_agent[j][1]] for j in sel.tolist()], dtype=bool).reshape(len(sel), -1)
+        rows = [slot_agent[j][0].agent_events[slot_agent[j][1]] if slot_agent[j] else obs["events"][j] > 0 for j in sel.tolist()]
+        return np.array(rows, dtype=bool).reshape(len(sel), -1)
 
     def listener() -> None:
         seen["tables"] = tables()
-        seen["active"] = [bool(s.agent_active[a]) for s, a in slot_agent]
-        seen["events"] = {j: s.agent_events[a].copy() for j, (s, a) in enumerate(slot_agent) if s.agent_active[a]}
+        seen["events"] = {j: s.agent_events[a].copy() for j, sa in enumerate(slot_agent) if sa for s, a in [sa] if s.agent_active[a]}
 
     bd.add_step_listener(listener)
-    obs = bd.reset()
+    obs = bd.reset(seeds)
     records = [EpisodeRecord() for _ in range(n_copies)]
     for c, tb in enumerate(tables()):
         sel = np.flatnonzero(slot_copy == c)
@@ -225,8 +234,11 @@ def _run_batched(bd, specs: list, seeds: list[int], max_steps: int) -> list[Epis
     for step in range(1, max_steps + 1):
         if done_copies.all():
             break
-        poses = np.zeros((len(slots), 3))
-        for j, (sim, a) in enumerate(slot_agent):
+        poses = np.zeros((len(slots), 3))  # (remote copies: no world-frame actions in SUMO cases)
+        for j, sa in enumerate(slot_agent):
+            if sa is None:
+                continue
+            sim, a = sa
             r = sim.agent_row[a]
             if r >= 0:
                 poses[j] = (sim.table.x[r], sim.table.y[r], sim.table.heading[r])
@@ -240,7 +252,8 @@ def _run_batched(bd, specs: list, seeds: list[int], max_steps: int) -> list[Epis
                 seen["tables"][c],
                 obs_bytes([{k: v[j] for k, v in obs.items()} for j in sel]),
                 reward_bytes(result.reward[sel]),
-                events_bytes(np.array([seen["events"][j] for j in sel.tolist()], dtype=bool).reshape(len(sel), -1),
+                events_bytes(np.array([seen["events"][j] if j in seen["events"] else obs["events"][j] > 0
+                                       for j in sel.tolist()], dtype=bool).reshape(len(sel), -1),
                              result.terminated[sel], result.truncated[sel]),
             )
             if result.restarted[slot_copy == c].any():

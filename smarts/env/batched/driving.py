@@ -23,17 +23,20 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from smarts.core.errors import ActionError
+from smarts.core.errors import ActionError, ScenarioError, WorkerError
 from smarts.core.policies import PolicyResolver
 from smarts.core.simulation import EpisodeSim, check_seed, derived_seed
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
 from smarts.env.assembly import as_spec
-from smarts.env.batched.assembly import BatchedSetupError, check_batchable
 from smarts.env.driving import Driving
 from smarts.scenario import ScenarioSpec
 from smarts.sensors.interface import AgentInterface
 from smarts.sensors.observation import ObservationConfig
+
+class BatchedSetupError(ScenarioError):
+    """Scenarios (or options) that cannot be batched together; the message says what differs."""
+
 
 COPY_SEED_STRIDE = 100_003
 """Seed distance between copies after ``set_seed`` (as ``SmartsBatchedEnv``)."""
@@ -75,8 +78,12 @@ class BatchedDriving:
     ``DrivingParallelEnv``; ``sim_device``: where simulation stages with a torch version run
     ("cpu": the compiled numpy kernels; "cuda", "torch-cpu": see
     ``smarts.dynamics.pose_control_torch.resolve_device``); ``policy_resolver`` turns social
-    agents' locators into policies. Every copy of one step length is one simulation; what cannot
-    share a process (SUMO) is refused with a ``BatchedSetupError`` naming the scenario and field.
+    agents' locators into policies. Every copy of one step length in this process is one
+    simulation. ``workers`` > 0 spreads the copies over that many worker processes instead (each
+    one simulation of its share); a SUMO copy always runs in a worker process of its own, as one
+    simulation of one episode (libsumo holds one simulation per process), stepped while this
+    process steps the rest. ``copy_ids``: the copies' numbers in a larger batch (their seeds), for
+    workers.
     """
 
     render_mode = None  # nothing is drawn (vector-env wrappers ask)
@@ -91,22 +98,37 @@ class BatchedDriving:
         reward_factory: Callable[[], Any] | None = None,
         sim_device: str = "cpu",
         policy_resolver: PolicyResolver | None = None,
+        workers: int = 0,
+        copy_ids: Sequence[int] | None = None,
+        in_worker: bool = False,
     ):
         if not scenarios:
             raise ValueError("BatchedDriving needs at least one scenario")
         self.specs = [as_spec(s) for s in scenarios]
-        for spec in self.specs:
-            check_batchable(spec)
         self.limits = limits or ReachLimits()
+        self.copy_ids = list(range(len(self.specs))) if copy_ids is None else list(copy_ids)
         self.slots: list[tuple[int, str]] = [(i, a.id) for i, s in enumerate(self.specs) for a in s.agents if not a.is_social]
         if not self.slots:
             raise BatchedSetupError(f"{self.specs[0].source}: every agent has a policy; at least one must learn")
         slot_index = {key: j for j, key in enumerate(self.slots)}
+        sumo = [i for i, spec in enumerate(self.specs) if is_sumo(spec)]
+        rest = [i for i in range(len(self.specs)) if i not in sumo]
+        if in_worker and len(self.specs) == 1:
+            sumo, rest = [], [0]  # a worker's one SUMO copy runs here
+        if workers < 0:
+            raise ValueError(f"workers: expected 0 (every copy in this process) or more, got {workers}")
+        local = [] if workers else rest
+        shard_copies = [rest[w::workers] for w in range(workers) if rest[w::workers]] if workers else []
+        shard_copies += [[i] for i in sumo]  # libsumo holds one simulation per process
+        options = dict(observation=observation, limits=self.limits, lane_relative=lane_relative,
+                       reward_factory=reward_factory, sim_device=sim_device, policy_resolver=policy_resolver)  # fmt: skip
+        self.shards = [_Shard(self, copies, options, [slot_index[k] for k in self.slots if k[0] in copies])
+                       for copies in shard_copies]  # fmt: skip
         by_step: dict[float, list[int]] = {}
-        for i, spec in enumerate(self.specs):
-            by_step.setdefault(spec.step_length, []).append(i)
+        for i in local:
+            by_step.setdefault(self.specs[i].step_length, []).append(i)
         self.groups: list[_Group] = []
-        self.copy_place: list[tuple[int, int]] = [(0, 0)] * len(self.specs)  # copy -> (group, episode)
+        self.copy_place: list[tuple[int, int] | None] = [None] * len(self.specs)  # copy -> (group, episode)
         for copies in by_step.values():
             specs = [self.specs[i] for i in copies]
             driving = Driving(specs, observation=observation, limits=self.limits, lane_relative=lane_relative,
@@ -119,35 +141,38 @@ class BatchedDriving:
             self.groups.append(_Group(driving, copies, agent_slot))
             for b, i in enumerate(copies):
                 self.copy_place[i] = (g, b)
+        for shard in self.shards:
+            shard.started()
         self.action_space, self.observation_space = self._shared_spaces()
         n = len(self.slots)
         self._obs = {k: np.zeros((n, *s.shape), dtype=s.dtype) for k, s in self.observation_space.spaces.items()}
         self._first = {k: np.zeros_like(v) for k, v in self._obs.items()}
         self._next_seed: list[int | None] = [None] * len(self.specs)
         self._listeners: list[Callable[[], Any]] = []
-        self.seed_schedule: Callable[[int], int | None] | None = None
-        """When set, ``seed_schedule(copy)`` gives each new episode's seed instead (adapters with
-        their own seeding convention)."""
         self._arange: np.ndarray | None = None
 
     def _shared_spaces(self) -> tuple[gym.spaces.Box | None, gym.spaces.Dict]:
         """The action space every slot shares (None when scenarios mix action spaces: then
         ``action_low``/``action_high`` bound each slot's columns) and the one observation space
         (a batch of observations is one array per key)."""
-        g0 = self.groups[0]
-        a0 = int(g0.learners[0])
-        obs = g0.driving.observation_space(a0)
         first = self.specs[self.slots[0][0]]
         boxes: list[gym.spaces.Box] = [None] * len(self.slots)  # type: ignore[list-item]
+        spaces: list[gym.spaces.Dict] = [None] * len(self.slots)  # type: ignore[list-item]
         for g in self.groups:
             for a in g.learners.tolist():
                 boxes[g.agent_slot[a]] = g.driving.action_space(a)
-                if g.driving.observation_space(a) != obs:
-                    copy, aid = self.slots[g.agent_slot[a]]
-                    raise BatchedSetupError(
-                        f"{self.specs[copy].source}: {aid}'s observation space differs from {first.source}'s "
-                        f"{self.slots[0][1]}; give one interface (observation=...) for all"
-                    )
+                spaces[g.agent_slot[a]] = g.driving.observation_space(a)
+        for shard in self.shards:
+            for j, box, space in zip(shard.slots, shard.boxes, shard.spaces):
+                boxes[j], spaces[j] = box, space
+        obs = spaces[0]
+        for j, space in enumerate(spaces):
+            if space != obs:
+                copy, aid = self.slots[j]
+                raise BatchedSetupError(
+                    f"{self.specs[copy].source}: {aid}'s observation space differs from {first.source}'s "
+                    f"{self.slots[0][1]}; give one interface (observation=...) for all"
+                )
         width = max(b.shape[0] for b in boxes)
         self.action_low = np.zeros((len(boxes), width), dtype=np.float32)
         self.action_high = np.zeros((len(boxes), width), dtype=np.float32)
@@ -156,6 +181,8 @@ class BatchedDriving:
             self.action_high[j, : box.shape[0]] = box.high
         self.action_width = width
         """Columns of an action array (the widest slot's action; narrower ones read their first)."""
+        self.slot_action_spaces = boxes
+        """Each slot's own action space."""
         shared = boxes[0] if all(b == boxes[0] for b in boxes) else None
         return shared, obs
 
@@ -163,6 +190,8 @@ class BatchedDriving:
     def episode_sim(self, copy: int) -> EpisodeSim:
         """Copy ``copy``'s current episode as a single simulation (its agents by their scenario
         ids), for per-episode readers such as the benchmark's ``EpisodeRecorder``."""
+        if self.copy_place[copy] is None:
+            raise ValueError(f"copy {copy} ({self.specs[copy].source}) runs in a worker process; its episodes are read there")
         g, b = self.copy_place[copy]
         return self.groups[g].sim.episode_sim(b)
 
@@ -182,24 +211,35 @@ class BatchedDriving:
         copy replays its scenario's seed)."""
         if seed is not None:
             seed = check_seed(seed, "BatchedDriving.set_seed(seed)")
-        self._next_seed = [None if seed is None else derived_seed(seed, i * COPY_SEED_STRIDE) for i in range(len(self.specs))]
+        self._next_seed = [None if seed is None else derived_seed(seed, i * COPY_SEED_STRIDE) for i in self.copy_ids]
+        for shard in self.shards:
+            shard.call("seed", seed)
 
     def _take_seed(self, copy: int) -> int | None:
-        if self.seed_schedule is not None:
-            return self.seed_schedule(copy)
         seed = self._next_seed[copy]
         if seed is not None:
             self._next_seed[copy] = derived_seed(seed, 1)
         return seed
 
     # ------------------------------------------------------------------ episodes
-    def reset(self) -> dict[str, np.ndarray]:
-        """Start every copy; returns the first observation of every slot."""
+    def reset(self, seeds: Sequence[int] | None = None) -> dict[str, np.ndarray]:
+        """Start every copy (copy ``i`` with ``seeds[i]`` when given; its later episodes count up
+        from there); returns the first observation of every slot."""
+        if seeds is not None:
+            if len(seeds) != len(self.specs):
+                raise ValueError(f"seeds: expected {len(self.specs)} seeds (one per copy), got {len(seeds)}")
+            self._next_seed = [check_seed(s, f"seeds[{i}]") for i, s in enumerate(seeds)]
         for v in self._obs.values():
             v[:] = 0
+        for shard in self.shards:
+            shard.send("reset", None if seeds is None else [self._next_seed[i] for i in shard.copies])
         for group in self.groups:
             episodes = np.arange(group.sim.episodes, dtype=np.int64)
             self._restart(group, episodes, self._obs)
+        for shard in self.shards:
+            obs = shard.receive()
+            for key, value in obs.items():
+                self._obs[key][shard.slots] = value
         return self._obs
 
     def _restart(self, group: _Group, episodes: np.ndarray, out: dict[str, np.ndarray]) -> np.ndarray:
@@ -232,6 +272,11 @@ class BatchedDriving:
         acted = np.zeros(n, dtype=bool)
         restarted = np.zeros(n, dtype=bool)
         out = self._obs
+        if self.shards:  # the workers step while this process steps its own copies
+            for shard in self.shards:
+                shard.check(actions)  # a worker's refusal must come before anything moves
+            for shard in self.shards:
+                shard.send("step", actions[shard.slots])
         full = []
         for group in self.groups:
             arr = np.zeros((len(group.agent_slot), k), dtype=np.float64)
@@ -244,7 +289,7 @@ class BatchedDriving:
             slots = group.agent_slot[res.agents]
             for members, obs in res.batches:
                 mine = group.agent_slot[members]
-                if len(self.groups) == 1 and len(mine) == n and self._identity(mine):
+                if len(self.groups) == 1 and not self.shards and len(mine) == n and self._identity(mine):
                     out = obs  # every slot acted, in slot order: the built arrays are the result
                 else:
                     for key, value in obs.items():
@@ -261,6 +306,13 @@ class BatchedDriving:
             over = sim.episodes_over()
             if over.size:
                 restarted[self._restart(group, over, self._first)] = True
+        for shard in self.shards:
+            obs, r, term, trunc, did, again, first = shard.receive()
+            j = shard.slots
+            reward[j], terminated[j], truncated[j], acted[j], restarted[j] = r, term, trunc, did, again
+            for key in out:
+                out[key][j] = obs[key]
+                self._first[key][j[again]] = first[key][again]
         if out is self._obs and not acted.all():
             for v in out.values():
                 v[~acted] = 0
@@ -272,5 +324,110 @@ class BatchedDriving:
         return bool((slots == self._arange).all())
 
     def close(self) -> None:
+        for shard in self.shards:
+            shard.close()
+        self.shards = []
         for group in self.groups:
-            group.sim.close()
+            group.driving.close()
+
+
+def is_sumo(spec: ScenarioSpec) -> bool:
+    return spec.traffic is not None and spec.traffic.engine == "sumo"
+
+
+class _Shard:
+    """Some copies of a ``BatchedDriving`` stepped as a ``BatchedDriving`` of their own in a worker
+    process (``slots``: their slots in the parent's numbering). Messages are small tuples over a
+    pipe; the worker answers every command, with ``("error", message, exception)`` on failure."""
+
+    def __init__(self, parent: BatchedDriving, copies: list[int], options: dict, slots: list[int]):
+        import multiprocessing as mp
+
+        method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
+        ctx = mp.get_context(method)
+        if method == "forkserver":
+            ctx.set_forkserver_preload([__name__])
+        self.copies = copies
+        self.slots = np.array(slots, dtype=np.int64)
+        self.sources = [parent.specs[i].source for i in copies]
+        self.conn, child = ctx.Pipe()
+        specs = [parent.specs[i] for i in copies]
+        ids = [parent.copy_ids[i] for i in copies]
+        self.process = ctx.Process(target=_serve, args=(child, specs, ids, options), daemon=True)
+        self.process.start()
+        child.close()
+        self.boxes: list = []
+        self.spaces: list = []
+
+    def started(self) -> None:
+        """Wait for the worker's simulation: its slots' action and observation spaces."""
+        self.boxes, self.spaces = self.receive()
+
+    def send(self, command: str, payload) -> None:
+        self.conn.send((command, payload))
+
+    def receive(self):
+        try:
+            reply = self.conn.recv()
+        except EOFError:
+            code = self.process.exitcode
+            raise WorkerError(f"the worker process of {self.sources} ended (exit code {code})") from None
+        if reply[0] == "error":
+            _, message, exc = reply
+            if isinstance(exc, (ActionError, ScenarioError, ValueError)):
+                raise exc
+            raise WorkerError(f"in the worker process of {self.sources}:\n{message}")
+        return reply[1]
+
+    def call(self, command: str, payload):
+        self.send(command, payload)
+        return self.receive()
+
+    def check(self, actions: np.ndarray) -> None:
+        """The check that needs no simulation (finite numbers): a worker refusing its share after
+        others moved would break the step's atomicity."""
+        mine = actions[self.slots]
+        finite = np.isfinite(mine).all(axis=1)
+        if not finite.all():
+            bad = [f"slot {j}" for j in self.slots[~finite].tolist()]
+            raise ActionError(f"actions of {bad} ({self.sources}) are not finite numbers", bad)
+
+    def close(self) -> None:
+        try:
+            self.send("close", None)
+            self.conn.recv()
+        except (EOFError, OSError, BrokenPipeError):
+            pass
+        self.process.join(timeout=10)
+        if self.process.is_alive():
+            self.process.kill()
+
+
+def _serve(conn, specs: list, copy_ids: list[int], options: dict) -> None:
+    """A worker: one ``BatchedDriving`` of ``specs`` answering the parent's commands."""
+    import traceback
+
+    try:
+        env = BatchedDriving(specs, copy_ids=copy_ids, in_worker=True, **options)
+        conn.send(("ok", (env.slot_action_spaces, [env.observation_space] * env.num_slots)))
+    except BaseException as exc:  # noqa: BLE001 - reported to the parent
+        conn.send(("error", traceback.format_exc(), exc if isinstance(exc, Exception) else None))
+        return
+    while True:
+        command, payload = conn.recv()
+        try:
+            if command == "close":
+                env.close()
+                conn.send(("ok", None))
+                return
+            if command == "seed":
+                env.set_seed(payload)
+                conn.send(("ok", None))
+            elif command == "reset":
+                conn.send(("ok", {k: v.copy() for k, v in env.reset(payload).items()}))
+            elif command == "step":
+                res = env.step(payload)
+                conn.send(("ok", ({k: v.copy() for k, v in res.obs.items()}, res.reward, res.terminated, res.truncated,
+                                  res.acted, res.restarted, {k: v.copy() for k, v in res.first.items()})))  # fmt: skip
+        except Exception as exc:  # noqa: BLE001 - reported to the parent
+            conn.send(("error", traceback.format_exc(), exc))
