@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-import operator
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -90,84 +90,185 @@ class Received:
         )
 
 
-class V2VNetwork:
-    """Message queues and delivery rules for one simulation (see the module docstring)."""
+class V2VNetworks:
+    """The message queues and delivery rules of ``episodes`` episodes with one ``config``, in one
+    set of arrays (see the module docstring): every call serves all the episodes at once.
 
-    def __init__(self, config: CommsConfig, capacity: int, seed: int = 0):
+    Rows are each episode's own (0 to ``capacity`` - 1, the rows of its block of a simulation's
+    table, whose first row is ``base[e]``), so an episode's losses and connected vehicles are those
+    it has alone. Queues hold ``latency + 1`` slots of one step per episode."""
+
+    def __init__(self, config: CommsConfig, capacity: int, seeds: Sequence[int]):
         if not isinstance(config, CommsConfig):
             raise TypeError(f"V2VNetwork: config must be a CommsConfig, got {type(config).__name__}")
         if capacity <= 0:
             raise ValueError(f"V2VNetwork: capacity must be positive, got {capacity}")
         self.config = config
         self.capacity = int(capacity)
+        self.episodes = n = len(seeds)
         self.slots = config.latency + 1
         size = config.message_size
-        self._slot_step = np.full(self.slots, -1, dtype=np.int64)  # the send step a slot holds
-        self._count = np.zeros(self.slots, dtype=np.int64)
-        self._row = np.zeros((self.slots, capacity), dtype=np.int64)
-        self._kind = np.zeros((self.slots, capacity), dtype=np.int8)
-        self._channel = np.zeros((self.slots, capacity), dtype=np.int64)
-        self._pose = np.zeros((self.slots, capacity, 3))
-        self._payload = np.zeros((self.slots, capacity, size), dtype=np.float32)
+        self._slot_step = np.full((n, self.slots), -1, dtype=np.int64)  # the send step a slot holds
+        self._count = np.zeros((n, self.slots), dtype=np.int64)
+        self._row = np.zeros((n, self.slots, capacity), dtype=np.int64)
+        self._kind = np.zeros((n, self.slots, capacity), dtype=np.int8)
+        self._channel = np.zeros((n, self.slots, capacity), dtype=np.int64)
+        self._pose = np.zeros((n, self.slots, capacity, 3))
+        self._payload = np.zeros((n, self.slots, capacity, size), dtype=np.float32)
         self._traffic_fields = min(size, len(TRAFFIC_PAYLOAD_FIELDS))
         self._traffic_columns = np.array(
             [COLUMN[f] for f in TRAFFIC_PAYLOAD_FIELDS[: self._traffic_fields]], dtype=np.int64
         )
-        # Connected traffic: per row, valid for the vehicle id last seen in that row.
-        self._connected = np.zeros(capacity, dtype=bool)
-        self._ids_seen: list[str | None] = [None] * capacity
-        self.reset(seed)
+        # Connected traffic: per row, valid for the vehicle (table serial) last seen in that row.
+        self._connected = np.zeros((n, capacity), dtype=bool)
+        self._serial_seen = np.zeros((n, capacity), dtype=np.int64)
+        self.seeds = np.zeros(n, dtype=np.uint64)
+        self._seed_keys: list[bytes] = [b""] * n
+        self.reset(np.arange(n), list(seeds))
 
     # ------------------------------------------------------------------ episode
+    def reset(self, episodes: np.ndarray, seeds: Sequence[int | None] | None = None) -> None:
+        """Drop every queued message of ``episodes``; a new seed redraws loss and connected vehicles."""
+        episodes = np.asarray(episodes, dtype=np.int64)
+        for k, e in enumerate(episodes.tolist()):
+            if seeds is not None and seeds[k] is not None:
+                seed = int(seeds[k])
+                self.seeds[e] = np.uint64(seed & _MASK64)
+                self._seed_keys[e] = (seed & _MASK64).to_bytes(8, "little")
+        self._slot_step[episodes] = -1
+        self._count[episodes] = 0
+        self._connected[episodes] = False
+        self._serial_seen[episodes] = 0
+
+    # ------------------------------------------------------------------ sending
+    def send(self, steps: np.ndarray, data: np.ndarray, base: np.ndarray, episode: np.ndarray,
+             rows: np.ndarray, channels: np.ndarray, payloads: np.ndarray) -> int:
+        """Queue one message per sender: episode ``episode[i]`` (ascending), its row ``rows[i]``
+        (the episode's own; the pose is read at ``base[episode] + row`` of ``data``), a channel and
+        a payload (clipped to +-payload_bound). ``steps[e]``: each episode's step. Returns -1, or
+        the index of the first bad message (nothing is queued then)."""
+        if rows.shape[0] == 0:
+            return -1
+        size = self.config.message_size
+        if payloads.shape != (rows.shape[0], size):
+            raise ValueError(
+                f"V2V send: payloads have shape {payloads.shape}; expected ({rows.shape[0]}, {size}): one "
+                f"row of message_size floats per sender"
+            )
+        bad = _enqueue_agents(
+            steps, episode, rows, channels, payloads, data, base, self.capacity, self.config.channels,
+            self.config.payload_bound, self._slot_step, self._count, self._row, self._kind, self._channel,
+            self._pose, self._payload,
+        )  # fmt: skip
+        if bad == -2:
+            raise RuntimeError(self._overflow_message())
+        return bad
+
+    def broadcast_traffic(self, steps: np.ndarray, tables: Sequence[VehicleTable], whole: VehicleTable,
+                          base: np.ndarray, episodes: np.ndarray) -> None:
+        """Queue the state message of every connected traffic vehicle of ``episodes``
+        (``tables[e]``: episode ``e``'s own table, for vehicle ids; ``whole``: the table whose row
+        ``base[e] + r`` is its row ``r``)."""
+        if self.config.penetration <= 0.0 or episodes.shape[0] == 0:
+            return
+        self._refresh_connected(tables, episodes)
+        if _enqueue_traffic(
+            steps, episodes, self._connected, whole.alive, whole.role, _BROADCASTS, whole.data, base,
+            self._traffic_columns, self.config.traffic_channel, self._slot_step, self._count, self._row,
+            self._kind, self._channel, self._pose, self._payload,
+        ) < 0:  # fmt: skip
+            raise RuntimeError(self._overflow_message())
+
+    def is_connected(self, table: VehicleTable, episode: int = 0) -> np.ndarray:
+        """bool[capacity]: live rows of episode ``episode`` (``table``, its own) that broadcast."""
+        self._refresh_connected([table] * (episode + 1), np.array([episode]))
+        return self._connected[episode] & table.alive & _BROADCASTS[table.role]
+
+    def _refresh_connected(self, tables: Sequence[VehicleTable], episodes: np.ndarray) -> None:
+        """Draw connectedness for the rows whose vehicle changed (departures and arrivals)."""
+        p = self.config.penetration
+        for e in episodes.tolist():
+            table = tables[e]
+            if table.capacity != self.capacity:
+                raise ValueError(f"V2V network built for {self.capacity} rows, table has {table.capacity}")
+            changed = np.flatnonzero(table.serial != self._serial_seen[e])
+            if changed.size == 0:
+                continue
+            ids = table.ids
+            for row in changed.tolist():
+                vid = ids[row] if table.alive[row] else None
+                self._connected[e, row] = vid is not None and self._id_uniform(e, vid) < p
+                self._serial_seen[e, row] = table.serial[row]
+
+    def _id_uniform(self, episode: int, vehicle_id: str) -> float:
+        """A uniform number in [0, 1) fixed by the episode's seed and the vehicle id (not the row)."""
+        digest = hashlib.blake2b(
+            vehicle_id.encode(), digest_size=8, key=self._seed_keys[episode], person=b"v2v-penetrate"
+        ).digest()
+        return (int.from_bytes(digest, "little") >> 11) * _INV_2_53
+
+    def _overflow_message(self) -> str:
+        return f"V2V: more than {self.capacity} messages sent in one step (one per table row is the most a step holds)"
+
+    # ------------------------------------------------------------------ delivery
+    def deliver(self, steps: np.ndarray, data: np.ndarray, base: np.ndarray, episode: np.ndarray,
+                rows: np.ndarray, channels: np.ndarray) -> Received:
+        """The messages sent ``latency`` steps ago that reach each receiver (episode
+        ``episode[i]``, its row ``rows[i]``, tuned to ``channels[i]``) at its episode's step."""
+        config = self.config
+        n = rows.shape[0]
+        out = Received.empty(n, config.max_messages, config.message_size)
+        if n == 0:
+            return out
+        bad = _deliver(
+            steps, episode, rows, channels, data, base, self.capacity, self._slot_step, self._count, self._row,
+            self._kind, self._channel, self._pose, self._payload, config.range * config.range, config.loss,
+            self.seeds, config.latency, config.receive_limit, out.sender_row, out.sender_kind, out.pose, out.age,
+            out.payload, out.mask, out.count,
+        )  # fmt: skip
+        if bad >= 0:
+            raise ValueError(f"V2V deliver: receiver row {int(rows[bad])} is not a row of the vehicle table")
+        return out
+
+
+class V2VNetwork:
+    """The V2V network of one simulation (one episode): ``V2VNetworks`` with one episode, whose
+    rows are the table's own."""
+
+    def __init__(self, config: CommsConfig, capacity: int, seed: int = 0):
+        self.net = V2VNetworks(config, capacity, [seed])
+        self.config = config
+        self.capacity = self.net.capacity
+        self.seed = int(seed)
+        self._base = np.zeros(1, dtype=np.int64)
+        self._one = np.zeros(1, dtype=np.int64)
+
     def reset(self, seed: int | None = None) -> None:
         """Drop every queued message; a new seed redraws loss and connected vehicles."""
         if seed is not None:
             self.seed = int(seed)
-            self._seed64 = np.uint64(self.seed & _MASK64)
-            self._seed_key = (self.seed & _MASK64).to_bytes(8, "little")
-        self._slot_step[:] = -1
-        self._count[:] = 0
-        self._connected[:] = False
-        self._ids_seen = [None] * self.capacity
+        self.net.reset(np.zeros(1, dtype=np.int64), [seed])
 
-    # ------------------------------------------------------------------ sending
-    def send(
-        self,
-        step: int,
-        table: VehicleTable,
-        sender_rows: np.ndarray,
-        channels: np.ndarray | int,
-        payloads: np.ndarray,
-    ) -> None:
+    def send(self, step: int, table: VehicleTable, sender_rows, channels, payloads) -> None:
         """Queue one message per sender row: the sender's current pose, a channel and a payload
         ``[n, message_size]`` (clipped to +-payload_bound)."""
         rows = np.asarray(sender_rows, dtype=np.int64)
         n = rows.shape[0]
         if n == 0:
             return
+        if step < 0:
+            raise ValueError(f"V2V: step must be >= 0, got {step}")
         payloads = np.asarray(payloads)
         if payloads.dtype.kind != "f":
             payloads = payloads.astype(np.float64)
-        size = self.config.message_size
-        if payloads.shape != (n, size):
-            raise ValueError(
-                f"V2V send: payloads have shape {payloads.shape}; expected ({n}, {size}): one "
-                f"row of message_size floats per sender"
-            )
         channels = np.asarray(channels, dtype=np.int64)
         if channels.ndim == 0:
             channels = np.full(n, channels, dtype=np.int64)
         elif channels.shape != (n,):
             raise ValueError(f"V2V send: channels have shape {channels.shape}; expected ({n},)")
-        slot, start = self._open_slot(step, n)
-        bad = _enqueue_agents(
-            rows, channels, payloads, table.data, self.config.channels, self.config.payload_bound,
-            start, self._row[slot], self._kind[slot], self._channel[slot], self._pose[slot],
-            self._payload[slot],
-        )
+        bad = self.net.send(np.array([step]), table.data, self._base, np.zeros(n, np.int64), rows, channels, payloads)
         if bad >= 0:
             raise ValueError(self._bad_message(table, rows[bad], channels[bad], payloads[bad]))
-        self._count[slot] = start + n
 
     def _bad_message(self, table: VehicleTable, row: int, channel: int, payload) -> str:
         if not 0 <= row < table.capacity:
@@ -182,89 +283,26 @@ class V2VNetwork:
 
     def broadcast_traffic(self, step: int, table: VehicleTable) -> int:
         """Queue the state message of every connected traffic vehicle; returns how many."""
+        if step < 0:
+            raise ValueError(f"V2V: step must be >= 0, got {step}")
         if self.config.penetration <= 0.0:
             return 0
-        self._refresh_connected(table)
-        slot, start = self._open_slot(step, 0)
-        n = _enqueue_traffic(
-            self._connected, table.alive, table.role, _BROADCASTS, table.data,
-            self._traffic_columns, self.config.traffic_channel, start, self._row[slot],
-            self._kind[slot], self._channel[slot], self._pose[slot], self._payload[slot],
-        )
-        if n < 0:
-            raise RuntimeError(self._overflow_message(step))
-        self._count[slot] = start + n
-        return n
+        before = self._queued(step)
+        self.net.broadcast_traffic(np.array([step]), [table], table, self._base, self._one)
+        return self._queued(step) - before
+
+    def _queued(self, step: int) -> int:
+        slot = step % self.net.slots
+        return int(self.net._count[0, slot]) if self.net._slot_step[0, slot] == step else 0
 
     def is_connected(self, table: VehicleTable) -> np.ndarray:
         """bool[capacity]: live rows whose vehicle broadcasts traffic state messages."""
-        self._refresh_connected(table)
-        return self._connected & table.alive & _BROADCASTS[table.role]
+        return self.net.is_connected(table)
 
-    def _refresh_connected(self, table: VehicleTable) -> None:
-        """Draw connectedness for the rows whose vehicle id changed (departures and arrivals)."""
-        if table.capacity != self.capacity:
-            raise ValueError(
-                f"V2V network built for {self.capacity} rows, table has {table.capacity}"
-            )
-        ids = table.ids
-        if ids == self._ids_seen:  # the common case: one C-level list comparison
-            return
-        changed = np.fromiter(
-            map(operator.ne, ids, self._ids_seen), dtype=bool, count=self.capacity
-        )
-        p = self.config.penetration
-        for row in np.flatnonzero(changed).tolist():
-            vid = ids[row]
-            self._connected[row] = vid is not None and self._id_uniform(vid) < p
-            self._ids_seen[row] = vid
-
-    def _id_uniform(self, vehicle_id: str) -> float:
-        """A uniform number in [0, 1) fixed by the seed and the vehicle id (not the row)."""
-        digest = hashlib.blake2b(
-            vehicle_id.encode(), digest_size=8, key=self._seed_key, person=b"v2v-penetrate"
-        ).digest()
-        return (int.from_bytes(digest, "little") >> 11) * _INV_2_53
-
-    def _open_slot(self, step: int, n: int) -> tuple[int, int]:
-        """Slot of ``step`` (emptied if it held an older step) and its first free index, with
-        room checked for ``n`` more messages."""
-        if step < 0:
-            raise ValueError(f"V2V: step must be >= 0, got {step}")
-        slot = step % self.slots
-        if self._slot_step[slot] != step:
-            self._slot_step[slot] = step
-            self._count[slot] = 0
-        start = int(self._count[slot])
-        if start + n > self.capacity:
-            raise RuntimeError(self._overflow_message(step))
-        return slot, start
-
-    def _overflow_message(self, step: int) -> str:
-        return (
-            f"V2V: more than {self.capacity} messages sent in step {step} (one per table row is "
-            "the most a step holds)"
-        )
-
-    # ------------------------------------------------------------------ delivery
-    def deliver(
-        self,
-        step: int,
-        table: VehicleTable,
-        receiver_rows: np.ndarray,
-        receiver_channels: np.ndarray | int = 0,
-    ) -> Received:
+    def deliver(self, step: int, table: VehicleTable, receiver_rows, receiver_channels=0) -> Received:
         """The messages sent ``latency`` steps ago that reach each receiver this step."""
         rows = np.asarray(receiver_rows, dtype=np.int64)
         n = rows.shape[0]
-        config = self.config
-        out = Received.empty(n, config.max_messages, config.message_size)
-        if n == 0:
-            return out
-        sent = step - config.latency
-        slot = sent % self.slots
-        # Nothing was sent at step ``sent`` (or the slot moved on): only the rows are checked.
-        count = int(self._count[slot]) if sent >= 0 and self._slot_step[slot] == sent else 0
         channels = np.asarray(receiver_channels, dtype=np.int64)
         if channels.ndim == 0:
             channels = np.full(n, channels, dtype=np.int64)
@@ -272,16 +310,7 @@ class V2VNetwork:
             raise ValueError(
                 f"V2V deliver: receiver_channels has shape {channels.shape}; expected ({n},)"
             )
-        bad = _deliver(
-            count, self._row[slot], self._kind[slot], self._channel[slot],
-            self._pose[slot], self._payload[slot], table.data, rows, channels,
-            config.range * config.range, config.loss, self._seed64, sent, config.receive_limit,
-            config.latency, out.sender_row, out.sender_kind, out.pose, out.age, out.payload,
-            out.mask, out.count,
-        )
-        if bad >= 0:
-            raise ValueError(f"V2V deliver: receiver row {int(rows[bad])} is not a row of the vehicle table")
-        return out
+        return self.net.deliver(np.array([step]), table.data, self._base, np.zeros(n, np.int64), rows, channels)
 
 
 _MASK64 = (1 << 64) - 1
@@ -315,16 +344,29 @@ def _loss_uniform(seed, sent_step, message, receiver_row):  # pragma: no cover -
     return float(z >> _S11) * 1.1102230246251565e-16  # 2**-53
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _open_slot(steps, e, slot_step, count, slots):  # pragma: no cover - compiled
+    """Episode ``e``'s slot of its step (emptied if it held an older step)."""
+    step = steps[e]
+    slot = step % slots
+    if slot_step[e, slot] != step:
+        slot_step[e, slot] = step
+        count[e, slot] = 0
+    return slot
+
+
 @numba.njit(cache=True, nogil=True)
 def _enqueue_agents(
-    rows, channels, payloads, data, n_channels, bound, start, q_row, q_kind, q_channel, q_pose,
-    q_payload,
+    steps, episode, rows, channels, payloads, data, base, capacity, n_channels, bound, slot_step, count,
+    q_row, q_kind, q_channel, q_pose, q_payload,
 ):  # pragma: no cover - compiled
-    """Write agents' messages into a slot from ``start``; returns the index of the first bad
-    message (channel out of range or non-finite payload) without writing anything, else -1."""
+    """Write agents' messages into their episodes' slots; returns the index of the first bad
+    message (row or channel out of range, non-finite payload) without writing anything, -2 when a
+    slot overflows, else -1."""
     n, size = payloads.shape
+    slots = slot_step.shape[1]
     for i in range(n):
-        if rows[i] < 0 or rows[i] >= data.shape[1]:
+        if rows[i] < 0 or rows[i] >= capacity:
             return i
         if channels[i] < 0 or channels[i] >= n_channels:
             return i
@@ -332,71 +374,90 @@ def _enqueue_agents(
             if not math.isfinite(payloads[i, p]):
                 return i
     for i in range(n):
-        k, r = start + i, rows[i]
-        q_row[k] = r
-        q_kind[k] = _AGENT
-        q_channel[k] = channels[i]
-        q_pose[k, 0], q_pose[k, 1], q_pose[k, 2] = data[_X, r], data[_Y, r], data[_H, r]
+        e, r = episode[i], rows[i]
+        slot = _open_slot(steps, e, slot_step, count, slots)
+        k = count[e, slot]
+        if k >= capacity:
+            return -2
+        g = base[e] + r
+        q_row[e, slot, k] = r
+        q_kind[e, slot, k] = _AGENT
+        q_channel[e, slot, k] = channels[i]
+        q_pose[e, slot, k, 0], q_pose[e, slot, k, 1], q_pose[e, slot, k, 2] = data[_X, g], data[_Y, g], data[_H, g]
         for p in range(size):
-            q_payload[k, p] = min(max(payloads[i, p], -bound), bound)
+            q_payload[e, slot, k, p] = min(max(payloads[i, p], -bound), bound)
+        count[e, slot] = k + 1
     return -1
 
 
 @numba.njit(cache=True, nogil=True)
 def _enqueue_traffic(
-    connected, alive, role, broadcasts, data, columns, channel, start, q_row, q_kind, q_channel,
-    q_pose, q_payload,
+    steps, episodes, connected, alive, role, broadcasts, data, base, columns, channel, slot_step, count,
+    q_row, q_kind, q_channel, q_pose, q_payload,
 ):  # pragma: no cover - compiled
-    """Write the state message of every live connected traffic row from ``start``; returns how
-    many, or -1 when the slot overflows."""
-    capacity, size = q_payload.shape
+    """Write the state message of every live connected traffic row of ``episodes``; returns -1
+    when a slot overflows, else 0."""
+    capacity, size = q_payload.shape[2], q_payload.shape[3]
+    slots = slot_step.shape[1]
     n_fields = columns.shape[0]
-    k = start
-    for r in range(alive.shape[0]):
-        if not (connected[r] and alive[r] and broadcasts[role[r]]):
-            continue
-        if k >= capacity:
-            return -1
-        q_row[k] = r
-        q_kind[k] = _TRAFFIC
-        q_channel[k] = channel
-        q_pose[k, 0], q_pose[k, 1], q_pose[k, 2] = data[_X, r], data[_Y, r], data[_H, r]
-        for p in range(n_fields):
-            v = data[columns[p], r]
-            q_payload[k, p] = min(max(v, -TRAFFIC_PAYLOAD_BOUND), TRAFFIC_PAYLOAD_BOUND)
-        for p in range(n_fields, size):
-            q_payload[k, p] = 0.0
-        k += 1
-    return k - start
+    for q in range(episodes.shape[0]):
+        e = episodes[q]
+        slot = _open_slot(steps, e, slot_step, count, slots)
+        k = count[e, slot]
+        for r in range(capacity):
+            g = base[e] + r
+            if not (connected[e, r] and alive[g] and broadcasts[role[g]]):
+                continue
+            if k >= capacity:
+                return -1
+            q_row[e, slot, k] = r
+            q_kind[e, slot, k] = _TRAFFIC
+            q_channel[e, slot, k] = channel
+            q_pose[e, slot, k, 0], q_pose[e, slot, k, 1], q_pose[e, slot, k, 2] = data[_X, g], data[_Y, g], data[_H, g]
+            for p in range(n_fields):
+                v = data[columns[p], g]
+                q_payload[e, slot, k, p] = min(max(v, -TRAFFIC_PAYLOAD_BOUND), TRAFFIC_PAYLOAD_BOUND)
+            for p in range(n_fields, size):
+                q_payload[e, slot, k, p] = 0.0
+            k += 1
+        count[e, slot] = k
+    return 0
 
 
 @numba.njit(cache=True, nogil=True)
 def _deliver(
-    count, s_row, s_kind, s_channel, s_pose, s_payload, data, receivers, r_channels,
-    range2, loss, seed, sent_step, limit, age, o_row, o_kind, o_pose, o_age, o_payload, o_mask,
+    steps, episode, receivers, r_channels, data, base, capacity, slot_step, count, q_row, q_kind, q_channel,
+    q_pose, q_payload, range2, loss, seeds, latency, limit, o_row, o_kind, o_pose, o_age, o_payload, o_mask,
     o_count,
 ):  # pragma: no cover - compiled
     for i in range(receivers.shape[0]):
-        if receivers[i] < 0 or receivers[i] >= data.shape[1]:
+        if receivers[i] < 0 or receivers[i] >= capacity:
             return i
-    dist2 = np.empty(count)
-    index = np.empty(count, dtype=np.int64)
-    size = s_payload.shape[1]
+    slots = slot_step.shape[1]
+    dist2 = np.empty(capacity)
+    index = np.empty(capacity, dtype=np.int64)
+    size = q_payload.shape[3]
     for i in range(receivers.shape[0]):
-        r = receivers[i]
-        rx, ry, rh = data[_X, r], data[_Y, r], data[_H, r]
+        e, r = episode[i], receivers[i]
+        sent = steps[e] - latency
+        slot = sent % slots if sent >= 0 else 0
+        # Nothing was sent at step ``sent`` (or the slot moved on): nothing to deliver.
+        n_sent = count[e, slot] if sent >= 0 and slot_step[e, slot] == sent else 0
+        g = base[e] + r
+        rx, ry, rh = data[_X, g], data[_Y, g], data[_H, g]
+        seed = seeds[e]
         m = 0
-        for k in range(count):
-            if s_row[k] == r:
+        for k in range(n_sent):
+            if q_row[e, slot, k] == r:
                 continue
-            ch = s_channel[k]
+            ch = q_channel[e, slot, k]
             if ch >= 0 and ch != r_channels[i]:
                 continue
-            ddx, ddy = s_pose[k, 0] - rx, s_pose[k, 1] - ry
+            ddx, ddy = q_pose[e, slot, k, 0] - rx, q_pose[e, slot, k, 1] - ry
             d2 = ddx * ddx + ddy * ddy
             if d2 > range2:
                 continue
-            if loss > 0.0 and _loss_uniform(seed, sent_step, k, r) < loss:
+            if loss > 0.0 and _loss_uniform(seed, sent, k, r) < loss:
                 continue
             dist2[m] = d2
             index[m] = k
@@ -412,15 +473,15 @@ def _deliver(
             dist2[j], dist2[best] = dist2[best], dist2[j]
             index[j], index[best] = index[best], index[j]
             k = index[j]
-            ddx, ddy = s_pose[k, 0] - rx, s_pose[k, 1] - ry
-            o_row[i, j] = s_row[k]
-            o_kind[i, j] = s_kind[k]
+            ddx, ddy = q_pose[e, slot, k, 0] - rx, q_pose[e, slot, k, 1] - ry
+            o_row[i, j] = q_row[e, slot, k]
+            o_kind[i, j] = q_kind[e, slot, k]
             o_pose[i, j, 0] = c * ddx + s * ddy
             o_pose[i, j, 1] = -s * ddx + c * ddy
-            o_pose[i, j, 2] = wrap_scalar(s_pose[k, 2] - rh)
-            o_age[i, j] = age
+            o_pose[i, j, 2] = wrap_scalar(q_pose[e, slot, k, 2] - rh)
+            o_age[i, j] = latency
             for p in range(size):
-                o_payload[i, j, p] = s_payload[k, p]
+                o_payload[i, j, p] = q_payload[e, slot, k, p]
             o_mask[i, j] = True
         o_count[i] = take
     return -1

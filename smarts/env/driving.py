@@ -19,7 +19,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from smarts.comms import Received, split_message_action
+from smarts.comms import Received
 from smarts.core.errors import ActionError
 from smarts.core.events import Event
 from smarts.core.policies import PolicyResolver
@@ -95,11 +95,17 @@ class Driving:
         ]  # fmt: skip
         """Each agent's driving action space (its action without the message part)."""
         self.driving_width = np.array([box.shape[0] for box in self.driving_spaces], dtype=np.int64)
-        self.links: list[V2VLink | None] = [
-            V2VLink(spec.comms, sim.views[b], self.driving_width[sim.views[b].agents]) if spec.comms is not None else None
-            for b, spec in enumerate(self.specs)
-        ]  # fmt: skip
-        self.comms = any(link is not None for link in self.links)
+        by_config: dict = {}
+        for b, spec in enumerate(self.specs):
+            if spec.comms is not None:
+                by_config.setdefault(spec.comms, []).append(b)
+        self.v2v = [V2VLink(config, sim, episodes, self.driving_width) for config, episodes in by_config.items()]
+        """One link per distinct comms setting, each serving all its episodes at once."""
+        self.links: list[V2VLink | None] = [None] * len(self.specs)  # by episode
+        for link in self.v2v:
+            for b in link.episodes.tolist():
+                self.links[b] = link
+        self.comms = bool(self.v2v)
         self.hears = np.array(with_comms, dtype=bool)  # per agent: its episode has V2V
         self._social_obs: dict[str, np.ndarray] = {}  # last observation of every social agent, by agent
         self._listeners: list = []
@@ -145,8 +151,13 @@ class Driving:
         batches = self.sensors.build(sim, agents)
         count = None
         if self.comms:
-            received = _concat([self.links[b].reset(sim.views[b]) for b in episodes.tolist() if self.links[b] is not None])
-            count = self._merge(batches, agents, received)
+            parts = []
+            for link in self.v2v:
+                mine = episodes[np.isin(episodes, link.episodes)]
+                if mine.size:
+                    hearing = agents[np.isin(sim.agent_episode[agents], mine)]
+                    parts.append((hearing, link.reset(mine)))
+            count = self._merge(batches, agents, parts)
         if self.social.any:
             self._keep_social(batches)
         return agents, batches, count
@@ -168,7 +179,8 @@ class Driving:
         batches = self.sensors.build(sim, agents)
         count = None
         if self.comms:
-            count = self._merge(batches, agents, self._exchange(senders, payloads, channels))
+            parts = [link.exchange(*self._sent(link, senders, payloads, channels)) for link in self.v2v]
+            count = self._merge(batches, agents, parts)
         if social:
             self._keep_social(batches)
             keep = self.learner[agents]
@@ -200,70 +212,55 @@ class Driving:
         sim.check_actions(driving, senders)
 
     def _split(self, actions, senders: np.ndarray):
-        """The driving actions (dict or array, as given) and, with comms, the senders' payloads
-        and channels per episode; a malformed message raises ``ActionError`` before anything moves."""
+        """The driving actions (dict or array, as given) and, with comms, each link's senders'
+        payloads and channels; a malformed message raises ``ActionError`` before anything moves."""
         if not self.comms:
             return actions, None, None
         sim = self.sim
         payloads, channels = {}, {}
-        senders = senders[self.hears[senders]]
         if isinstance(actions, np.ndarray):
             if actions.ndim != 2 or actions.shape[0] != len(sim.agent_ids) or actions.dtype.kind not in REAL_KINDS:
                 raise ActionError(f"expected a real-number action array of {len(sim.agent_ids)} rows, got {actions.shape} {actions.dtype}", [])
-            driving = actions
-            for b, mine in _by_episode(sim, senders):
-                link = self.links[b]
-                k = int(self.driving_width[mine[0]])
-                width = len(link.message_components)
-                messages = np.asarray(actions[mine, k:k + width], dtype=np.float64)
-                ids = [sim.agent_ids[a] for a in mine.tolist()]
-                if messages.shape[1] != width:
-                    raise ActionError(f"expected actions of {k + width} columns ({k} driving, {width} message), got {actions.shape[1]}", ids)
-                local = mine - sim.episode_agent_start[b]
-                payloads[b], channels[b] = split_message_action(link.config, messages, ids, link.fixed_channels[local])
-            return driving, payloads, channels
-        driving = {a: v for a, v in actions.items() if not self.hears[sim.agent_index[a]]} if len(senders) < len(actions) else {}
-        for b, mine in _by_episode(sim, senders):
-            link = self.links[b]
+            for k, link in enumerate(self.v2v):
+                mine = senders[link.mine[senders]]
+                payloads[k], channels[k] = link.split_array(actions, mine)
+            return actions, payloads, channels
+        driving = dict(actions)
+        for k, link in enumerate(self.v2v):
+            mine = senders[link.mine[senders]]
             ids = [sim.agent_ids[a] for a in mine.tolist()]
             missing = [a for a in ids if a not in actions]
             if missing:
                 raise ActionError(f"no action given for live agents {missing}", missing)
-            local = mine - sim.episode_agent_start[b]
-            control, payloads[b], channels[b] = link.split(actions, ids, local)
+            control, payloads[k], channels[k] = link.split(actions, ids, mine)
             driving.update(control)
         return driving, payloads, channels
 
-    def _merge(self, batches: list[Batch], agents: np.ndarray, received: Received | None) -> np.ndarray:
-        """Add the received messages to the batches of agents whose episodes have V2V
-        (``received``: theirs, in the order of ``agents``); returns each agent's message count (0
-        without V2V)."""
-        hearing = agents[self.hears[agents]]
-        if received is None or hearing.size == 0:
-            return np.zeros(len(agents), dtype=np.int64)
+    def _sent(self, link: V2VLink, senders: np.ndarray, payloads: dict, channels: dict) -> tuple:
+        k = self.v2v.index(link)
+        return senders[link.mine[senders]], payloads[k], channels[k]
+
+    def _merge(self, batches: list[Batch], agents: np.ndarray, parts: list[tuple[np.ndarray, Received]]) -> np.ndarray:
+        """Add each link's received messages (``parts``: its receivers, ascending, and what they
+        got) to the batches of agents whose episodes have V2V; returns each agent's message count
+        (0 without V2V), in the order of ``agents``."""
+        count = np.zeros(len(agents), dtype=np.int64)
+        parts = [(r, got) for r, got in parts if len(r)]
+        if not parts:
+            return count
+        if len(parts) == 1:
+            hearing, received = parts[0]
+        else:
+            hearing = np.concatenate([r for r, _ in parts])
+            order = np.argsort(hearing, kind="stable")
+            hearing = hearing[order]
+            received = Received(*(np.concatenate([getattr(got, f) for _, got in parts])[order] for f in Received.__dataclass_fields__))
         if hearing.size == agents.size:
             V2VLink.merge(batches, agents, received)
             return received.count
         V2VLink.merge([(m, b) for m, b in batches if self.hears[m[0]]], hearing, received)
-        count = np.zeros(len(agents), dtype=received.count.dtype)
-        count[self.hears[agents]] = received.count
+        count[np.isin(agents, hearing)] = received.count
         return count
-
-    def _exchange(self, senders: np.ndarray, payloads: dict, channels: dict) -> Received:
-        """The exchange of every episode with V2V after the step, concatenated in
-        ``sim.active_agents`` order."""
-        sim = self.sim
-        parts = []
-        sent = dict(_by_episode(sim, senders))
-        for b in range(sim.episodes):
-            if self.links[b] is None:
-                continue
-            view = sim.views[b]
-            mine = sent.get(b)
-            local = mine - sim.episode_agent_start[b] if mine is not None else np.zeros(0, np.int64)
-            empty = np.zeros((0, self.links[b].config.message_size), dtype=np.float32)
-            parts.append(self.links[b].exchange(view, local, payloads.get(b, empty), channels.get(b, np.zeros(0, np.int64))))
-        return _concat(parts)
 
     def _with_social(self, driving, active: np.ndarray):
         """The learners' actions with the live social agents' own (from their last observations)."""
@@ -301,14 +298,6 @@ def _by_episode(sim, agents: np.ndarray) -> list[tuple[int, np.ndarray]]:
     episode = sim.agent_episode[agents]
     cuts = np.flatnonzero(np.diff(episode)) + 1
     return [(int(episode[g[0]]), agents[g]) for g in np.split(np.arange(len(agents)), cuts)]
-
-
-def _concat(parts: list[Received]) -> Received | None:
-    if not parts:
-        return None
-    if len(parts) == 1:
-        return parts[0]
-    return Received(*(np.concatenate([getattr(p, f) for p in parts]) for f in Received.__dataclass_fields__))
 
 
 def _learners(batches: list[Batch], learner: np.ndarray) -> list[Batch]:

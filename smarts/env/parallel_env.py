@@ -80,7 +80,7 @@ class DrivingParallelEnv(ParallelEnv):
         self.sensors = self.driving.sensors
         self.builder = self.sensors.builders[0]  # the only one when all agents share an interface
         self.social = self.driving.social
-        self.comms: V2VLink | None = self.driving.links[0]
+        self.comms: V2VLink | None = self.driving.links[0]  # the episode's V2V link (None without comms)
         self.render_mode = render_mode
         self.render_view = render_view
         self._ego_renderer = None

@@ -1,5 +1,5 @@
-"""The env's side of V2V messaging: the message part of the learners' actions, the network that
-carries it, and the received messages added to every step's observation batches.
+"""The env's side of V2V messaging: the message part of the learners' actions, the networks that
+carry it, and the received messages added to every step's observation batches.
 
 With comms on, an agent's action is its driving action followed by the message components
 (``smarts.comms.message_action_components``), and its observation gains ``messages`` and
@@ -8,6 +8,10 @@ before the simulation moves (so a bad message action changes nothing), then ``ex
 has moved: the learners' messages leave from where their senders are now, connected traffic
 broadcasts its state, and every live agent (social ones included) receives what reaches it.
 Social agents listen on their fixed channel and send nothing.
+
+One ``V2VLink`` serves every episode of a simulation that has the same comms settings, in one call
+per stage (``smarts.comms.network.V2VNetworks``); each episode keeps its own queues, rows, seed
+and step, so no message crosses episodes and an episode hears what it would hear alone.
 """
 
 from __future__ import annotations
@@ -21,35 +25,43 @@ import numpy as np
 from smarts.comms import (
     CommsConfig,
     Received,
-    V2VNetwork,
     message_action_components,
     message_action_space,
     received_observation_space,
     received_to_observation,
     split_message_action,
 )
-from smarts.core.simulation import Simulation
+from smarts.comms.network import V2VNetworks
 from smarts.core.errors import ActionError
+from smarts.core.simulation import Simulation
 from smarts.dynamics.action_spaces import REAL_KINDS
 from smarts.sensors.suite import Batch
 
 
 class V2VLink:
-    """Message actions in, received messages out, for one simulation's agents."""
+    """Message actions in, received messages out, for the agents of ``episodes`` (episodes of
+    ``sim`` with this ``config``; agent indices are the simulation's)."""
 
-    def __init__(self, config: CommsConfig, sim: Simulation, driving_components: Sequence[int]):
-        """``driving_components[i]``: how many leading components of agent i's action drive it."""
-        config.check_agents(sim.agent_ids)
+    def __init__(self, config: CommsConfig, sim: Simulation, episodes: Sequence[int], driving_components: np.ndarray):
+        """``driving_components[a]``: how many leading components of agent a's action drive it."""
         self.config = config
-        self.network = V2VNetwork(config, sim.table.capacity, sim.seed)
-        self.fixed_channels = config.fixed_channels(sim.agent_ids)
+        self.sim = sim
+        self.episodes = np.asarray(episodes, dtype=np.int64)
+        self.network = V2VNetworks(config, sim.episode_capacity, [sim.episode_seed[b] for b in self.episodes])
+        self._index = np.full(sim.episodes, -1, dtype=np.int64)  # simulation episode -> network episode
+        self._index[self.episodes] = np.arange(len(self.episodes))
+        self.base = self.episodes * sim.episode_capacity
+        self.fixed_channels = np.zeros(len(sim.agent_ids), dtype=np.int64)  # by agent
+        for b in self.episodes.tolist():
+            view = sim.views[b]
+            config.check_agents(view.agent_ids)
+            self.fixed_channels[view.agents] = config.fixed_channels(view.agent_ids)
         self.tuned = self.fixed_channels.copy()  # channel each agent listens on, by agent index
+        self.mine = np.isin(sim.agent_episode, self.episodes)  # by agent: its episode is served here
         self.driving_components = np.asarray(driving_components, dtype=np.int64)
         self.message_components = message_action_components(config)
         self._message_space = message_action_space(config)
         self._received_spaces = received_observation_space(config)
-        self._no_payloads = np.zeros((0, config.message_size), dtype=np.float32)
-        self._no_channels = np.zeros(0, dtype=np.int64)
 
     # ------------------------------------------------------------------ spaces
     def action_space(self, driving: gym.spaces.Box) -> gym.spaces.Box:
@@ -66,23 +78,32 @@ class V2VLink:
         return gym.spaces.Dict({**space.spaces, **self._received_spaces})
 
     # ------------------------------------------------------------------ episode
-    def reset(self, sim: Simulation) -> Received:
-        """Empty queues, channels back to the fixed ones; what the live agents hear at step 0
-        (connected traffic, when latency is 0). Call after ``sim.reset``."""
-        self.network.reset(sim.seed)
-        self.tuned[:] = self.fixed_channels
-        self.network.broadcast_traffic(0, sim.table)
-        return self.network.deliver(0, sim.table, sim.active_rows, self.tuned[sim.active_agents])
+    def _steps(self) -> np.ndarray:
+        return self.sim.episode_step[self.episodes]
 
-    def split(
-        self, actions: Mapping[str, Any], ids: Sequence[str], agents: np.ndarray
-    ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    def reset(self, episodes: np.ndarray) -> Received:
+        """Empty the queues of ``episodes`` (simulation episodes served here), channels back to the
+        fixed ones; what their live agents hear at step 0 (connected traffic, when latency is 0),
+        in agent order. Call after the simulation reset them."""
+        sim = self.sim
+        e = self._index[episodes]
+        self.network.reset(e, [sim.episode_seed[b] for b in episodes.tolist()])
+        agents = np.flatnonzero(np.isin(sim.agent_episode, episodes))
+        self.tuned[agents] = self.fixed_channels[agents]
+        self.network.broadcast_traffic(self._steps(), self._tables(), sim.table, self.base, e)
+        active = sim.active_agents[np.isin(sim.agent_episode[sim.active_agents], episodes)]
+        return self._deliver(active)
+
+    def _tables(self) -> list:
+        return [self.sim.views[b].table for b in self.episodes.tolist()]
+
+    def split(self, actions: Mapping[str, Any], ids: Sequence[str], agents: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
         """Driving actions by id, payloads float32[n, message_size] and channels int64[n] of the
         agents ``ids`` (agent indices ``agents``). A wrong length or a non-finite message number
         raises ``ActionError`` naming the agents, before anything moves."""
         n = len(ids)
         if n == 0:
-            return {}, self._no_payloads, self._no_channels
+            return {}, np.zeros((0, self.config.message_size), dtype=np.float32), np.zeros(0, dtype=np.int64)
         k = self.driving_components[agents]
         width = len(self.message_components)
         k0 = int(k[0])
@@ -103,22 +124,46 @@ class V2VLink:
                 control[a] = arr[:ka]
                 rows.append(arr[ka:])
             messages = np.stack(rows)
-        payloads, channels = split_message_action(
-            self.config, messages, ids, self.fixed_channels[agents]
-        )
+        payloads, channels = split_message_action(self.config, messages, ids, self.fixed_channels[agents])
         return control, payloads, channels
 
-    def exchange(
-        self, sim: Simulation, senders: np.ndarray, payloads: np.ndarray, channels: np.ndarray
-    ) -> Received:
+    def split_array(self, actions: np.ndarray, agents: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Payloads and channels of ``agents`` from their rows of an action array (each agent's
+        message after its own driving components)."""
+        width = len(self.message_components)
+        ids = [self.sim.agent_ids[a] for a in agents.tolist()]
+        cols = self.driving_components[agents][:, None] + np.arange(width)
+        if agents.size and cols.max() >= actions.shape[1]:
+            raise ActionError(
+                f"expected action arrays of at least {int(cols.max()) + 1} columns (driving components, then "
+                f"{width} message components), got {actions.shape[1]}",
+                ids,
+            )
+        messages = np.asarray(actions[agents[:, None], cols], dtype=np.float64)
+        return split_message_action(self.config, messages, ids, self.fixed_channels[agents])
+
+    def exchange(self, senders: np.ndarray, payloads: np.ndarray, channels: np.ndarray) -> tuple[np.ndarray, Received]:
         """Send the senders' messages from their poses now, broadcast connected traffic and
-        deliver to every live agent (in ``sim.active_agents`` order). Call after ``sim.step`` and
-        before finished agents are removed."""
-        step, table, net = sim.step_count, sim.table, self.network
-        net.send(step, table, sim.agent_row[senders], channels, payloads)
+        deliver to every live agent served here; returns those agents (ascending) and what each
+        received. Call after the simulation step and before finished agents are removed."""
+        sim, net = self.sim, self.network
+        steps = self._steps()
+        episode = self._index[sim.agent_episode[senders]]
+        rows = sim.agent_row[senders] - self.base[episode]
+        bad = net.send(steps, sim.table.data, self.base, episode, rows, channels, payloads)
+        if bad >= 0:  # split_message_action has checked every value: only a broken row gets here
+            raise ValueError(f"V2V: sender {sim.agent_ids[senders[bad]]} has no vehicle row")
         self.tuned[senders] = channels
-        net.broadcast_traffic(step, table)
-        return net.deliver(step, table, sim.active_rows, self.tuned[sim.active_agents])
+        net.broadcast_traffic(steps, self._tables(), sim.table, self.base, np.arange(len(self.episodes)))
+        active = sim.active_agents
+        receivers = active[self.mine[active]]
+        return receivers, self._deliver(receivers)
+
+    def _deliver(self, receivers: np.ndarray) -> Received:
+        sim = self.sim
+        episode = self._index[sim.agent_episode[receivers]]
+        rows = sim.agent_row[receivers] - self.base[episode]
+        return self.network.deliver(self._steps(), sim.table.data, self.base, episode, rows, self.tuned[receivers])
 
     @staticmethod
     def merge(batches: list[Batch], agents: np.ndarray, received: Received) -> None:
