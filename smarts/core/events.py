@@ -12,6 +12,7 @@ from enum import IntEnum
 import numba
 import numpy as np
 
+from smarts.core.records import view
 from smarts.core.vehicle_table import COLUMN
 from smarts.maps.drivable import on_road_at
 
@@ -136,19 +137,15 @@ def not_moving_step(anchor, anchor_time, row, x, y, time, seconds, distance):  #
 
 
 @numba.njit(cache=True, nogil=True)
-def agent_events(
-    data, lane, alive, agents, rows,
-    flat_raster, raster_width, raster_origin, inv_res, cell_max,
-    lane_internal, lane_road, on_route_road,
-    goal_kind, goal_xy, goal_radius, goal_road, goal_lane, goal_s, goal_gate, prev_xy, prev_row,
-    anchor, anchor_time, not_moving_seconds, not_moving_distance, time, at_step_limit,
-    terminate_on, events, done,
-):  # pragma: no cover - compiled
-    """Every event of ``Event`` for the agents (rows of ``events``/``done`` indexed by agent).
+def agent_events(tables, alive, agents, rows, b, time):  # pragma: no cover - compiled
+    """Every event of ``Event`` for the agents ``agents`` (rows ``rows``) of episode ``b`` at its
+    clock ``time``, from and into ``tables`` (a frozen ``smarts.core.sim_records.SimTables``): its
+    ``agents.events`` and ``agents.done`` rows of these agents are written here.
 
     Collisions are tested against all ``alive`` rows (circle pre-test, then separating axes).
-    Goal kinds: 1 = within ``goal_radius`` of ``goal_xy``; 2 = on ``goal_road`` (and ``goal_lane``
-    unless it is -1) at or past ``goal_s``.
+    Off road is read from the drivable raster of the episode's map. Goal kinds: 1 = within
+    ``goal_radius`` of ``goal_xy``; 2 = on ``goal_road`` (and ``goal_lane`` unless it is -1) at
+    or past ``goal_s``.
 
     Goals are tested on the whole movement since the last call (``prev_xy`` of the agent's
     ``prev_row``; both are updated here), not only at the new position: a position goal is
@@ -157,6 +154,17 @@ def agent_events(
     and its goal never seen. Off route is not flagged on the step the goal is reached (the route
     ends at the goal; what lies beyond it is off the route).
     """
+    t = view(tables)
+    data, lane = t.table.data, t.table.lane
+    ms, ag, ep, sf = t.missions, t.agents, t.episodes, t.surfaces
+    m = ep.map[b]
+    flat_raster = sf.flat[sf.base[m]:sf.base[m + 1]]
+    raster_width, raster_origin, inv_res, cell_max = sf.width[m], sf.origin[m], sf.inv_res[m], sf.cell_max[m]
+    lane_internal, lane_road = t.lanes.internal, t.lanes.road
+    terminate_on = ep.terminate_on[b]
+    at_step_limit = ep.step[b] >= ep.limit[b]
+    not_moving_seconds, not_moving_distance = ep.not_moving_seconds[b], ep.not_moving_distance[b]
+    prev_xy, prev_row, events, done = ag.prev_xy, ag.prev_row, ag.events, ag.done
     own = np.empty((4, 2))
     other = np.empty((4, 2))
     for i in range(agents.shape[0]):
@@ -186,24 +194,24 @@ def agent_events(
         road = lane_road[ln] if ln >= 0 else -1
         if ln >= 0 and not lane_internal[ln]:  # junction lanes cross each other: no direction
             ev[WRONG_WAY] = math.cos(h - data[_LANE_HEADING, r]) < 0.0
-            ev[OFF_ROUTE] = not on_route_road[a, road]
+            ev[OFF_ROUTE] = not ms.on_route_road[a, road]
         px, py = (prev_xy[a, 0], prev_xy[a, 1]) if prev_row[a] == r else (x, y)
         prev_xy[a, 0], prev_xy[a, 1], prev_row[a] = x, y, r
-        if goal_kind[a] == 1:
+        if ms.goal_kind[a] == 1:
             ev[REACHED_GOAL] = segment_point_distance2(
-                px, py, x, y, goal_xy[a, 0], goal_xy[a, 1]
-            ) <= goal_radius[a] * goal_radius[a]
-        elif goal_kind[a] == 2:
+                px, py, x, y, ms.goal_xy[a, 0], ms.goal_xy[a, 1]
+            ) <= ms.goal_radius[a] * ms.goal_radius[a]
+        elif ms.goal_kind[a] == 2:
             ev[REACHED_GOAL] = (
                 ln >= 0
-                and road == goal_road[a]
-                and (goal_lane[a] < 0 or ln == goal_lane[a])
-                and data[_S, r] >= goal_s[a]
-            ) or crosses_gate(px, py, x, y, goal_gate[a])
+                and road == ms.goal_road[a]
+                and (ms.goal_lane[a] < 0 or ln == ms.goal_lane[a])
+                and data[_S, r] >= ms.goal_s[a]
+            ) or crosses_gate(px, py, x, y, ms.goal_gate[a])
         if ev[REACHED_GOAL]:
             ev[OFF_ROUTE] = False
         ev[NOT_MOVING] = not_moving_step(
-            anchor, anchor_time, r, x, y, time, not_moving_seconds, not_moving_distance
+            t.table.anchor, t.table.anchor_time, r, x, y, time, not_moving_seconds, not_moving_distance
         )
         ev[MAX_STEPS] = at_step_limit
         finished = at_step_limit

@@ -41,6 +41,8 @@ import numpy as np
 from smarts.core.events import NUM_EVENTS, Event, NotMovingTracker, agent_events
 from smarts.core.missions import MissionArrays, ResolvedMission, stack_missions
 from smarts.core.provider import Provider, ProviderBase
+from smarts.core.records import view
+from smarts.core.sim_records import sim_tables
 from smarts.core.vehicle_table import COLUMN, Role, VehicleTable
 from smarts.maps import RoadMap, project
 from smarts.maps.stack import MapStack, stack_maps
@@ -706,53 +708,32 @@ class Simulation:
 
     def _route_progress_of(self, agents: np.ndarray, first: bool) -> None:
         self.route_progress_delta[agents] = 0.0
-        ma = self.mission_arrays
-        _route_progress(
-            self.table.data, agents, self.agent_row[agents], ma.flat_paths, ma.stride, ma.path_len,
-            ma.path_s, ma.route_length, self.route_index, self.route_progress,
-            self.route_progress_delta, first,
-        )  # fmt: skip
+        _route_progress(sim_tables(self), agents, self.agent_row[agents], first)
 
     def _events_of(self, episodes: np.ndarray) -> None:
-        ma, st = self.mission_arrays, self.map_stack
         self.agent_events[~self.agent_active] = False
         agents = self._active
+        tables = sim_tables(self)
         if self.episodes == 1:  # the kernel itself: no episode ranges to cut
             if agents.size == 0:
                 return
-            agent_events(
-                self.table.data, self.table.lane, self.alive, agents, self.agent_row[agents],
-                st.raster_flat, st.raster_width[0], st.raster_origin[0], st.raster_inv_res[0], st.raster_cell_max[0],
-                self.road_map.lane_internal, self.road_map.lane_road, ma.on_route_road,
-                ma.goal_kind, ma.goal_xy, ma.goal_radius, ma.goal_road, ma.goal_lane, ma.goal_s,
-                ma.goal_gate, self.agent_prev_xy, self.agent_prev_row,
-                self.not_moving.anchor, self.not_moving.anchor_time,
-                self.event_configs[0].not_moving_seconds, self.event_configs[0].not_moving_distance,
-                float(self.episode_time[0]), bool(self.episode_step[0] >= self.episode_limit[0]),
-                self.terminate_on[0], self.agent_events, self.agent_done,
-            )  # fmt: skip
+            agent_events(tables, self.alive, agents, self.agent_row[agents], 0, float(self.episode_time[0]))
             return
         alive_lo, alive_hi, agent_lo, agent_hi = self.episode_ranges(self.alive, agents)
         _episode_events(
-            episodes, alive_lo, alive_hi, agent_lo, agent_hi,
-            self.table.data, self.table.lane, self.alive, agents, self.agent_row[agents], self.episode_map,
-            st.raster_flat, st.raster_base, st.raster_width, st.raster_origin, st.raster_inv_res, st.raster_cell_max,
-            self.road_map.lane_internal, self.road_map.lane_road, ma.on_route_road,
-            ma.goal_kind, ma.goal_xy, ma.goal_radius, ma.goal_road, ma.goal_lane, ma.goal_s,
-            ma.goal_gate, self.agent_prev_xy, self.agent_prev_row,
-            self.not_moving.anchor, self.not_moving.anchor_time,
-            self.not_moving_seconds, self.not_moving_distance, self.episode_time,
-            self.episode_step >= self.episode_limit, self.terminate_on,
-            self.agent_events, self.agent_done,
+            tables, self.alive, agents, self.agent_row[agents], episodes, alive_lo, alive_hi, agent_lo, agent_hi,
+            self.episode_time,
         )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
-def _route_progress(
-    data, agents, rows, flat_paths, stride, path_len, path_s, route_length,
-    route_index, route_progress, delta, first,
-):  # pragma: no cover - compiled
-    """Nearest route point in a window around the last one, and the arc length reached."""
+def _route_progress(tables, agents, rows, first):  # pragma: no cover - compiled
+    """Nearest route point in a window around the last one, and the arc length reached (into the
+    ``agents`` part of ``tables``, a frozen ``SimTables``)."""
+    t = view(tables)
+    data, ms, ag = t.table.data, t.missions, t.agents
+    flat_paths, stride, path_len, path_s, route_length = ms.flat_paths, ms.stride, ms.path_len, ms.path_s, ms.route_length
+    route_index, route_progress, delta = ag.route_index, ag.route_progress, ag.progress_delta
     for i in range(agents.shape[0]):
         a, r = agents[i], rows[i]
         x, y = data[_X, r], data[_Y, r]
@@ -779,30 +760,17 @@ def _route_progress(
 
 @numba.njit(cache=True, nogil=True)
 def _episode_events(
-    episodes, alive_lo, alive_hi, agent_lo, agent_hi,
-    data, lane, alive, agents, rows, episode_map, raster_flat, raster_base, raster_width, raster_origin,
-    raster_inv_res, raster_cell_max,
-    lane_internal, lane_road, on_route_road, goal_kind, goal_xy, goal_radius, goal_road, goal_lane,
-    goal_s, goal_gate, prev_xy, prev_row, anchor, anchor_time, not_moving_seconds,
-    not_moving_distance, episode_time, at_step_limit, terminate_on, events, done,
+    tables, alive, agents, rows, episodes, alive_lo, alive_hi, agent_lo, agent_hi, episode_time,
 ):  # pragma: no cover - compiled
-    """``agent_events`` of each episode in ``episodes`` with only that episode's rows as others,
-    on its map's drivable raster (rasters concatenated, map ``m``'s from ``raster_base[m]``) and
-    with its own event rules."""
+    """``agent_events`` of each episode in ``episodes`` with only that episode's rows as others
+    (``alive[alive_lo[b]:alive_hi[b]]``), its agents ``agents[agent_lo[b]:agent_hi[b]]`` and its
+    clock; ``agent_events`` reads the episode's map, raster and event rules from ``tables``."""
     for k in range(episodes.shape[0]):
         b = episodes[k]
         lo, hi = agent_lo[b], agent_hi[b]
         if lo == hi:
             continue
-        m = episode_map[b]
-        agent_events(
-            data, lane, alive[alive_lo[b]:alive_hi[b]], agents[lo:hi], rows[lo:hi],
-            raster_flat[raster_base[m]:raster_base[m + 1]], raster_width[m], raster_origin[m],
-            raster_inv_res[m], raster_cell_max[m],
-            lane_internal, lane_road, on_route_road, goal_kind, goal_xy, goal_radius, goal_road,
-            goal_lane, goal_s, goal_gate, prev_xy, prev_row, anchor, anchor_time, not_moving_seconds[b],
-            not_moving_distance[b], episode_time[b], at_step_limit[b], terminate_on[b], events, done,
-        )  # fmt: skip
+        agent_events(tables, alive[alive_lo[b]:alive_hi[b]], agents[lo:hi], rows[lo:hi], b, episode_time[b])
 
 
 _X, _Y = COLUMN["x"], COLUMN["y"]

@@ -1,0 +1,190 @@
+"""A simulation's arrays as one kernel record (``smarts.core.records``): what its per-step kernels
+(events, route progress, observations, the lead and the vehicle ahead, lane-relative control)
+read, named.
+
+Everything here is built once per simulation (``sim_tables``) and holds the simulation's own
+arrays, not copies: a kernel that writes ``agents.events`` writes ``Simulation.agent_events``.
+What changes from step to step (the live rows, the clock, the agents asked about) is passed to each
+kernel beside it. The simulation allocates these arrays once, in its constructor; should it ever
+replace one, ``tests/core/test_sim_records.py`` fails (a record would go on holding the old one).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from smarts.core.records import declare, freeze_fields
+
+
+class Lanes(NamedTuple):
+    """A road map's lanes (``RoadMap``'s arrays: for a stack of maps, the combined map's)."""
+
+    length: np.ndarray  # float64[L] arc length of the centre line
+    width: np.ndarray  # float64[L]
+    speed_limit: np.ndarray  # float64[L] m/s
+    road: np.ndarray  # int32[L] road of each lane
+    index: np.ndarray  # int16[L] position on its road, 0 = rightmost
+    internal: np.ndarray  # bool[L] inside a junction
+    left: np.ndarray  # int32[L] neighbour to the left, -1 none
+    right: np.ndarray  # int32[L] neighbour to the right, -1 none
+    succ_offsets: np.ndarray  # int64[L + 1] CSR of each lane's successors
+    succ: np.ndarray  # int32[E]
+    point_offsets: np.ndarray  # int64[L + 1] CSR of each lane's points, resampled every metre
+    points: np.ndarray  # float64[Q, 2]
+    point_s: np.ndarray  # float64[Q] arc length of each point within its lane
+    point_heading: np.ndarray  # float64[Q]
+
+
+class Surfaces(NamedTuple):
+    """Every map's drivable raster, concatenated as ``MapStack`` stacks them: map ``m``'s cells
+    are ``flat[base[m]:base[m + 1]]``, ``width[m]`` cells a row, with its origin, inverse
+    resolution and largest cell index (x, y)."""
+
+    flat: np.ndarray  # bool[cells of every map]
+    base: np.ndarray  # int64[M + 1]
+    width: np.ndarray  # int64[M]
+    origin: np.ndarray  # float64[M, 2]
+    inv_res: np.ndarray  # float64[M]
+    cell_max: np.ndarray  # float64[M, 2]
+
+
+class Missions(NamedTuple):
+    """Every agent's mission (``MissionArrays``): route paths, goal, route roads, signals."""
+
+    flat_paths: np.ndarray  # float64[A * stride, 3, 3] point i of agent a at row a * stride + i
+    flat_valid: np.ndarray  # bool[A * stride, 3]
+    stride: int  # route points per agent (padded)
+    path_len: np.ndarray  # int64[A] valid route points
+    path_s: np.ndarray  # float64[A, stride] arc length of each route point
+    route_length: np.ndarray  # float64[A]
+    on_route_road: np.ndarray  # bool[A, R]
+    goal_kind: np.ndarray  # int8[A] 0 none, 1 position, 2 road (see ``agent_events``)
+    goal_xy: np.ndarray  # float64[A, 2]
+    goal_radius: np.ndarray  # float64[A]
+    goal_road: np.ndarray  # int32[A]
+    goal_lane: np.ndarray  # int32[A], -1: any lane of the road
+    goal_s: np.ndarray  # float64[A]
+    goal_gate: np.ndarray  # float64[A, 6] goal line (see ``crosses_gate``)
+    signal_via: np.ndarray  # int32[A * stride] next signal-controlled lane from each route point
+    signal_s: np.ndarray  # float64[A * stride] route arc length of its stop line
+
+
+class Agents(NamedTuple):
+    """What the simulation keeps per agent between steps."""
+
+    episode: np.ndarray  # int64[A] each agent's episode
+    events: np.ndarray  # bool[A, NUM_EVENTS] this step's events
+    done: np.ndarray  # bool[A]
+    prev_xy: np.ndarray  # float64[A, 2] position at the last event test
+    prev_row: np.ndarray  # int64[A] the row it was tested on (-1: none yet)
+    route_index: np.ndarray  # int64[A] nearest route point
+    route_progress: np.ndarray  # float64[A] arc length reached along the route
+    progress_delta: np.ndarray  # float64[A] progress of the last step
+
+
+class Episodes(NamedTuple):
+    """Per episode: its map, step count and limit, event rules and signal colours."""
+
+    map: np.ndarray  # int64[B] map of each episode in the stack
+    step: np.ndarray  # int64[B] steps taken
+    limit: np.ndarray  # int64[B] steps allowed
+    terminate_on: np.ndarray  # bool[B, NUM_EVENTS] events that end an agent's episode
+    not_moving_seconds: np.ndarray  # float64[B]
+    not_moving_distance: np.ndarray  # float64[B]
+    via_colour: np.ndarray  # int8[B, L] signal colour of each junction lane
+
+
+class Table(NamedTuple):
+    """The vehicle table's columns the kernels read, and the rows' not-moving anchors."""
+
+    data: np.ndarray  # float64[columns, rows] (``VehicleTable.data``)
+    lane: np.ndarray  # int32[rows] projected lane, -1 off every lane
+    role: np.ndarray  # int8[rows]
+    vtype: np.ndarray  # int8[rows]
+    anchor: np.ndarray  # float64[rows, 2] where the row last moved more than the distance
+    anchor_time: np.ndarray  # float64[rows] when
+
+
+class SimTables(NamedTuple):
+    """Everything of a simulation that its per-step kernels read and that stays in place."""
+
+    table: Table
+    lanes: Lanes
+    surfaces: Surfaces
+    missions: Missions
+    agents: Agents
+    episodes: Episodes
+    dt: float
+
+
+for _record in (Lanes, Surfaces, Missions, Agents, Episodes, Table, SimTables):
+    declare(_record)
+
+
+@numba.njit(cache=True, nogil=True)
+def freeze(fields):  # pragma: no cover - compiled
+    """The frozen record of one of this module's records (see ``smarts.core.records``)."""
+    return freeze_fields(fields)
+
+
+def lanes_of(road_map) -> Lanes:
+    """A road map's ``Lanes`` (its own arrays)."""
+    m = road_map
+    return Lanes(
+        length=m.lane_length, width=m.lane_width, speed_limit=m.lane_speed_limit, road=m.lane_road,
+        index=m.lane_index, internal=m.lane_internal, left=m.lane_left, right=m.lane_right,
+        succ_offsets=m.succ_offsets, succ=m.succ, point_offsets=m.lanepoint_offsets, points=m.lanepoints,
+        point_s=m.lanepoint_s, point_heading=m.lanepoint_heading,
+    )  # fmt: skip
+
+
+def lanes_record(road_map):
+    """A road map's frozen ``Lanes``, built at the first call and kept on the map (maps do not
+    change once compiled)."""
+    frozen = road_map.__dict__.get("_lanes_record")
+    if frozen is None:
+        frozen = road_map.__dict__["_lanes_record"] = freeze(lanes_of(road_map))
+    return frozen
+
+
+def sim_tables(sim):
+    """``sim``'s frozen ``SimTables``, built at the first call and kept on the simulation (with
+    the tuple it was made from, ``sim._sim_tables_fields``)."""
+    frozen = sim.__dict__.get("_sim_tables")
+    if frozen is None:
+        fields = sim.__dict__["_sim_tables_fields"] = tables_of(sim)
+        frozen = sim.__dict__["_sim_tables"] = freeze(fields)
+    return frozen
+
+
+def tables_of(sim) -> SimTables:
+    """``sim``'s ``SimTables`` (its own arrays)."""
+    ma, st, t = sim.mission_arrays, sim.map_stack, sim.table
+    return SimTables(
+        table=Table(data=t.data, lane=t.lane, role=t.role, vtype=t.vtype, anchor=sim.not_moving.anchor,
+                    anchor_time=sim.not_moving.anchor_time),
+        lanes=lanes_of(sim.road_map),
+        surfaces=Surfaces(flat=st.raster_flat, base=st.raster_base, width=st.raster_width,
+                          origin=st.raster_origin, inv_res=st.raster_inv_res, cell_max=st.raster_cell_max),
+        missions=Missions(
+            flat_paths=ma.flat_paths, flat_valid=ma.flat_valid, stride=int(ma.stride), path_len=ma.path_len,
+            path_s=ma.path_s, route_length=ma.route_length, on_route_road=ma.on_route_road,
+            goal_kind=ma.goal_kind, goal_xy=ma.goal_xy, goal_radius=ma.goal_radius, goal_road=ma.goal_road,
+            goal_lane=ma.goal_lane, goal_s=ma.goal_s, goal_gate=ma.goal_gate,
+            signal_via=ma.signal_via.reshape(-1), signal_s=ma.signal_s.reshape(-1),
+        ),
+        agents=Agents(
+            episode=sim.agent_episode, events=sim.agent_events, done=sim.agent_done, prev_xy=sim.agent_prev_xy,
+            prev_row=sim.agent_prev_row, route_index=sim.route_index, route_progress=sim.route_progress,
+            progress_delta=sim.route_progress_delta,
+        ),
+        episodes=Episodes(
+            map=sim.episode_map, step=sim.episode_step, limit=sim.episode_limit, terminate_on=sim.terminate_on,
+            not_moving_seconds=sim.not_moving_seconds, not_moving_distance=sim.not_moving_distance,
+            via_colour=sim.via_colour,
+        ),
+        dt=float(sim.dt),
+    )  # fmt: skip
