@@ -22,7 +22,7 @@ from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import COLUMN, Role
 from smarts.sensors.interface import LidarInterface
 from smarts.sensors.map_fields import map_fields
-from smarts.sensors.rays import box_interval, ray_box
+from smarts.sensors.rays import box_interval, parallel_worth_it, ray_box
 
 HIT_NONE, HIT_VEHICLE, HIT_PEDESTRIAN, HIT_ROAD_EDGE = 0, 1, 2, 3
 _NOISE_STREAM = 0x1D4
@@ -59,7 +59,8 @@ class LidarSensor:
             idx = np.flatnonzero(maps == m)
             f = map_fields(sim.map_stack.maps[m])
             d, h = (dist, hit) if len(idx) == n else (np.empty((len(idx), cfg.rays), np.float32), np.empty((len(idx), cfg.rays), np.float32))
-            lidar_scan(
+            kernel = lidar_scan_parallel if parallel_worth_it(len(idx)) else lidar_scan
+            kernel(
                 sim.table.data, sim.table.role, scope.alive, scope.lo[idx], scope.hi[idx], rows[idx], cfg.range,
                 f.origin, f.inv_res, f.cell_max, f.width, f.road_clearance, d, h,
             )  # fmt: skip
@@ -91,38 +92,54 @@ class LidarSensor:
 def lidar_scan(
     data, role, alive, alive_lo, alive_hi, rows, max_range, origin, inv_res, cell_max, width, clearance, dist, hit,
 ):  # pragma: no cover - compiled
-    n_rays = dist.shape[1]
-    step = 2.0 * math.pi / n_rays
+    """Each agent's rays (``rows[i]`` among ``alive[alive_lo[i]:alive_hi[i]]``)."""
     for i in range(rows.shape[0]):
-        r = rows[i]
-        px, py, h = data[_X, r], data[_Y, r], data[_H, r]
-        dist[i, :] = max_range
-        hit[i, :] = HIT_NONE
-        for j in alive[alive_lo[i]:alive_hi[i]]:
-            if j == r:
-                continue
-            bx, by, bh = data[_X, j], data[_Y, j], data[_H, j]
-            hl, hw = 0.5 * data[_LENGTH, j], 0.5 * data[_WIDTH, j]
-            if math.hypot(bx - px, by - py) - math.hypot(hl, hw) > max_range:
-                continue
-            lo, hi, inside = box_interval(px, py, h, bx, by, bh, hl, hw)
-            if inside:
-                continue
-            kind = HIT_PEDESTRIAN if role[j] == _PEDESTRIAN else HIT_VEHICLE
-            bc, bs = math.cos(bh), math.sin(bh)
-            for k in range(int(math.ceil(lo / step)), int(math.floor(hi / step)) + 1):
-                a = k * step + h
-                t = ray_box(px, py, math.cos(a), math.sin(a), bx, by, bc, bs, hl, hw)
-                kk = k % n_rays
-                if t < dist[i, kk]:
-                    dist[i, kk] = t
-                    hit[i, kk] = kind
-        for k in range(n_rays):
+        _scan_one(data, role, alive[alive_lo[i]:alive_hi[i]], rows[i], max_range, origin, inv_res, cell_max, width,
+                  clearance, dist[i], hit[i])  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def lidar_scan_parallel(
+    data, role, alive, alive_lo, alive_hi, rows, max_range, origin, inv_res, cell_max, width, clearance, dist, hit,
+):  # pragma: no cover - compiled
+    """``lidar_scan`` with the agents spread over threads (each agent's rays are its own)."""
+    for i in numba.prange(rows.shape[0]):
+        _scan_one(data, role, alive[alive_lo[i]:alive_hi[i]], rows[i], max_range, origin, inv_res, cell_max, width,
+                  clearance, dist[i], hit[i])  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def _scan_one(data, role, alive, r, max_range, origin, inv_res, cell_max, width, clearance, dist, hit):  # pragma: no cover - compiled
+    n_rays = dist.shape[0]
+    step = 2.0 * math.pi / n_rays
+    px, py, h = data[_X, r], data[_Y, r], data[_H, r]
+    dist[:] = max_range
+    hit[:] = HIT_NONE
+    for j in alive:
+        if j == r:
+            continue
+        bx, by, bh = data[_X, j], data[_Y, j], data[_H, j]
+        hl, hw = 0.5 * data[_LENGTH, j], 0.5 * data[_WIDTH, j]
+        if math.hypot(bx - px, by - py) - math.hypot(hl, hw) > max_range:
+            continue
+        lo, hi, inside = box_interval(px, py, h, bx, by, bh, hl, hw)
+        if inside:
+            continue
+        kind = HIT_PEDESTRIAN if role[j] == _PEDESTRIAN else HIT_VEHICLE
+        bc, bs = math.cos(bh), math.sin(bh)
+        for k in range(int(math.ceil(lo / step)), int(math.floor(hi / step)) + 1):
             a = k * step + h
-            t = _edge_distance(px, py, math.cos(a), math.sin(a), dist[i, k], origin, inv_res, cell_max, width, clearance)
-            if t < dist[i, k]:
-                dist[i, k] = t
-                hit[i, k] = HIT_ROAD_EDGE
+            t = ray_box(px, py, math.cos(a), math.sin(a), bx, by, bc, bs, hl, hw)
+            kk = k % n_rays
+            if t < dist[kk]:
+                dist[kk] = t
+                hit[kk] = kind
+    for k in range(n_rays):
+        a = k * step + h
+        t = _edge_distance(px, py, math.cos(a), math.sin(a), dist[k], origin, inv_res, cell_max, width, clearance)
+        if t < dist[k]:
+            dist[k] = t
+            hit[k] = HIT_ROAD_EDGE
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -23,7 +23,7 @@ import numpy as np
 
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import COLUMN
-from smarts.sensors.rays import box_interval, slab
+from smarts.sensors.rays import box_interval, parallel_worth_it, slab
 
 SHADOW_BINS = 1440
 """Angular bins of the depth buffer (0.25 degree each: 4 cm across at 10 m)."""
@@ -60,7 +60,8 @@ class ShadowCaster:
             self._visible = np.zeros((m, cap), dtype=np.float32)
         depth, owner, visible = self._depth[:n], self._owner[:n], self._visible[:n]
         scope = sim.scope(agents)
-        cast_shadows(sim.table.data, scope.alive, scope.lo, scope.hi, scope.base, rows, self.range, depth, owner, visible)
+        kernel = cast_shadows_parallel if parallel_worth_it(n) else cast_shadows
+        kernel(sim.table.data, scope.alive, scope.lo, scope.hi, scope.base, rows, self.range, depth, owner, visible)
         return Shadows(depth, owner, visible, self.range)
 
 
@@ -69,58 +70,71 @@ def cast_shadows(data, alive, alive_lo, alive_hi, row_base, rows, sensor_range, 
     """Fill ``depth``/``owner`` [n, bins] and ``visible`` [n, capacity] for the agents' rows, each
     among ``alive[alive_lo[i]:alive_hi[i]]`` (``visible`` by row within the episode, ``row -
     row_base[i]``; ``owner`` holds global rows)."""
-    n_bins = depth.shape[1]
+    for i in range(rows.shape[0]):
+        _cast_one(data, alive[alive_lo[i]:alive_hi[i]], row_base[i], rows[i], sensor_range, depth[i], owner[i], visible[i])
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def cast_shadows_parallel(data, alive, alive_lo, alive_hi, row_base, rows, sensor_range, depth, owner, visible):  # pragma: no cover - compiled
+    """``cast_shadows`` with the agents spread over threads (each agent's buffers are its own, so
+    the result is the same)."""
+    for i in numba.prange(rows.shape[0]):
+        _cast_one(data, alive[alive_lo[i]:alive_hi[i]], row_base[i], rows[i], sensor_range, depth[i], owner[i], visible[i])
+
+
+@numba.njit(cache=True, nogil=True)
+def _cast_one(data, alive, base, r, sensor_range, depth, owner, visible):  # pragma: no cover - compiled
+    """One agent's depth buffer, owners and visible fractions."""
+    n_bins = depth.shape[0]
     bin_width = 2.0 * math.pi / n_bins
     turn_c, turn_s = math.cos(bin_width), math.sin(bin_width)
     cand = np.empty(alive.shape[0], dtype=np.int64)
     first_bin = np.empty(alive.shape[0], dtype=np.int64)
     bin_count = np.empty(alive.shape[0], dtype=np.int64)
-    for i in range(rows.shape[0]):
-        r = rows[i]
-        px, py, h = data[_X, r], data[_Y, r], data[_H, r]
-        depth[i, :] = math.inf
-        owner[i, :] = -1
-        m = 0
-        base = row_base[i]
-        for j in alive[alive_lo[i]:alive_hi[i]]:
-            visible[i, j - base] = 0.0
-            if j == r:
-                continue
-            bx, by, bh = data[_X, j], data[_Y, j], data[_H, j]
-            hl, hw = 0.5 * data[_LENGTH, j], 0.5 * data[_WIDTH, j]
-            if math.hypot(bx - px, by - py) - math.hypot(hl, hw) > sensor_range:
-                continue
-            lo, hi, inside = box_interval(px, py, h, bx, by, bh, hl, hw)
-            if inside:
-                visible[i, j - base] = 1.0
-                continue
-            b0 = int(math.floor((lo + math.pi) / bin_width))
-            b1 = int(math.floor((hi + math.pi) / bin_width))
-            cand[m], first_bin[m], bin_count[m] = j, b0, b1 - b0 + 1
-            m += 1
-            # Rays in the box's frame; inner bins turn the previous direction by one bin width.
-            bc, bs = math.cos(bh), math.sin(bh)
-            lx, ly = bc * (px - bx) + bs * (py - by), -bs * (px - bx) + bc * (py - by)
-            ldx, ldy = 1.0, 0.0
-            for b in range(b0, b1 + 1):
-                if b <= b0 + 1 or b == b1:
-                    a = min(max((b + 0.5) * bin_width - math.pi, lo), hi) + h - bh
-                    ldx, ldy = math.cos(a), math.sin(a)
-                else:
-                    ldx, ldy = ldx * turn_c - ldy * turn_s, ldx * turn_s + ldy * turn_c
-                t = slab(lx, ly, ldx, ldy, hl, hw)
-                k = b % n_bins
-                if t < depth[i, k]:
-                    depth[i, k] = t
-                    owner[i, k] = j
-        for q in range(m):
-            j = cand[q]
-            seen = 0
-            for b in range(first_bin[q], first_bin[q] + bin_count[q]):
-                k = b % n_bins
-                if owner[i, k] == j and depth[i, k] <= sensor_range:
-                    seen += 1
-            visible[i, j - base] = seen / bin_count[q]
+    px, py, h = data[_X, r], data[_Y, r], data[_H, r]
+    depth[:] = math.inf
+    owner[:] = -1
+    m = 0
+    for j in alive:
+        visible[j - base] = 0.0
+        if j == r:
+            continue
+        bx, by, bh = data[_X, j], data[_Y, j], data[_H, j]
+        hl, hw = 0.5 * data[_LENGTH, j], 0.5 * data[_WIDTH, j]
+        if math.hypot(bx - px, by - py) - math.hypot(hl, hw) > sensor_range:
+            continue
+        lo, hi, inside = box_interval(px, py, h, bx, by, bh, hl, hw)
+        if inside:
+            visible[j - base] = 1.0
+            continue
+        b0 = int(math.floor((lo + math.pi) / bin_width))
+        b1 = int(math.floor((hi + math.pi) / bin_width))
+        cand[m], first_bin[m], bin_count[m] = j, b0, b1 - b0 + 1
+        m += 1
+        # Rays in the box's frame; inner bins turn the previous direction by one bin width.
+        bc, bs = math.cos(bh), math.sin(bh)
+        lx, ly = bc * (px - bx) + bs * (py - by), -bs * (px - bx) + bc * (py - by)
+        ldx, ldy = 1.0, 0.0
+        for b in range(b0, b1 + 1):
+            if b <= b0 + 1 or b == b1:
+                a = min(max((b + 0.5) * bin_width - math.pi, lo), hi) + h - bh
+                ldx, ldy = math.cos(a), math.sin(a)
+            else:
+                ldx, ldy = ldx * turn_c - ldy * turn_s, ldx * turn_s + ldy * turn_c
+            t = slab(lx, ly, ldx, ldy, hl, hw)
+            k = b % n_bins
+            if t < depth[k]:
+                depth[k] = t
+                owner[k] = j
+    for q in range(m):
+        j = cand[q]
+        seen = 0
+        for b in range(first_bin[q], first_bin[q] + bin_count[q]):
+            k = b % n_bins
+            if owner[k] == j and depth[k] <= sensor_range:
+                seen += 1
+        visible[j - base] = seen / bin_count[q]
+
 
 _X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
 _LENGTH, _WIDTH = COLUMN["length"], COLUMN["width"]

@@ -21,16 +21,18 @@ drawn forward into the few pixels they cover.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import gymnasium as gym
 import numba
 import numpy as np
 
-from smarts.core.simulation import Simulation
+from smarts.core.simulation import Scope, Simulation
 from smarts.core.vehicle_table import COLUMN
 from smarts.sensors.interface import RASTER_LAYERS, RasterInterface
 from smarts.sensors.map_fields import map_fields
 from smarts.sensors.occlusion import SHADOW_BINS, Shadows
+from smarts.sensors.rays import parallel_worth_it
 
 OCCLUSION_OUT_OF_RANGE, OCCLUSION_OCCLUDED, OCCLUSION_VISIBLE = 0, 1, 2
 
@@ -85,12 +87,7 @@ class RasterSensor:
         self._slot = np.full(len(RASTER_LAYERS), -1, dtype=np.int64)
         for i, name in enumerate(config.layers):
             self._slot[RASTER_LAYERS.index(name)] = i
-        self._occupant = np.zeros(s * s, dtype=np.int32)
-        self._route = np.zeros(s * s, dtype=np.uint8)
-        self._cell = np.zeros(s * s, dtype=np.int64)
-        self._on_road = np.zeros(s * s, dtype=np.uint8)
-        self._on_lane = np.zeros(s * s, dtype=np.uint8)
-        self._shade = np.zeros(s * s, dtype=np.uint8)
+        self._pixels = RasterPixels(self._ex, self._ey, self._bin, self._dist, int(s), float(config.resolution), self._slot)
         self._no_shadow = np.zeros((1, 1))
         self._no_visible = np.zeros((1, 1), dtype=np.float32)
 
@@ -107,7 +104,7 @@ class RasterSensor:
         cfg = self.config
         n, s = rows.shape[0], cfg.size
         layers = np.empty((n, len(cfg.layers), s, s), dtype=np.uint8)
-        rgb = np.empty((n, s, s, 3) if cfg.rgb else (0, s, s, 3), dtype=np.uint8)
+        rgb = np.empty((n, s, s, 3) if cfg.rgb else (1, s, s, 3), dtype=np.uint8)  # (a dummy without rgb)
         scope = sim.scope(agents)
         for m, idx in _by_map(sim, agents):
             part = slice(None) if idx is None else idx
@@ -132,18 +129,18 @@ class RasterSensor:
         ma = sim.mission_arrays
         # A pixel is on a lane line within half a pixel of it (at least one map cell).
         lane_cells = max(0.5 * cfg.resolution * f.inv_res, 1.0)
-        draw_rasters(
-            sim.table.data, sim.table.role, scope.alive, scope.lo[part], scope.hi[part], scope.base[part], agents, rows,
-            self._ex, self._ey, self._bin, self._dist, cfg.size, cfg.resolution,
-            f.origin, f.inv_res, f.cell_max, f.width, f.drivable, f.lane_distance, lane_cells,
-            ma.flat_paths, ma.flat_valid, ma.stride, ma.path_len, sim.route_index,
+        grid = MapGrid(f.origin, float(f.inv_res), f.cell_max, int(f.width), f.drivable, f.lane_distance, float(lane_cells))
+        paths = RoutePaths(ma.flat_paths, ma.flat_valid, int(ma.stride), ma.path_len, sim.route_index)
+        sh = ShadowView(
             shadows.depth[part] if shadows is not None else self._no_shadow,
             shadows.visible[part] if shadows is not None else self._no_visible,
-            shadows.range if shadows is not None else math.inf,
+            float(shadows.range) if shadows is not None else math.inf,
             shadows is not None, self.hide_hidden and shadows is not None,
-            self._occupant, self._route, self._cell, self._on_road, self._on_lane, self._shade,
-            self._slot, layers, cfg.rgb, rgb, SHADED_PALETTE,
         )  # fmt: skip
+        sub = Scope(scope.alive, scope.lo[part], scope.hi[part], scope.base[part])
+        kernel = draw_rasters_parallel if parallel_worth_it(len(rows)) else draw_rasters
+        kernel(sim.table.data, sim.table.role, sub, agents, rows, self._pixels, grid, paths, sh, layers, cfg.rgb, rgb,
+               SHADED_PALETTE)  # fmt: skip
 
 
 def _by_map(sim: Simulation, agents: np.ndarray):
@@ -155,129 +152,210 @@ def _by_map(sim: Simulation, agents: np.ndarray):
     return [(int(m), np.flatnonzero(maps == m)) for m in np.unique(maps).tolist()]
 
 
+class RasterPixels(NamedTuple):
+    """The per-pixel geometry of a raster sensor (made once): pixel centres in the ego frame
+    (``ex``, ``ey``, metres), each pixel's shadow bin and distance, the size, metres per pixel,
+    and where each layer goes (``slot``, -1: not drawn)."""
+
+    ex: np.ndarray
+    ey: np.ndarray
+    bin: np.ndarray
+    dist: np.ndarray
+    size: int
+    res: float
+    slot: np.ndarray
+
+
+class MapGrid(NamedTuple):
+    """A map's rasterised fields as the raster kernel reads them (``smarts.sensors.map_fields``)."""
+
+    origin: np.ndarray
+    inv_res: float
+    cell_max: np.ndarray
+    width: int
+    drivable: np.ndarray
+    lane_distance: np.ndarray
+    lane_cells: float
+
+
+class RoutePaths(NamedTuple):
+    """Every agent's route path (``MissionArrays``) and where along it each agent is."""
+
+    flat_paths: np.ndarray
+    flat_valid: np.ndarray
+    stride: int
+    path_len: np.ndarray
+    route_index: np.ndarray
+
+
+class ShadowView(NamedTuple):
+    """Shadows for the raster kernel: per agent depth buffers and visible fractions (dummies when
+    ``have_shadows`` is False), the sensor range, and whether hidden road users are left out."""
+
+    depth: np.ndarray
+    visible: np.ndarray
+    sensor_range: float
+    have_shadows: bool
+    hide_hidden: bool
+
+
 @numba.njit(cache=True, nogil=True)
-def draw_rasters(
-    data, role, alive, alive_lo, alive_hi, row_base, agents, rows, px_ex, px_ey, px_bin, px_dist, size, res,
-    origin, inv_res, cell_max, width, drivable, lane_distance, lane_cells,
-    flat_paths, flat_valid, stride, path_len, route_index,
-    depth, visible, sensor_range, have_shadows, hide_hidden,
-    occupant, route, cell, on_road, on_lane, shade, slot, layers, want_rgb, rgb, shaded,
+def draw_rasters(data, role, scope, agents, rows, pix, grid, paths, sh, layers, want_rgb, rgb, shaded):  # pragma: no cover - compiled
+    """Draw the layers (and the RGB view) of each agent ``agents[i]`` (row ``rows[i]``) among its
+    episode's road users (``scope``, a ``smarts.core.simulation.Scope``)."""
+    n_px = pix.size * pix.size
+    occupant, route, cell = np.empty(n_px, np.int32), np.empty(n_px, np.uint8), np.empty(n_px, np.int64)
+    on_road, on_lane, shade = np.empty(n_px, np.uint8), np.empty(n_px, np.uint8), np.empty(n_px, np.uint8)
+    for i in range(rows.shape[0]):
+        _draw_one(data, role, scope.alive[scope.lo[i]:scope.hi[i]], scope.base[i], agents[i], rows[i], pix, grid, paths,
+                  sh, _agent_part(sh.depth, i), _agent_part(sh.visible, i), occupant, route, cell, on_road, on_lane,
+                  shade, layers[i], want_rgb, _agent_part(rgb, i), shaded)  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def draw_rasters_parallel(data, role, scope, agents, rows, pix, grid, paths, sh, layers, want_rgb, rgb, shaded):  # pragma: no cover - compiled
+    """``draw_rasters`` with the agents spread over threads (each its own scratch buffers)."""
+    n_px = pix.size * pix.size
+    for i in numba.prange(rows.shape[0]):
+        occupant, route, cell = np.empty(n_px, np.int32), np.empty(n_px, np.uint8), np.empty(n_px, np.int64)
+        on_road, on_lane, shade = np.empty(n_px, np.uint8), np.empty(n_px, np.uint8), np.empty(n_px, np.uint8)
+        _draw_one(data, role, scope.alive[scope.lo[i]:scope.hi[i]], scope.base[i], agents[i], rows[i], pix, grid, paths,
+                  sh, _agent_part(sh.depth, i), _agent_part(sh.visible, i), occupant, route, cell, on_road, on_lane,
+                  shade, layers[i], want_rgb, _agent_part(rgb, i), shaded)  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _agent_part(a, i):  # pragma: no cover - compiled
+    """Row ``i`` of a per-agent array, or the dummy's only row."""
+    return a[min(np.int64(i), np.int64(a.shape[0] - 1))]  # (a prange index is unsigned)
+
+
+@numba.njit(cache=True, nogil=True)
+def _draw_one(
+    data, role, alive, row_base, a, r, pix, grid, paths, sh, depth, visible, occupant, route, cell, on_road,
+    on_lane, shade, layers, want_rgb, rgb, shaded,
 ):  # pragma: no cover - compiled
+    """One agent's rasters (its own scratch buffers and output planes)."""
+    px_ex, px_ey, px_bin, px_dist, size, res = pix.ex, pix.ey, pix.bin, pix.dist, pix.size, pix.res
+    origin, inv_res, cell_max, width = grid.origin, grid.inv_res, grid.cell_max, grid.width
+    drivable, lane_distance, lane_cells = grid.drivable, grid.lane_distance, grid.lane_cells
+    flat_paths, flat_valid, stride, path_len, route_index = (
+        paths.flat_paths, paths.flat_valid, paths.stride, paths.path_len, paths.route_index
+    )
     half = 0.5 * size * res
     view = half * math.sqrt(2.0)  # farthest pixel corner from the ego
+    slot = pix.slot
     s_drv, s_lane, s_route, s_occ, s_occl = slot[0], slot[1], slot[2], slot[3], slot[4]
-    for i in range(rows.shape[0]):
-        r, a = rows[i], agents[i]
-        x, y, h = data[_X, r], data[_Y, r], data[_H, r]
-        c, s = math.cos(h), math.sin(h)
+    x, y, h = data[_X, r], data[_Y, r], data[_H, r]
+    c, s = math.cos(h), math.sin(h)
 
-        # Boxes: ego = -1, other road users = row + 1, into the pixels whose centre they cover.
-        occupant[:] = 0
-        for j in alive[alive_lo[i]:alive_hi[i]]:
-            if j != r and hide_hidden and visible[i, j - row_base[i]] <= 0.0:
-                continue
-            dx, dy = data[_X, j] - x, data[_Y, j] - y
-            bx, by = c * dx + s * dy, -s * dx + c * dy
-            hl, hw = 0.5 * data[_LENGTH, j], 0.5 * data[_WIDTH, j]
-            reach = math.hypot(hl, hw)
-            if abs(bx) - reach > half or abs(by) - reach > half:
-                continue
-            rel = data[_H, j] - h
-            rc, rs = math.cos(rel), math.sin(rel)
-            row0 = max(int(math.floor(0.5 * size - (bx + reach) / res)), 0)
-            row1 = min(int(math.floor(0.5 * size - (bx - reach) / res)), size - 1)
-            col0 = max(int(math.floor(0.5 * size - (by + reach) / res)), 0)
-            col1 = min(int(math.floor(0.5 * size - (by - reach) / res)), size - 1)
-            mark = -1 if j == r else j + 1
-            for pr in range(row0, row1 + 1):
-                for pc in range(col0, col1 + 1):
-                    q = pr * size + pc
-                    qx, qy = px_ex[q] - bx, px_ey[q] - by
-                    if abs(rc * qx + rs * qy) <= hl and abs(-rs * qx + rc * qy) <= hw:
-                        if j == r or occupant[q] <= 0:
-                            occupant[q] = mark
+    # Boxes: ego = -1, other road users = row + 1, into the pixels whose centre they cover.
+    occupant[:] = 0
+    for j in alive:
+        if j != r and sh.hide_hidden and visible[j - row_base] <= 0.0:
+            continue
+        dx, dy = data[_X, j] - x, data[_Y, j] - y
+        bx, by = c * dx + s * dy, -s * dx + c * dy
+        hl, hw = 0.5 * data[_LENGTH, j], 0.5 * data[_WIDTH, j]
+        reach = math.hypot(hl, hw)
+        if abs(bx) - reach > half or abs(by) - reach > half:
+            continue
+        rel = data[_H, j] - h
+        rc, rs = math.cos(rel), math.sin(rel)
+        row0 = max(int(math.floor(0.5 * size - (bx + reach) / res)), 0)
+        row1 = min(int(math.floor(0.5 * size - (bx - reach) / res)), size - 1)
+        col0 = max(int(math.floor(0.5 * size - (by + reach) / res)), 0)
+        col1 = min(int(math.floor(0.5 * size - (by - reach) / res)), size - 1)
+        mark = -1 if j == r else j + 1
+        for pr in range(row0, row1 + 1):
+            for pc in range(col0, col1 + 1):
+                q = pr * size + pc
+                qx, qy = px_ex[q] - bx, px_ey[q] - by
+                if abs(rc * qx + rs * qy) <= hl and abs(-rs * qx + rc * qy) <= hw:
+                    if j == r or occupant[q] <= 0:
+                        occupant[q] = mark
 
-        # Route: its path polyline sampled every half pixel, from where it enters the view.
-        route[:] = 0
-        base = a * stride
-        k0 = route_index[a]
-        while k0 > 0 and route_index[a] - k0 < _ROUTE_BACK:
-            p = flat_paths[base + k0 - 1, 0]
-            if math.hypot(p[0] - x, p[1] - y) > view + 2.0:
-                break
-            k0 -= 1
-        px_prev, py_prev = 0.0, 0.0
-        entered = False
-        last = min(path_len[a], route_index[a] + int(2.0 * view) + _ROUTE_AHEAD)  # ~1 m per point
-        for k in range(k0, last):
-            if not flat_valid[base + k, 0]:
-                break
-            p = flat_paths[base + k, 0]
-            dx, dy = p[0] - x, p[1] - y
-            ex, ey = c * dx + s * dy, -s * dx + c * dy
-            if k > k0:
-                seg = math.hypot(ex - px_prev, ey - py_prev)
-                n_sub = max(int(math.ceil(seg / (0.5 * res))), 1)
-                for u in range(n_sub + 1):
-                    f = u / n_sub
-                    qx, qy = px_prev + (ex - px_prev) * f, py_prev + (ey - py_prev) * f
-                    pr = int(math.floor(0.5 * size - qx / res))
-                    pc = int(math.floor(0.5 * size - qy / res))
-                    if 0 <= pr < size and 0 <= pc < size:
-                        route[pr * size + pc] = 1
-            px_prev, py_prev = ex, ey
-            near = math.hypot(ex, ey) <= view + 2.0
-            if entered and not near and k > route_index[a]:
-                break
-            entered = entered or near
+    # Route: its path polyline sampled every half pixel, from where it enters the view.
+    route[:] = 0
+    base = a * stride
+    k0 = route_index[a]
+    while k0 > 0 and route_index[a] - k0 < _ROUTE_BACK:
+        p = flat_paths[base + k0 - 1, 0]
+        if math.hypot(p[0] - x, p[1] - y) > view + 2.0:
+            break
+        k0 -= 1
+    px_prev, py_prev = 0.0, 0.0
+    entered = False
+    last = min(path_len[a], route_index[a] + int(2.0 * view) + _ROUTE_AHEAD)  # ~1 m per point
+    for k in range(k0, last):
+        if not flat_valid[base + k, 0]:
+            break
+        p = flat_paths[base + k, 0]
+        dx, dy = p[0] - x, p[1] - y
+        ex, ey = c * dx + s * dy, -s * dx + c * dy
+        if k > k0:
+            seg = math.hypot(ex - px_prev, ey - py_prev)
+            n_sub = max(int(math.ceil(seg / (0.5 * res))), 1)
+            for u in range(n_sub + 1):
+                f = u / n_sub
+                qx, qy = px_prev + (ex - px_prev) * f, py_prev + (ey - py_prev) * f
+                pr = int(math.floor(0.5 * size - qx / res))
+                pc = int(math.floor(0.5 * size - qy / res))
+                if 0 <= pr < size and 0 <= pc < size:
+                    route[pr * size + pc] = 1
+        px_prev, py_prev = ex, ey
+        near = math.hypot(ex, ey) <= view + 2.0
+        if entered and not near and k > route_index[a]:
+            break
+        entered = entered or near
 
-        # Every pixel: map lookups, shadows, then the layers and the composed colour. Simple
-        # loops over the flat pixel index, so the compiler can vectorise them.
-        n_px = size * size
+    # Every pixel: map lookups, shadows, then the layers and the composed colour. Simple
+    # loops over the flat pixel index, so the compiler can vectorise them.
+    n_px = size * size
+    for q in range(n_px):
+        ex, ey = px_ex[q], px_ey[q]
+        cx = min(max((x + c * ex - s * ey - origin[0]) * inv_res, 0.0), cell_max[0])
+        cy = min(max((y + s * ex + c * ey - origin[1]) * inv_res, 0.0), cell_max[1])
+        cell[q] = int(cy) * width + int(cx)
+    for q in range(n_px):
+        on_road[q] = drivable[cell[q]]
+        on_lane[q] = on_road[q] and lane_distance[cell[q]] <= lane_cells
+    if sh.have_shadows:
         for q in range(n_px):
-            ex, ey = px_ex[q], px_ey[q]
-            cx = min(max((x + c * ex - s * ey - origin[0]) * inv_res, 0.0), cell_max[0])
-            cy = min(max((y + s * ex + c * ey - origin[1]) * inv_res, 0.0), cell_max[1])
-            cell[q] = int(cy) * width + int(cx)
+            d = px_dist[q]
+            shade[q] = (
+                OCCLUSION_OUT_OF_RANGE if d > sh.sensor_range
+                else OCCLUSION_OCCLUDED if d > depth[px_bin[q]] else OCCLUSION_VISIBLE
+            )  # fmt: skip
+    else:
+        shade[:] = OCCLUSION_VISIBLE
+    flat = layers.reshape(layers.shape[0], n_px)
+    if s_drv >= 0:
         for q in range(n_px):
-            on_road[q] = drivable[cell[q]]
-            on_lane[q] = on_road[q] and lane_distance[cell[q]] <= lane_cells
-        if have_shadows:
-            for q in range(n_px):
-                d = px_dist[q]
-                shade[q] = (
-                    OCCLUSION_OUT_OF_RANGE if d > sensor_range
-                    else OCCLUSION_OCCLUDED if d > depth[i, px_bin[q]] else OCCLUSION_VISIBLE
-                )  # fmt: skip
-        else:
-            shade[:] = OCCLUSION_VISIBLE
-        flat = layers[i].reshape(layers.shape[1], n_px)
-        if s_drv >= 0:
-            for q in range(n_px):
-                flat[s_drv, q] = on_road[q]
-        if s_lane >= 0:
-            for q in range(n_px):
-                flat[s_lane, q] = on_lane[q]
-        if s_route >= 0:
-            flat[s_route, :] = route
-        if s_occ >= 0:
-            for q in range(n_px):
-                flat[s_occ, q] = occupant[q] > 0
-        if s_occl >= 0:
-            flat[s_occl, :] = shade
-        if want_rgb:
-            image = rgb[i].reshape(n_px, 3)
-            for q in range(n_px):
-                occ = occupant[q]
-                if occ != 0:
-                    colour = EGO if occ < 0 else ROLE_BASE + role[occ - 1]
-                    level = OCCLUSION_VISIBLE
-                else:
-                    colour = ROUTE if route[q] else LANE if on_lane[q] else ROAD if on_road[q] else BACKGROUND
-                    level = shade[q]
-                image[q, 0] = shaded[level, colour, 0]
-                image[q, 1] = shaded[level, colour, 1]
-                image[q, 2] = shaded[level, colour, 2]
+            flat[s_drv, q] = on_road[q]
+    if s_lane >= 0:
+        for q in range(n_px):
+            flat[s_lane, q] = on_lane[q]
+    if s_route >= 0:
+        flat[s_route, :] = route
+    if s_occ >= 0:
+        for q in range(n_px):
+            flat[s_occ, q] = occupant[q] > 0
+    if s_occl >= 0:
+        flat[s_occl, :] = shade
+    if want_rgb:
+        image = rgb.reshape(n_px, 3)
+        for q in range(n_px):
+            occ = occupant[q]
+            if occ != 0:
+                colour = EGO if occ < 0 else ROLE_BASE + role[occ - 1]
+                level = OCCLUSION_VISIBLE
+            else:
+                colour = ROUTE if route[q] else LANE if on_lane[q] else ROAD if on_road[q] else BACKGROUND
+                level = shade[q]
+            image[q, 0] = shaded[level, colour, 0]
+            image[q, 1] = shaded[level, colour, 1]
+            image[q, 2] = shaded[level, colour, 2]
 
 
 class EgoViewRenderer:

@@ -7,10 +7,42 @@ relative to the ego's heading, counter-clockwise positive.
 from __future__ import annotations
 
 import math
+import os
 
 import numba
 
 _TWO_PI = 2.0 * math.pi
+PARALLEL_AGENTS = 16
+"""Agents from which the sensors spread their per-agent work over threads; below it waking the
+threads costs more than it saves."""
+SENSOR_THREADS_VARIABLE = "SMARTS_SENSOR_THREADS"
+"""Threads the occlusion, lidar and raster sensors may use (default 1: one thread per process,
+like the rest of the step; numba's ``NUMBA_NUM_THREADS`` caps it). Each agent's result is
+computed alone, so any number gives the same observations."""
+
+
+def sensor_threads() -> int:
+    """The threads the sensors use (``SMARTS_SENSOR_THREADS``, read at each call)."""
+    text = os.environ.get(SENSOR_THREADS_VARIABLE, "1")
+    try:
+        wanted = int(text)
+    except ValueError:
+        raise ValueError(f"{SENSOR_THREADS_VARIABLE}: expected a positive integer, got {text!r}") from None
+    if wanted < 1:
+        raise ValueError(f"{SENSOR_THREADS_VARIABLE}: expected a positive integer, got {text!r}")
+    return min(wanted, numba.config.NUMBA_NUM_THREADS)
+
+
+def parallel_worth_it(n_agents: int) -> bool:
+    """Whether ``n_agents`` agents' sensors run on threads (more than one allowed, and enough
+    agents); sets numba's thread count for the call when they do."""
+    if n_agents < PARALLEL_AGENTS:
+        return False
+    threads = sensor_threads()
+    if threads < 2:
+        return False
+    numba.set_num_threads(threads)
+    return True
 GRAZE = 1e-6  # metres: a ray touching a box corner still hits it
 
 
