@@ -17,6 +17,11 @@ chunks with 95% confidence intervals. Cases:
   task's mix: 11 scenarios on 7 maps, with traffic, signals and up to three agents per copy) with
   lane-relative commands; all copies are one simulation over the stacked maps.
 
+``--sensor-batch B`` (default 64) adds the sensor rows: B copies of the per-env diagnostic's
+all-sensors case (10 agents with occlusion, 64x64 rasters of every layer with RGB, 64-ray lidar,
+extended neighbours, and V2V messaging among 50 built-in traffic vehicles) against the same batch
+with the sensors and V2V off, and their ratio; ``SMARTS_SENSOR_THREADS`` sets the sensors' threads.
+
 ``--ppo-steps N`` adds end-to-end rows: ``python -m train ppo --task platoon`` on each backend
 (run as users run it; the env-steps/s it records over the whole run and over its collection
 phases alone: env steps and policy inference, without the PPO updates).
@@ -199,6 +204,32 @@ def batched_rows(batches=DEFAULT_BATCHES, cases=tuple(CASES), steps: int = 300, 
     return rows
 
 
+def sensor_rows(batch: int, steps: int, warmup: int, seed: int = 0) -> list[dict]:
+    """Agent-steps/s of ``batch`` copies of the all-sensors case with sensors and V2V on, and off."""
+    from smarts.diagnostic.__main__ import sensor_scenario
+    from smarts.env.batched import BatchedDriving
+    from smarts.sensors.rays import sensor_threads
+
+    spec = sensor_scenario(SENSOR_AGENTS, SENSOR_VEHICLES, steps + warmup + 10)
+    plain = dataclasses.replace(spec, comms=None, agents=[dataclasses.replace(a, interface=None) for a in spec.agents])
+    rows = []
+    for case, scenario in (("sensors_v2v", spec), ("sensors_off", plain)):
+        env = BatchedDriving([scenario] * batch)
+        env.set_seed(seed)
+        env.reset()
+        actions = np.zeros((env.num_slots, env.action_width))
+        actions[:, 0] = 0.8  # cruise straight at 8 m/s with the traffic
+        mean, ci = _timed(lambda: int(env.step(actions).acted.sum()), steps, warmup)
+        env.close()
+        rows.append({"case": case, "batch": int(batch), "agents": SENSOR_AGENTS, "vehicles": SENSOR_VEHICLES,
+                     "sensor_threads": sensor_threads(), "agent_steps_per_s": mean, "agent_steps_per_s_ci95": ci})  # fmt: skip
+    rows[0]["ratio_to_off"] = rows[0]["agent_steps_per_s"] / rows[1]["agent_steps_per_s"]
+    return rows
+
+
+SENSOR_AGENTS, SENSOR_VEHICLES = 10, 50
+
+
 def ppo_rate(backend: str, envs: int, steps: int, out_dir: Path, frames: int, minibatch: int, epochs: int) -> dict:
     """End-to-end env-steps/s of ``python -m train ppo --task platoon`` on ``backend``: run as
     users run it (a subprocess), the rate read from the metrics of its final checkpoint."""
@@ -247,6 +278,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=300, help="timed steps of the whole batch per row (batched backend)")
     parser.add_argument("--per-env-agent-steps", type=int, default=5000, help="timed agent-steps per row on the per-env path")
     parser.add_argument("--warmup", type=int, default=10, help="untimed steps first")
+    parser.add_argument("--sensor-batch", type=int, default=64, help="copies of the all-sensors rows (0: none)")
     parser.add_argument("--ppo-steps", type=int, default=0, help="env steps of each end-to-end PPO run (0: no PPO rows)")
     parser.add_argument("--ppo-envs", type=int, default=256, help="scenario copies of the PPO runs")
     parser.add_argument("--ppo-frames", type=int, default=16384, help="frames per batch of the PPO runs")
@@ -281,6 +313,17 @@ def main(argv: list[str] | None = None) -> int:
             f"{r['speedup']:.1f}x", f"{r['memory_per_episode_kb']:.0f} KiB",
         )  # fmt: skip
     console.print(table)
+    sensors = []
+    if args.sensor_batch:
+        sensors = sensor_rows(args.sensor_batch, max(args.steps // 5, CHUNKS), args.warmup)
+        stable = Table(title=f"All sensors and V2V, batched ({SENSOR_AGENTS} agents and {SENSOR_VEHICLES} vehicles per "
+                             f"episode, B={args.sensor_batch}, {sensors[0]['sensor_threads']} sensor thread(s))")  # fmt: skip
+        for col in ("case", "agent-steps/s", "ratio"):
+            stable.add_column(col, justify="right")
+        for r in sensors:
+            stable.add_row(r["case"], f"{r['agent_steps_per_s']:,.0f} ± {r['agent_steps_per_s_ci95']:,.0f}",
+                           f"{r['agent_steps_per_s'] / sensors[1]['agent_steps_per_s']:.2f}x")  # fmt: skip
+        console.print(stable)
     ppo_rows = []
     if args.ppo_steps:
         for backend in ("per_env", "batched"):
@@ -300,6 +343,7 @@ def main(argv: list[str] | None = None) -> int:
     report = {
         "machine": {"python": platform.python_version(), "processor": platform.processor(), "system": platform.platform()},
         "rows": rows,
+        "sensors": sensors,
         "ppo": ppo_rows,
     }
     args.out.write_text(json.dumps(report, indent=2))

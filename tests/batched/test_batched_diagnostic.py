@@ -9,7 +9,7 @@ def test_batched_rows_are_written_as_json(tmp_path):
     out = tmp_path / "batched.json"
     done = subprocess.run(
         [sys.executable, "-m", "smarts.diagnostic", "--batched", "--batches", "1,4", "--cases", "free_direct,lead_lane,mix_lane",
-         "--steps", "10", "--warmup", "2", "--per-env-agent-steps", "20", "--out", str(out)],
+         "--steps", "10", "--warmup", "2", "--per-env-agent-steps", "20", "--sensor-batch", "2", "--out", str(out)],
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
@@ -21,6 +21,12 @@ def test_batched_rows_are_written_as_json(tmp_path):
         assert r["agent_steps_per_s"] > 0 and r["per_env_agent_steps_per_s"] > 0 and r["memory_per_episode_kb"] > 0
         assert r["speedup"] == r["agent_steps_per_s"] / r["per_env_agent_steps_per_s"]
     assert "speed-up" in done.stdout
+    sensors = json.loads(out.read_text())["sensors"]
+    assert [(r["case"], r["batch"], r["agents"], r["vehicles"]) for r in sensors] == [
+        ("sensors_v2v", 2, 10, 50), ("sensors_off", 2, 10, 50),
+    ]
+    assert sensors[0]["ratio_to_off"] == sensors[0]["agent_steps_per_s"] / sensors[1]["agent_steps_per_s"]
+    assert "All sensors and V2V" in done.stdout
 
 
 def test_bad_flags_name_the_flag():
