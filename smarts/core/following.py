@@ -16,11 +16,13 @@ of the follower's heading line also counts as in lane.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
+from smarts.core.records import view
+from smarts.core.sim_records import lanes_record
 from smarts.core.vehicle_table import COLUMN
 
 _X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
@@ -30,9 +32,9 @@ LEAD_SIGHT = 50.0
 """Metres between the centres (along the lane, or straight) within which the lead is visible."""
 
 
-@dataclass
-class LeadState:
-    """Per agent (in the order asked for): the lead's state relative to the agent."""
+class LeadState(NamedTuple):
+    """Per agent (in the order asked for): the lead's state relative to the agent (the kernel's
+    output record: it fills these arrays)."""
 
     present: np.ndarray  # bool[n] the agent follows a vehicle that is in the simulation now
     visible: np.ndarray  # bool[n] present and within sight (centre distance <= sight)
@@ -49,10 +51,14 @@ class LeadState:
 
     @classmethod
     def empty(cls, n: int) -> "LeadState":
-        z = np.zeros(n)
-        f = np.zeros(n, dtype=bool)
-        return cls(f, f.copy(), f.copy(), np.full(n, np.nan), z, z.copy(), z.copy(), z.copy(), z.copy(),
-                   z.copy(), z.copy())  # fmt: skip
+        def z():
+            return np.zeros(n)
+
+        def f():
+            return np.zeros(n, dtype=bool)
+
+        return cls(present=f(), visible=f(), in_lane=f(), gap=np.full(n, np.nan), dx=z(), dy=z(), rel_heading=z(),
+                   rel_vx=z(), rel_vy=z(), lead_speed=z(), lead_accel=z())  # fmt: skip
 
 
 def _lead_cache(sim) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -98,20 +104,17 @@ def lead_state(sim, agents: np.ndarray, sight: float = LEAD_SIGHT) -> LeadState:
         return LeadState.empty(n)
     leads = lead_rows(sim, agents)
     rows = sim.agent_row[agents]
-    rm = sim.road_map
     out = LeadState.empty(n)
-    _lead_kernel(
-        sim.table.data, sim.table.lane, rows, leads, rm.succ_offsets, rm.succ, rm.lane_length,
-        rm.lane_width, rm.lane_internal, float(sight), out.present, out.visible, out.in_lane, out.gap,
-        out.dx, out.dy, out.rel_heading, out.rel_vx, out.rel_vy, out.lead_speed, out.lead_accel,
-    )  # fmt: skip
+    _lead_kernel(lanes_record(sim.road_map), sim.table.data, sim.table.lane, rows, leads, float(sight), out)
     return out
 
 
 @numba.njit(cache=True, nogil=True)
-def lane_distance_ahead(succ_offsets, succ, lane_length, from_lane, from_s, to_lane, to_s, limit):  # pragma: no cover - compiled
-    """Metres along the lane graph from (from_lane, from_s) forward to (to_lane, to_s); inf when
-    ``to_lane`` is not reached within ``limit`` metres (or lies behind on the same lane)."""
+def lane_distance_ahead(lanes, from_lane, from_s, to_lane, to_s, limit):  # pragma: no cover - compiled
+    """Metres along the lane graph (``lanes``, a ``Lanes`` tuple) from (from_lane, from_s) forward
+    to (to_lane, to_s); inf when ``to_lane`` is not reached within ``limit`` metres (or lies
+    behind on the same lane)."""
+    succ_offsets, succ, lane_length = lanes.succ_offsets, lanes.succ, lanes.length
     if from_lane == to_lane:
         return to_s - from_s if to_s >= from_s else np.inf
     stack_lane = np.empty(128, dtype=np.int64)
@@ -140,10 +143,12 @@ def lane_distance_ahead(succ_offsets, succ, lane_length, from_lane, from_s, to_l
 
 
 @numba.njit(cache=True, nogil=True)
-def _lead_kernel(
-    data, lane, rows, leads, succ_offsets, succ, lane_length, lane_width, lane_internal, sight,
-    present, visible, in_lane, gap, dx_out, dy_out, rel_h, rel_vx, rel_vy, lead_speed, lead_accel,
-):  # pragma: no cover - compiled
+def _lead_kernel(frozen_lanes, data, lane, rows, leads, sight, out):  # pragma: no cover - compiled
+    """``lead_state`` of the agents on ``rows`` (their leads on ``leads``) into ``out``, a
+    ``LeadState``; ``frozen_lanes`` is the map's frozen ``Lanes``."""
+    lanes = view(frozen_lanes)
+    present, visible, in_lane, gap, dx_out, dy_out = out.present, out.visible, out.in_lane, out.gap, out.dx, out.dy
+    rel_h, rel_vx, rel_vy, lead_speed, lead_accel = out.rel_heading, out.rel_vx, out.rel_vy, out.lead_speed, out.lead_accel
     for i in range(rows.shape[0]):
         r, j = rows[i], leads[i]
         if j < 0 or r < 0:
@@ -168,17 +173,17 @@ def _lead_kernel(
         lf, lj = lane[r], lane[j]
         if lf < 0 or lj < 0:
             continue
-        along = lane_distance_ahead(succ_offsets, succ, lane_length, lf, data[_S, r], lj, data[_S, j], sight)
+        along = lane_distance_ahead(lanes, lf, data[_S, r], lj, data[_S, j], sight)
         if along <= sight and along > 0.0:
             in_lane[i] = True
             gap[i] = along - half_lengths
-        elif (lane_internal[lf] or lane_internal[lj]) and fx > 0.0 and abs(fy) < 0.5 * lane_width[lf]:
+        elif (lanes.internal[lf] or lanes.internal[lj]) and fx > 0.0 and abs(fy) < 0.5 * lanes.width[lf]:
             in_lane[i] = True
 
 
-@dataclass
-class AheadState:
-    """Per agent: the nearest road user ahead on the agent's lane (lane continuity, any vehicle)."""
+class AheadState(NamedTuple):
+    """Per agent: the nearest road user ahead on the agent's lane (lane continuity, any vehicle);
+    the kernel's output record."""
 
     present: np.ndarray  # bool[n] one is within ``sight`` metres of lane ahead
     gap: np.ndarray  # float64[n] bumper-to-bumper metres along the lanes (sight when none)
@@ -192,23 +197,24 @@ def ahead_state(sim, agents: np.ndarray, sight: float = LEAD_SIGHT) -> AheadStat
     metres along the lanes (the vehicle a driver keeps a gap to, whoever it is)."""
     agents = np.asarray(agents, dtype=np.int64)
     n = len(agents)
-    out = AheadState(np.zeros(n, bool), np.full(n, float(sight)), np.zeros(n), np.zeros(n), np.zeros(n))
+    out = AheadState(present=np.zeros(n, bool), gap=np.full(n, float(sight)), rel_speed=np.zeros(n), speed=np.zeros(n),
+                     accel=np.zeros(n))  # fmt: skip
     if n == 0:
         return out
-    rm = sim.road_map
     scope = sim.scope(agents)  # each agent among its own episode's road users
     _ahead_kernel(
-        sim.table.data, sim.table.lane, sim.agent_row[agents], scope.alive, scope.lo, scope.hi, rm.succ_offsets,
-        rm.succ, rm.lane_length, float(sight), out.present, out.gap, out.rel_speed, out.speed, out.accel,
+        lanes_record(sim.road_map), sim.table.data, sim.table.lane, sim.agent_row[agents], scope.alive, scope.lo,
+        scope.hi, float(sight), out,
     )  # fmt: skip
     return out
 
 
 @numba.njit(cache=True, nogil=True)
-def _ahead_kernel(
-    data, lane, rows, alive, alive_lo, alive_hi, succ_offsets, succ, lane_length, sight, present, gap, rel_speed,
-    speed, accel,
-):  # pragma: no cover - compiled
+def _ahead_kernel(frozen_lanes, data, lane, rows, alive, alive_lo, alive_hi, sight, out):  # pragma: no cover - compiled
+    """``ahead_state`` of the agents on ``rows`` among the live rows of their episodes
+    (``alive[alive_lo[i]:alive_hi[i]]``) into ``out``, an ``AheadState``."""
+    lanes = view(frozen_lanes)
+    present, gap, rel_speed, speed, accel = out.present, out.gap, out.rel_speed, out.speed, out.accel
     for i in range(rows.shape[0]):
         r = rows[i]
         if r < 0 or lane[r] < 0:
@@ -221,7 +227,7 @@ def _ahead_kernel(
             dx, dy = data[_X, j] - x, data[_Y, j] - y
             if dx * dx + dy * dy > (sight + 15.0) ** 2:
                 continue
-            along = lane_distance_ahead(succ_offsets, succ, lane_length, lane[r], data[_S, r], lane[j], data[_S, j], sight)
+            along = lane_distance_ahead(lanes, lane[r], data[_S, r], lane[j], data[_S, j], sight)
             if along <= 0.0 or along > sight:
                 continue
             g = along - 0.5 * (data[_LENGTH, r] + data[_LENGTH, j])

@@ -34,12 +34,15 @@ shifted sideways by what remains of the lane-change profile.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import asdict, dataclass, fields
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
 from smarts.core.geometry import wrap_scalar
+from smarts.core.records import declare, freeze_fields, view
+from smarts.core.sim_records import lanes_record
 from smarts.core.vehicle_table import COLUMN
 
 COMMAND_COMPONENTS = ("speed", "lane_change")
@@ -84,6 +87,52 @@ class LaneRelativeParams:
                 raise ValueError(f"LaneRelativeParams.{f.name}: expected a number in (0, {'1' if f.name == 'threshold' else 'inf'}), got {value!r}")
 
 
+class Limits(NamedTuple):
+    """``LaneRelativeParams`` as the kernel reads them (same names)."""
+
+    speed_time_constant: float
+    max_accel: float
+    max_decel: float
+    max_jerk: float
+    brake_jerk: float
+    comfort_decel: float
+    lane_change_time: float
+    lookahead_time: float
+    min_lookahead: float
+    threshold: float
+
+
+class ControllerState(NamedTuple):
+    """A controller's limits and per-agent state (its own arrays, kept between steps)."""
+
+    limits: Limits
+    route_road: np.ndarray  # bool[A, R] roads on each agent's route
+    track: np.ndarray  # int64[A] the lane being followed, -1 none
+    track_s: np.ndarray  # float64[A] where on it at the last step
+    pending: np.ndarray  # int64[A] lane change under way: -1 right, +1 left, 0 none
+    profile_start: np.ndarray  # float64[A] lateral offset to the target lane when it began
+    profile_age: np.ndarray  # float64[A] s since the profile began
+    branch: np.ndarray  # int64[A] remembered fork choice
+
+
+class Targets(NamedTuple):
+    """One call's output per member: acceleration (m/s^2), pure-pursuit curvature (1/m) and the
+    pursued point (world x, y)."""
+
+    accel: np.ndarray  # float64[n]
+    curvature: np.ndarray  # float64[n]
+    target: np.ndarray  # float64[n, 2]
+
+
+declare(ControllerState)
+
+
+@numba.njit(cache=True, nogil=True)
+def _freeze(fields):  # pragma: no cover - compiled
+    """The frozen record of this module's records (see ``smarts.core.records``)."""
+    return freeze_fields(fields)
+
+
 class LaneRelativeController:
     """Per-agent lane-change state and the command -> target conversion for one simulation.
 
@@ -100,6 +149,7 @@ class LaneRelativeController:
         self.profile_age = np.full(n_agents, np.inf)  # s since the profile began
         self.branch = np.zeros(n_agents, dtype=np.int64)  # remembered fork choice
         self._route_road: np.ndarray | None = None
+        self._state = None  # frozen ControllerState, made at the first ``targets``
 
     def reset(self, sim) -> None:
         self.reset_agents(sim, np.arange(self.n))
@@ -123,22 +173,20 @@ class LaneRelativeController:
         """
         if self._route_road is None:
             self.reset(sim)
-        p = self.params
+        if self._state is None:
+            self._state = _freeze(ControllerState(
+                limits=Limits(**{k: float(v) for k, v in asdict(self.params).items()}), route_road=self._route_road,
+                track=self.track, track_s=self.track_s, pending=self.pending, profile_start=self.profile_start,
+                profile_age=self.profile_age, branch=self.branch,
+            ))  # fmt: skip
         cmd = np.clip(np.asarray(commands, dtype=np.float64), -1.0, 1.0)
         n = len(members)
-        accel = np.empty(n)
-        curvature = np.empty(n)
-        target = np.empty((n, 2))
-        rm = sim.road_map
+        out = Targets(accel=np.empty(n), curvature=np.empty(n), target=np.empty((n, 2)))
         _targets_kernel(
-            sim.table.data, sim.table.lane, np.asarray(members, np.int64), np.asarray(rows, np.int64), cmd, dt,
-            p.speed_time_constant, p.max_accel, p.max_decel, p.max_jerk, p.brake_jerk, p.comfort_decel, p.lane_change_time, p.lookahead_time, p.min_lookahead,
-            p.threshold, rm.lane_left, rm.lane_right, rm.lane_width, rm.lane_length, rm.lane_speed_limit, rm.lane_road,
-            rm.lane_internal, rm.succ_offsets, rm.succ, rm.lanepoint_offsets, rm.lanepoints, rm.lanepoint_s,
-            rm.lanepoint_heading, self._route_road, self.track, self.track_s, self.pending, self.profile_start,
-            self.profile_age, self.branch, accel, curvature, target,
+            lanes_record(sim.road_map), self._state, sim.table.data, sim.table.lane, np.asarray(members, np.int64),
+            np.asarray(rows, np.int64), cmd, dt, out,
         )  # fmt: skip
-        return accel, curvature, target[:, 0], target[:, 1]
+        return out.accel, out.curvature, out.target[:, 0], out.target[:, 1]
 
     # ------------------------------------------------------------------ conversions
     def relative_pose_actions(self, sim, members, rows, commands, dt: float) -> np.ndarray:
@@ -219,9 +267,11 @@ def _point_on_lane(offsets, points, point_s, heading, lane, s):  # pragma: no co
 
 
 @numba.njit(cache=True, nogil=True)
-def _turn_of(offsets, heading, lane, nxt, succ_offsets, succ, internal):  # pragma: no cover - compiled
+def _turn_of(lanes, lane, nxt):  # pragma: no cover - compiled
     """Heading change from the end of ``lane`` through the junction that ``nxt`` enters (rad, +
     left): junction lanes with a single successor are followed to the lane leaving the junction."""
+    offsets, heading = lanes.point_offsets, lanes.point_heading
+    succ_offsets, succ, internal = lanes.succ_offsets, lanes.succ, lanes.internal
     end = heading[offsets[lane + 1] - 1]
     cur = nxt
     guard = 0
@@ -237,9 +287,10 @@ def _turn_of(offsets, heading, lane, nxt, succ_offsets, succ, internal):  # prag
 
 
 @numba.njit(cache=True, nogil=True)
-def _next_lane(lane, branch, agent, succ_offsets, succ, lane_road, internal, route_road, lp_offsets, lp_heading):  # pragma: no cover
+def _next_lane(lanes, route_road, lane, branch, agent):  # pragma: no cover - compiled
     """The successor to follow at the end of ``lane``: the default one (on the agent's route, else
     the straightest), or with a branch request the next one to its left (+1) or right (-1)."""
+    succ_offsets, succ, lane_road = lanes.succ_offsets, lanes.succ, lanes.road
     a, b = succ_offsets[lane], succ_offsets[lane + 1]
     if b == a:
         return -1
@@ -248,17 +299,17 @@ def _next_lane(lane, branch, agent, succ_offsets, succ, lane_road, internal, rou
     default, default_key = succ[a], np.inf
     for k in range(a, b):
         nxt = succ[k]
-        turn = _turn_of(lp_offsets, lp_heading, lane, nxt, succ_offsets, succ, internal)
+        turn = _turn_of(lanes, lane, nxt)
         key = abs(turn) + (0.0 if route_road[agent, lane_road[nxt]] else 100.0)
         if key < default_key:
             default, default_key = nxt, key
     if branch == 0:
         return default
-    base = _turn_of(lp_offsets, lp_heading, lane, default, succ_offsets, succ, internal)
+    base = _turn_of(lanes, lane, default)
     best, best_gap = default, np.inf
     for k in range(a, b):
         nxt = succ[k]
-        turn = _turn_of(lp_offsets, lp_heading, lane, nxt, succ_offsets, succ, internal)
+        turn = _turn_of(lanes, lane, nxt)
         gap = (turn - base) * branch
         if abs(turn) < U_TURN and 1e-3 < gap < best_gap:  # a U-turn is never a branch request
             best, best_gap = nxt, gap
@@ -266,8 +317,11 @@ def _next_lane(lane, branch, agent, succ_offsets, succ, lane_road, internal, rou
 
 
 @numba.njit(cache=True, nogil=True)
-def _accel(command, limit, v, previous, dt, tau, max_accel, max_decel, max_jerk, brake_jerk, comfort_decel):  # pragma: no cover - compiled
-    """Towards the target speed ``limit * (1 + command)``, within the acceleration and jerk limits."""
+def _accel(limits, command, limit, v, previous, dt):  # pragma: no cover - compiled
+    """Towards the target speed ``limit * (1 + command)``, within the acceleration and jerk limits
+    (``limits``, a ``Limits``)."""
+    tau, max_accel, max_decel = limits.speed_time_constant, limits.max_accel, limits.max_decel
+    max_jerk, brake_jerk, comfort_decel = limits.max_jerk, limits.brake_jerk, limits.comfort_decel
     target = max(limit, 0.1) * (1.0 + command)
     want = min(max((target - v) / tau, -max_decel), max_accel)
     if target < 0.05 and v < 0.01:  # the last centimetre per second: come to rest
@@ -341,12 +395,23 @@ def _project_near(offsets, points, point_s, lane, x, y, s_hint):  # pragma: no c
 
 
 @numba.njit(cache=True, nogil=True)
-def _targets_kernel(
-    data, lane_col, members, rows, cmd, dt, tau, max_accel, max_decel, max_jerk, brake_jerk, comfort_decel, lc_time, look_time,
-    min_look, threshold, lane_left, lane_right, lane_width, lane_length, speed_limit, lane_road, internal,
-    succ_offsets, succ, lp_offsets, lp_points, lp_s, lp_heading, route_road, track, track_s, pending,
-    profile_start, profile_age, branch, accel_out, kappa_out, target_out,
-):  # pragma: no cover - compiled
+def _targets_kernel(frozen_lanes, frozen_state, data, lane_col, members, rows, cmd, dt, out):  # pragma: no cover - compiled
+    """``LaneRelativeController.targets``: members ``members`` on rows ``rows`` follow ``cmd``
+    (``frozen_lanes``: the map's frozen ``Lanes``; ``frozen_state``: the controller's frozen
+    ``ControllerState``, updated here) into ``out``, a ``Targets``."""
+    lanes, state = view(frozen_lanes), view(frozen_state)
+    limits = state.limits
+    lc_time, look_time, min_look, threshold = (
+        limits.lane_change_time, limits.lookahead_time, limits.min_lookahead, limits.threshold
+    )
+    lane_left, lane_right, lane_width, lane_length, speed_limit = (
+        lanes.left, lanes.right, lanes.width, lanes.length, lanes.speed_limit
+    )
+    succ_offsets = lanes.succ_offsets
+    lp_offsets, lp_points, lp_s, lp_heading = lanes.point_offsets, lanes.points, lanes.point_s, lanes.point_heading
+    route_road, track, track_s, pending = state.route_road, state.track, state.track_s, state.pending
+    profile_start, profile_age, branch = state.profile_start, state.profile_age, state.branch
+    accel_out, kappa_out, target_out = out.accel, out.curvature, out.target
     for i in range(members.shape[0]):
         a, r = members[i], rows[i]
         x, y, h, v = data[_X, r], data[_Y, r], data[_H, r], max(data[_SPEED, r], 0.0)
@@ -360,7 +425,7 @@ def _targets_kernel(
             s, t = _project_near(lp_offsets, lp_points, lp_s, lane, x, y, track_s[a] + v * dt)
             guard = 0
             while s > lane_length[lane] and guard < 16:
-                nxt = _next_lane(lane, branch[a], a, succ_offsets, succ, lane_road, internal, route_road, lp_offsets, lp_heading)
+                nxt = _next_lane(lanes, route_road, lane, branch[a], a)
                 if nxt < 0:
                     break
                 if succ_offsets[lane + 1] - succ_offsets[lane] > 1:
@@ -378,7 +443,7 @@ def _targets_kernel(
                 track[a] = -1
                 kappa_out[i] = 0.0
                 target_out[i, 0], target_out[i, 1] = x + math.cos(h), y + math.sin(h)
-                accel_out[i] = _accel(cmd[i, 0], DEFAULT_SPEED_LIMIT, v, data[_ACCEL, r], dt, tau, max_accel, max_decel, max_jerk, brake_jerk, comfort_decel)
+                accel_out[i] = _accel(limits, cmd[i, 0], DEFAULT_SPEED_LIMIT, v, data[_ACCEL, r], dt)
                 continue
             s, t = _project_near(lp_offsets, lp_points, lp_s, lane, x, y, data[_S, r])
             if abs(t) > 0.1:  # settle onto this lane's centre smoothly
@@ -397,7 +462,7 @@ def _targets_kernel(
                     pending[a] = 0
         track[a] = lane
         track_s[a] = s
-        accel_out[i] = _accel(cmd[i, 0], speed_limit[lane], v, data[_ACCEL, r], dt, tau, max_accel, max_decel, max_jerk, brake_jerk, comfort_decel)
+        accel_out[i] = _accel(limits, cmd[i, 0], speed_limit[lane], v, data[_ACCEL, r], dt)
 
         # A new lane-change request, once the last change is over.
         side = 1 if cmd[i, 1] > threshold else (-1 if cmd[i, 1] < -threshold else 0)
@@ -420,7 +485,7 @@ def _targets_kernel(
         cur = ref
         guard = 0
         while pos > lane_length[cur] and guard < 64:
-            nxt = _next_lane(cur, branch[a], a, succ_offsets, succ, lane_road, internal, route_road, lp_offsets, lp_heading)
+            nxt = _next_lane(lanes, route_road, cur, branch[a], a)
             if nxt < 0:
                 break
             pos -= lane_length[cur]

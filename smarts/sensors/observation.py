@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import gymnasium as gym
 import numba
@@ -52,6 +53,8 @@ import numpy as np
 from smarts.core.events import NUM_EVENTS
 from smarts.core.following import ahead_state, lead_state
 from smarts.core.geometry import wrap_scalar
+from smarts.core.records import declare, freeze_fields, view
+from smarts.core.sim_records import sim_tables
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import COLUMN, Role, VehicleType
 from smarts.sensors.interface import (
@@ -83,6 +86,41 @@ LEAD_FEATURE_NAMES = (
     "accel", "gap",
 )  # fmt: skip
 _VIS_OFF, _VIS_HIDE, _VIS_FLAG = 0, 1, 2
+
+
+class ObserveSetup(NamedTuple):
+    """What one builder's observation kernel reads besides the simulation: its interface's
+    sizes and switches, and the yaw rates it remembers per agent (built once per builder)."""
+
+    offsets: np.ndarray  # int64[W] route points between waypoints
+    radius2: float  # squared neighbour radius
+    extended: bool  # extended neighbour columns
+    vis_mode: int  # _VIS_OFF, _VIS_HIDE or _VIS_FLAG
+    ego_extended: bool  # the angular acceleration column
+    yaw: np.ndarray  # float64[3, A] yaw rate seen, its step, angular acceleration (ego_extended)
+
+
+class BasicObservation(NamedTuple):
+    """The basic keys of one call's observation (``ObservationBuilder.empty_basic``), filled by
+    the kernel."""
+
+    ego: np.ndarray
+    neighbours: np.ndarray
+    neighbour_mask: np.ndarray
+    waypoints: np.ndarray
+    waypoint_mask: np.ndarray
+    goal: np.ndarray
+    signal: np.ndarray
+    events: np.ndarray
+
+
+declare(ObserveSetup)
+
+
+@numba.njit(cache=True, nogil=True)
+def _freeze(fields):  # pragma: no cover - compiled
+    """The frozen record of this module's records (see ``smarts.core.records``)."""
+    return freeze_fields(fields)
 
 
 @dataclass(frozen=True)
@@ -169,10 +207,9 @@ class ObservationBuilder:
         hide = interface.occlusion.enabled and interface.occlusion.mode == "hide"
         self.rasters = RasterSensor(interface.rasters, hide) if interface.rasters is not None else None
         self.lidar = LidarSensor(interface.lidar, stream) if interface.lidar is not None else None
-        self._lane_info_map = None
-        self._lane_info_cache = np.zeros((0, 4))
         self._no_visible = np.zeros((1, 1), dtype=np.float32)
         self._yaw = np.zeros((3, 0))  # previous yaw rate, its step, angular acceleration per agent
+        self._setup = None  # frozen ObserveSetup (rebuilt when _yaw is)
         self.space = self._space(k, w)
 
     def _space(self, k: int, w: int) -> gym.spaces.Dict:
@@ -217,7 +254,6 @@ class ObservationBuilder:
 
     def build(self, sim: Simulation, agents: np.ndarray) -> dict[str, np.ndarray]:
         interface = self.interface
-        ma = sim.mission_arrays
         n = len(agents)
         rows = sim.agent_row[agents]
         shadows: Shadows | None = self.shadows.scan(sim, agents, rows) if self.shadows is not None else None
@@ -225,16 +261,18 @@ class ObservationBuilder:
         if interface.ego.extended and self._yaw.shape[1] != len(sim.agent_ids):
             self._yaw = np.zeros((3, len(sim.agent_ids)))
             self._yaw[1] = -2.0
+            self._setup = None
+        if self._setup is None:
+            self._setup = _freeze(ObserveSetup(
+                offsets=self._offsets, radius2=float(interface.neighbours.radius**2),
+                extended=bool(interface.neighbours.extended), vis_mode=self._vis_mode,
+                ego_extended=bool(interface.ego.extended), yaw=self._yaw,
+            ))  # fmt: skip
         scope = sim.scope(agents)
+        visible = shadows.visible if shadows is not None and self._vis_mode != _VIS_OFF else self._no_visible
         _observe(
-            sim.table.data, sim.table.lane, sim.table.role, sim.table.vtype, scope.alive, scope.lo, scope.hi,
-            scope.base, agents, rows, self._lane_info(sim.road_map), ma.flat_paths, ma.flat_valid, ma.stride,
-            sim.route_index, self._offsets, ma.goal_kind, ma.goal_xy, ma.route_length,
-            sim.route_progress, ma.signal_via, ma.signal_s, sim.via_colour, sim.agent_episode, sim.agent_events,
-            interface.neighbours.radius**2, interface.neighbours.extended,
-            shadows.visible if shadows is not None and self._vis_mode != _VIS_OFF else self._no_visible,
-            self._vis_mode, interface.ego.extended, self._yaw, sim.episode_step, sim.dt,
-            *obs.values(),
+            sim_tables(sim), self._setup, scope.alive, scope.lo, scope.hi, scope.base, agents, rows, visible,
+            BasicObservation(**obs),
         )  # fmt: skip
         if not interface.signals:
             del obs["signal"]
@@ -248,16 +286,6 @@ class ObservationBuilder:
         if self.lidar is not None:
             obs.update(self.lidar.observe(sim, agents, rows))
         return obs
-
-    def _lane_info(self, rm) -> np.ndarray:
-        """(width, speed limit, road, index on the road) per lane, stacked once per map."""
-        if self._lane_info_map is not rm:
-            self._lane_info_cache = np.stack(
-                [rm.lane_width, rm.lane_speed_limit, rm.lane_road.astype(np.float64), rm.lane_index.astype(np.float64)],
-                axis=1,
-            )
-            self._lane_info_map = rm
-        return self._lane_info_cache
 
 
 def lead_features(sim: Simulation, agents: np.ndarray) -> np.ndarray:
@@ -273,15 +301,24 @@ def lead_features(sim: Simulation, agents: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def _observe(
-    data, lane, role, vtype, alive, alive_lo, alive_hi, row_base, agents, rows, lane_info, flat_paths, flat_valid,
-    stride, route_index, offsets, goal_kind, goal_xy, route_length, route_progress, signal_via, signal_s,
-    via_colours, agent_episode, events, radius2, extended, visible, vis_mode, ego_extended, yaw, episode_step, dt,
-    ego, neighbours, neighbour_mask, waypoints, waypoint_mask, goal, signal, events_out,
-):  # pragma: no cover - compiled
+def _observe(tables, setup, alive, alive_lo, alive_hi, row_base, agents, rows, visible, out):  # pragma: no cover - compiled
     """The basic observation of each agent ``agents[i]`` (row ``rows[i]``) among the live rows of
     its own episode (``alive[alive_lo[i]:alive_hi[i]]``; ``visible`` is indexed by the row within
-    the episode, ``row - row_base[i]``), with its episode's signal colours and step."""
+    the episode, ``row - row_base[i]``), with its episode's signal colours and step: from
+    ``tables`` (a frozen ``SimTables``) and ``setup`` (a frozen ``ObserveSetup``) into ``out``
+    (a ``BasicObservation``)."""
+    t, c = view(tables), view(setup)
+    data, lane, role, vtype = t.table.data, t.table.lane, t.table.role, t.table.vtype
+    lanes, ms, ag = t.lanes, t.missions, t.agents
+    flat_paths, flat_valid, stride, route_index = ms.flat_paths, ms.flat_valid, ms.stride, ag.route_index
+    goal_kind, goal_xy, route_length, route_progress = ms.goal_kind, ms.goal_xy, ms.route_length, ag.route_progress
+    signal_via, signal_s, via_colours = ms.signal_via, ms.signal_s, t.episodes.via_colour
+    agent_episode, events, episode_step, dt = ag.episode, ag.events, t.episodes.step, t.dt
+    offsets, radius2, extended, vis_mode, ego_extended, yaw = (
+        c.offsets, c.radius2, c.extended, c.vis_mode, c.ego_extended, c.yaw
+    )
+    ego, neighbours, neighbour_mask, waypoints = out.ego, out.neighbours, out.neighbour_mask, out.waypoints
+    waypoint_mask, goal, signal, events_out = out.waypoint_mask, out.goal, out.signal, out.events
     k_max = neighbours.shape[1]
     vis_col = neighbours.shape[2] - 1
     near_d2 = np.empty(k_max)
@@ -305,8 +342,8 @@ def _observe(
         ego[i, 6] = wrap_scalar(h - data[_LANE_HEADING, r])
         ego[i, 7] = data[_T, r]
         ln = lane[r]
-        ego[i, 8] = lane_info[ln, 0] if ln >= 0 else 0.0
-        ego[i, 9] = lane_info[ln, 1] if ln >= 0 else 0.0
+        ego[i, 8] = lanes.width[ln] if ln >= 0 else 0.0
+        ego[i, 9] = lanes.speed_limit[ln] if ln >= 0 else 0.0
         ego[i, 10] = data[_LENGTH, r]
         ego[i, 11] = data[_WIDTH, r]
         if ego_extended:
@@ -356,8 +393,8 @@ def _observe(
                 neighbours[i, q, 10] = data[_ACCEL, j]
                 neighbours[i, q, 11] = data[_YAW_RATE, j]
                 lj = lane[j]
-                neighbours[i, q, 12] = lane_info[lj, 3] if lj >= 0 else -1.0
-                neighbours[i, q, 13] = 1.0 if lj >= 0 and ln >= 0 and lane_info[lj, 2] == lane_info[ln, 2] else 0.0
+                neighbours[i, q, 12] = float(lanes.index[lj]) if lj >= 0 else -1.0
+                neighbours[i, q, 13] = 1.0 if lj >= 0 and ln >= 0 and lanes.road[lj] == lanes.road[ln] else 0.0
                 if 0 <= vtype[j] < _NUM_TYPES:
                     neighbours[i, q, 14 + vtype[j]] = 1.0
             if vis_mode != _VIS_OFF:
@@ -389,10 +426,10 @@ def _observe(
 
         signal[i] = 0.0
         here = a * stride + route_index[a]
-        via = signal_via.ravel()[here]
+        via = signal_via[here]
         if via >= 0 and via_colour[via] > 0:
             signal[i, via_colour[via] - 1] = 1.0  # colours RED=1, YELLOW=2, GREEN=3
-            signal[i, 3] = max(signal_s.ravel()[here] - route_progress[a], 0.0)
+            signal[i, 3] = max(signal_s[here] - route_progress[a], 0.0)
         for e in range(events.shape[1]):
             events_out[i, e] = events[a, e]
 
