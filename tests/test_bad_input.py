@@ -262,3 +262,111 @@ def test_viewer_skips_bad_recordings_in_a_folder_with_one_warning_each(tmp_path)
     assert len(warnings) == len(bad), err
     for name, problem in bad.items():
         assert any(f"{tmp_path / name}: " in w and problem in w for w in warnings), (name, warnings)
+
+
+# ---------------------------------------------------------------------------- batched actions and step order
+def _two_agent_copies(copies: int):
+    from tests.builders import agent, make_spec
+
+    spec = make_spec([agent(lane=0, offset=10.0), agent(lane=1, offset=10.0)], episode_steps=30)
+    return [spec] * copies
+
+
+def _escaped_shape(shape: tuple) -> str:
+    import re
+
+    return re.escape(str(tuple(shape)))
+
+
+@pytest.mark.parametrize("copies, bad_shape", [(2, (12,)), (3, (3, 6))], ids=["flat-12-for-4x3", "3x6-for-6x3"])
+def test_sb3_vec_env_refuses_actions_that_only_reshape_into_place(copies, bad_shape):
+    """12 numbers for 4 slots of 3, or (3, 6) for (6, 3), hold the right count but not one row per
+    slot: refused naming the expected shape, and no copy moves."""
+    import numpy as np
+
+    from smarts.core.errors import ActionError
+    from smarts.env.sb3_vec_env import SmartsVecEnv
+
+    vec = SmartsVecEnv(_two_agent_copies(copies), normalize_actions=True)
+    try:
+        vec.reset()
+        slots = 2 * copies
+        with pytest.raises(ActionError, match=rf"SmartsVecEnv: actions: expected shape \({slots}, 3\) .* got shape {_escaped_shape(bad_shape)}"):
+            vec.step(np.zeros(bad_shape, dtype=np.float32))
+        assert vec.driving.groups[0].sim.episode_step.tolist() == [0] * copies
+        vec.step(np.zeros((slots, 3), dtype=np.float32))
+        assert vec.driving.groups[0].sim.episode_step.tolist() == [1] * copies
+    finally:
+        vec.close()
+
+
+@pytest.mark.parametrize("adapter", ["SmartsVecEnv", "SmartsBatchedEnv", "BatchedDriving"])
+def test_text_and_object_actions_are_one_clear_action_error(adapter):
+    """Text, objects, bools or complex numbers as actions: an ``ActionError`` naming the dtype
+    (not numpy's ``ufunc 'isfinite'`` TypeError), and nothing moves."""
+    import numpy as np
+    import torch
+
+    from smarts.core.errors import ActionError
+    from smarts.env.batched import BatchedDriving
+    from smarts.env.sb3_vec_env import SmartsVecEnv
+    from smarts.env.torchrl_env import SmartsBatchedEnv
+
+    specs = _two_agent_copies(2)
+    if adapter == "SmartsVecEnv":
+        env = SmartsVecEnv(specs, normalize_actions=True)
+        driving = env.driving
+        env.reset()
+        bad = [np.full((4, 3), "1.0"), np.full((4, 3), None, dtype=object), np.ones((4, 3), dtype=bool)]
+        step = env.step
+    elif adapter == "SmartsBatchedEnv":
+        env = SmartsBatchedEnv(specs)
+        driving = env.driving
+        td = env.reset()
+        bad = [torch.ones(4, 3, dtype=torch.bool), torch.ones(4, 3, dtype=torch.complex64)]
+
+        def step(action):
+            return env.step(td.clone().set("action", action))
+    else:
+        env = driving = BatchedDriving(specs)
+        env.reset()
+        bad = [np.full((4, 3), "1.0"), np.full((4, 3), None, dtype=object), np.ones((4, 3), dtype=bool)]
+        step = env.step
+    try:
+        for action in bad:
+            with pytest.raises(ActionError, match=r"actions: expected real numbers.*got dtype"):
+                step(action)
+        assert driving.groups[0].sim.episode_step.tolist() == [0, 0]
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("env_class", ["DrivingParallelEnv", "BatchedDriving", "SmartsBatchedEnv", "SmartsVecEnv"])
+def test_step_before_reset_names_what_to_call(env_class):
+    """Every env refuses a step before its first reset with the same words: which env, and that
+    reset() comes first (the batched core used to step nothing and return zeros)."""
+    import numpy as np
+
+    from smarts.env import DrivingParallelEnv
+    from smarts.env.batched import BatchedDriving
+    from smarts.env.sb3_vec_env import SmartsVecEnv
+    from smarts.env.torchrl_env import SmartsBatchedEnv
+
+    specs = _two_agent_copies(2)
+    if env_class == "DrivingParallelEnv":
+        env = DrivingParallelEnv(specs[0])
+        step = lambda: env.step({"agent_0": np.zeros(3), "agent_1": np.zeros(3)})  # noqa: E731
+    elif env_class == "BatchedDriving":
+        env = BatchedDriving(specs)
+        step = lambda: env.step(np.zeros((4, 3)))  # noqa: E731
+    elif env_class == "SmartsBatchedEnv":
+        env = SmartsBatchedEnv(specs)
+        step = lambda: env.step(env.full_action_spec.zero())  # noqa: E731
+    else:
+        env = SmartsVecEnv(specs)
+        step = lambda: env.step(np.zeros((4, 3)))  # noqa: E731
+    try:
+        with pytest.raises(RuntimeError, match=rf"^{env_class}\.step\(\) before reset\(\): call reset\(\) first$"):
+            step()
+    finally:
+        env.close()

@@ -31,13 +31,46 @@ def test_benchmark_on_ray_scores_the_same_as_the_process_pool(tmp_path):
 
 
 def test_ppo_with_ray_collectors_writes_a_final_checkpoint(tmp_path):
+    """On the batched backend (per_env builds the same env): the two collectors' shares hold one
+    and two learning agents, padded to one batch shape."""
     out = tmp_path / "run"
-    args = ["ppo", "--task", "platoon", "--total-steps", "256", "--frames-per-batch", "128", "--minibatch-size", "64",
-            "--epochs", "1", "--envs", "2", "--workers", "2", "--eval-episodes", "0", "--ray-address", "local",
-            "--out-dir", str(out), "--quiet"]  # fmt: skip
+    args = ["ppo", "--task", "platoon", "--backend", "batched", "--total-steps", "256", "--frames-per-batch", "128",
+            "--minibatch-size", "64", "--epochs", "1", "--envs", "2", "--workers", "2", "--eval-episodes", "0",
+            "--ray-address", "local", "--out-dir", str(out), "--quiet"]  # fmt: skip
     assert main(args) == 0
     blob = torch.load(out / "final.pt", weights_only=True)
-    assert blob["step"] == 256 and blob["config"]["ray_address"] == "local"
+    assert blob["step"] == 256 and blob["config"]["ray_address"] == "local" and blob["config"]["backend"] == "batched"
+
+
+def test_ray_collectors_play_the_copies_episodes_of_a_run_without_ray():
+    """The one seeding rule across collectors: each collector's env numbers its copies as in the
+    whole batch, so copy i starts at the same seed (and gives the same first observation) as in
+    the env training builds without Ray; padding slots stay zero and invalid."""
+    from train.config import load_config
+    from train.ppo import make_env, ray_env_factories
+
+    cfg = load_config("platoon", overrides={"envs": 4, "workers": 2, "ray_address": "local"})
+    whole = make_env(cfg.model_copy(update={"workers": 1}))
+    shares = [factory() for factory in ray_env_factories(cfg)]
+    try:
+        first = whole.reset()
+        slot = {key: j for j, key in enumerate(whole.base_env.slots)}
+        for w, env in enumerate(shares):
+            assert env.batch_size == torch.Size([3])  # copies (0, 2): 1 + 1 agents, padded; (1, 3): 2 + 1
+            td = env.reset()
+            own = env.base_env.driving
+            assert own.copy_ids == list(range(w, 4, 2))
+            for j, (copy, agent) in enumerate(env.base_env.slots):
+                if copy < 0:
+                    assert not td["valid"][j].any() and not td["observation", "ego"][j].any()
+                    continue
+                global_slot = slot[(own.copy_ids[copy], agent)]
+                assert torch.equal(td["observation", "ego"][j], first["observation", "ego"][global_slot])
+        assert any((-1, "") in env.base_env.slots for env in shares)
+    finally:
+        whole.close()
+        for env in shares:
+            env.close()
 
 
 def test_ray_collectors_need_envs_divisible_by_workers(tmp_path, capsys):

@@ -105,9 +105,8 @@ def test_device_names_a_place_for_the_batched_backends_torch_stages(tmp_path, ca
     assert load_config(path=path).device == "cuda:1"
     with pytest.raises(ConfigError, match=r"--device: device: unknown device 'gpu'; expected one of cpu, torch-cpu, cuda, cuda:N"):
         load_config("platoon", overrides={"backend": "batched", "device": "gpu"})
-    for device in ("cuda", "torch-cpu"):  # the per-env path has no torch stages
-        with pytest.raises(ConfigError, match="--device: device: only the batched backend has torch stages"):
-            load_config("platoon", overrides={"backend": "per_env", "device": device})
+    for device in ("cuda", "torch-cpu"):  # both backends build the one batched env, with its torch stages
+        assert load_config("platoon", overrides={"backend": "per_env", "device": device}).device == device
     # ...but training refuses it, before any run folder is made, where torch sees no GPU.
     if not torch.cuda.is_available():
         out = tmp_path / "run"
@@ -122,11 +121,14 @@ def test_both_trainers_hand_the_device_to_the_batched_backend():
     from train.ppo import make_env
     from train.sb3_ppo import make_vec_env
 
-    def agent_device(driving):
-        return {p.device for group in driving.groups for p in group.sim.providers}
+    from smarts.dynamics.agent_provider import AgentProvider
 
-    for device, expected in (("torch-cpu", torch.device("cpu")), ("cpu", None)):
-        cfg = load_config("platoon", overrides={"backend": "batched", "device": device, "envs": "2"})
+    def agent_device(driving):
+        return {p.device for group in driving.groups for p in group.sim.providers if isinstance(p, AgentProvider)}
+
+    for backend, device, expected in (("batched", "torch-cpu", torch.device("cpu")), ("per_env", "torch-cpu", torch.device("cpu")),
+                                      ("batched", "cpu", None)):  # fmt: skip
+        cfg = load_config("platoon", overrides={"backend": backend, "device": device, "envs": "2"})
         env = make_env(cfg)
         try:
             assert agent_device(env.base_env.driving) == {expected}

@@ -148,12 +148,15 @@ class TrainConfig(Schema):
     lib: Literal[LIBS] = Field("torchrl", description="torchrl | sb3 (Stable-Baselines3's PPO).")
     backend: Literal[BACKENDS] = Field(
         "per_env",
-        description="per_env: one simulation per scenario copy | batched: all copies, whatever their maps, stepped as one "
-        "vectorised simulation (smarts.env.batched; built-in traffic only, not with ray_address).",
+        description="batched: every copy, whatever its map, in one simulation of the batched core in this process (a "
+        "SUMO copy in a worker process of its own, as libsumo holds one simulation per process), or spread over "
+        "workers processes when workers > 1 | per_env: the same (kept for configs that name it: an episode gives the "
+        "same bits whatever it is stepped beside, so one simulation per copy would only be slower). With ray_address "
+        "each collector steps its share the same way.",
     )
     device: str = Field(
         "cpu",
-        description="Where the simulation stages that have a torch version run (batched backend only): cpu: the "
+        description="Where the simulation stages that have a torch version run (either backend): cpu: the "
         "compiled numpy kernels | torch-cpu: the torch stages on the CPU (to check them) | cuda, cuda:N: the torch "
         "stages on that GPU (refused when torch sees none).",
     )
@@ -162,7 +165,9 @@ class TrainConfig(Schema):
         16, description="Scenario copies stepped together (in this process, or split over workers)."
     )
     workers: PositiveInt = Field(
-        1, description="Processes that step the envs (<= envs); with ray_address, the Ray collectors."
+        1,
+        description="Processes that step the envs (<= envs): 1 steps them in this process, N > 1 in N worker processes, "
+        "each one simulation of its share; with ray_address, the Ray collectors.",
     )
     seed: NonNegativeInt = Field(0, description="Seed of torch, numpy and the training episodes.")
     frames_per_batch: PositiveInt = Field(2048, description="Env steps collected for each PPO update.")
@@ -277,18 +282,9 @@ class TrainConfig(Schema):
 
     @field_validator("device")
     @classmethod
-    def _device_name(cls, name: str, info: ValidationInfo) -> str:
+    def _device_name(cls, name: str) -> str:
         check_device_name(name)  # whether the GPU is there is asked when the envs are built
-        if name != "cpu" and info.data.get("backend") == "per_env":
-            raise ValueError("only the batched backend has torch stages; use backend: batched, or device: cpu")
         return name
-
-    @field_validator("ray_address")
-    @classmethod
-    def _ray_per_env(cls, address: str | None, info: ValidationInfo) -> str | None:
-        if address is not None and info.data.get("backend") == "batched":
-            raise ValueError("Ray collectors step per-env copies; use backend: per_env with ray_address")
-        return address
 
     @field_validator("interface")
     @classmethod

@@ -35,7 +35,7 @@ import torch
 from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.collectors import Collector
-from torchrl.envs import ParallelEnv, RewardSum, TransformedEnv
+from torchrl.envs import RewardSum, TransformedEnv
 from torchrl.modules import IndependentNormal, ProbabilisticActor, ValueOperator
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
@@ -52,56 +52,43 @@ from agents.ppo import (
 )
 from smarts.env.task_rewards import reward_factory
 from smarts.dynamics.pose_control_torch import resolve_device
-from smarts.env.batched.torchrl_env import BatchedTorchRLEnv
 from smarts.env.torchrl_env import SmartsBatchedEnv
 from train.config import ACTION_SPACES, TrainConfig
-from train.run import TRAIN_SEED_BASE, Run, check_resume, interface_dict, lane_relative_dict, scenario_names, training_specs
+from train.run import TRAIN_SEED_BASE, Run, check_resume, interface_dict, lane_relative_dict, training_specs
+
 
 def env_options(cfg: TrainConfig) -> dict:
-    """What every training env copy gets besides its scenario: observation and task reward."""
+    """What every training env copy gets besides its scenario: observation, task reward,
+    lane-relative settings and where the simulation's torch stages run."""
     return {
         "observation": cfg.observation_interface(),
         "reward_factory": reward_factory(cfg.reward_weights()),
         "lane_relative": cfg.lane_relative_params(),
+        "sim_device": cfg.device,
     }
 
 
+def env_workers(cfg: TrainConfig) -> int:
+    """``BatchedDriving``'s ``workers`` for the config: ``workers: 1`` steps the copies in this
+    process (0 worker processes), N > 1 spreads them over N processes. Both backends build the same
+    env (``TrainConfig.backend``); SUMO copies always get a worker process of their own."""
+    return cfg.workers if cfg.workers > 1 else 0
+
+
 def check_env_split(cfg: TrainConfig, specs: list) -> None:
-    """Refuse, before anything is built or written, copies that cannot be split as configured (and
-    a ``device`` whose GPU is not there)."""
+    """Refuse, before anything is built or written, a ``device`` whose GPU is not there. (Any split
+    of the copies over workers works: each worker process steps its share as one simulation, and
+    SUMO copies run in processes of their own.)"""
     resolve_device(cfg.device)
-    if cfg.backend == "per_env" and any(s.traffic is not None and s.traffic.engine == "sumo" for s in specs) and cfg.workers < cfg.envs:
-        raise ValueError("SUMO scenarios run one per process: set workers equal to envs")
-    if cfg.workers > 1:
-        per = [specs[w :: cfg.workers] for w in range(cfg.workers)]
-        slots = [sum(not a.is_social for spec in p for a in spec.agents) for p in per]
-        if len(set(slots)) > 1:  # torchrl's ParallelEnv stacks equal batches only
-            scenarios = len(scenario_names(cfg.scenarios))
-            raise ValueError(
-                f"workers: the {cfg.envs} env copies split over {cfg.workers} workers give them {slots} learning "
-                f"agents; every worker needs the same number (set envs to a multiple of workers x scenarios = "
-                f"{cfg.workers * scenarios}, or workers 1)"
-            )
 
 
 def make_env(cfg: TrainConfig, specs: list | None = None) -> TransformedEnv:
     """``envs`` scenario copies (cycling through the task's scenarios; ``specs`` when already
-    built) stepped as one batched env in this process, or, with ``workers`` > 1, that many such
-    batches in worker processes (needed for SUMO traffic: one SUMO per process)."""
+    built) as one ``SmartsBatchedEnv`` whatever the backend: one simulation of every copy in this
+    process, or spread over ``workers`` processes (``env_workers``)."""
     specs = training_specs(cfg) if specs is None else specs
     check_env_split(cfg, specs)
-    options = env_options(cfg)
-    # backend batched: all copies as one vectorised simulation, whatever their maps (same keys and seeds)
-    batch_env = BatchedTorchRLEnv if cfg.backend == "batched" else SmartsBatchedEnv
-    if cfg.backend == "batched":
-        options["sim_device"] = cfg.device  # where its torch stages run
-    if cfg.workers > 1:
-        per = [specs[w :: cfg.workers] for w in range(cfg.workers)]
-        base = ParallelEnv(cfg.workers, [functools.partial(batch_env, p, **options) for p in per],
-                           mp_start_method="spawn")  # fmt: skip
-    else:
-        base = batch_env(specs, **options)
-    env = TransformedEnv(base, RewardSum())
+    env = TransformedEnv(SmartsBatchedEnv(specs, workers=env_workers(cfg), **env_options(cfg)), RewardSum())
     env.set_seed(TRAIN_SEED_BASE + cfg.seed * 1_000_003)
     return env
 
@@ -115,19 +102,21 @@ def transformed_batched_env(specs: list, seed: int, options: dict) -> Transforme
 
 
 def ray_env_factories(cfg: TrainConfig) -> list:
-    """Per Ray collector, a picklable factory of its share of the ``envs`` scenario copies."""
+    """Per Ray collector, a picklable factory of its share of the ``envs`` scenario copies, the
+    same for both backends. Each share keeps its copies' numbers in the whole batch
+    (``copy_ids``), so with the one training seed every copy plays the episodes it plays without
+    Ray."""
     if cfg.envs % cfg.workers or cfg.frames_per_batch % cfg.workers:
         raise ValueError(f"with ray_address, envs ({cfg.envs}) and frames_per_batch ({cfg.frames_per_batch}) "
                          f"must be multiples of workers ({cfg.workers})")  # fmt: skip
     specs = training_specs(cfg)
-    per = [specs[w :: cfg.workers] for w in range(cfg.workers)]
-    base = TRAIN_SEED_BASE + cfg.seed * 1_000_003
+    shares = [list(range(w, cfg.envs, cfg.workers)) for w in range(cfg.workers)]
+    seed = TRAIN_SEED_BASE + cfg.seed * 1_000_003
     # Ray stacks the collectors' batches: pad every collector to the same number of slots.
-    slots = max(sum(not a.is_social for spec in p for a in spec.agents) for p in per)
-    options = {**env_options(cfg), "slots": slots}
-    # Seeds spaced apart per collector so their copies never share an episode seed.
-    return [functools.partial(transformed_batched_env, p, base + w * 10_000_019, options)
-            for w, p in enumerate(per)]  # fmt: skip
+    slots = max(sum(not a.is_social for i in share for a in specs[i].agents) for share in shares)
+    return [functools.partial(transformed_batched_env, [specs[i] for i in share], seed,
+                              {**env_options(cfg), "slots": slots, "copy_ids": share})
+            for share in shares]  # fmt: skip
 
 
 class RewardScaler:

@@ -33,27 +33,27 @@ if TYPE_CHECKING:
     from smarts.env.sb3_vec_env import SmartsVecEnv
 
 
-def make_vec_env(cfg: TrainConfig):
-    import functools
+TRAINING_SEED_OFFSET = 1_000_003
+"""Training seeds of run seed ``s`` start at ``TRAIN_SEED_BASE + s * TRAINING_SEED_OFFSET`` (as torchrl's)."""
 
-    from smarts.env import DrivingParallelEnv
+
+def training_seed(cfg: TrainConfig) -> int:
+    """The seed of the training episodes (copy ``i`` then counts up from ``+ i * 100_003``)."""
+    return TRAIN_SEED_BASE + cfg.seed * TRAINING_SEED_OFFSET
+
+
+def make_vec_env(cfg: TrainConfig) -> "SmartsVecEnv":
+    """``envs`` scenario copies as one ``SmartsVecEnv`` whatever the backend, as the torchrl
+    trainer builds them (``train.ppo.make_env``): one simulation of every copy in this process, or
+    spread over ``workers`` processes; SUMO copies always in processes of their own."""
     from smarts.env.sb3_vec_env import SmartsVecEnv
-    from smarts.env.task_rewards import TaskReward
+    from smarts.env.task_rewards import reward_factory
 
-    interface, weights, lane = cfg.observation_interface(), cfg.reward_weights(), cfg.lane_relative_params()
-    if cfg.backend == "batched":  # all copies as one vectorised simulation, whatever their maps
-        from smarts.env.batched.sb3_vec_env import BatchedVecEnv
-        from smarts.env.task_rewards import reward_factory
-
-        return BatchedVecEnv(training_specs(cfg), observation=interface, reward_factory=reward_factory(weights),
-                             lane_relative=lane, seed=TRAIN_SEED_BASE + cfg.seed * 1_000_003, normalize_actions=True,
-                             sim_device=cfg.device)  # fmt: skip
-    factories = [
-        functools.partial(DrivingParallelEnv, spec, observation=interface, reward=TaskReward(weights), lane_relative=lane)
-        for spec in training_specs(cfg)
-    ]  # every learning agent of every copy is one slot
-    return SmartsVecEnv(factories, seed=TRAIN_SEED_BASE + cfg.seed * 1_000_003, normalize_actions=True,
-                        processes=cfg.workers > 1)  # fmt: skip
+    workers = cfg.workers if cfg.workers > 1 else 0  # workers: 1 is this process (as train.ppo.env_workers)
+    return SmartsVecEnv(training_specs(cfg), observation=cfg.observation_interface(),
+                        reward_factory=reward_factory(cfg.reward_weights()), lane_relative=cfg.lane_relative_params(),
+                        sim_device=cfg.device, workers=workers, seed=training_seed(cfg),
+                        normalize_actions=True)  # fmt: skip
 
 
 def build_model(cfg: TrainConfig, vec: "SmartsVecEnv") -> "PPO":
@@ -81,6 +81,7 @@ def build_model(cfg: TrainConfig, vec: "SmartsVecEnv") -> "PPO":
         device="cpu",
         verbose=0,
     )
+    vec.seed(training_seed(cfg))  # PPO(seed=...) seeded the env with the run seed: the training episodes keep theirs
     size = model.policy.log_std.numel()  # the same starting exploration as the torchrl trainer
     if len(cfg.init_log_std) not in (1, size):
         raise ValueError(f"init_log_std: expected 1 or {size} values (one per action component), got {cfg.init_log_std}")

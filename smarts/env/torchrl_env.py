@@ -1,20 +1,23 @@
-"""A TorchRL environment over ``DrivingParallelEnv``, and batched copies of it in worker processes.
+"""TorchRL environments: one scenario (``SmartsTorchRLEnv``, over ``DrivingParallelEnv``) and
+scenario copies as slots (``SmartsBatchedEnv``, over the batched core ``BatchedDriving``).
 
 Multi-agent scenarios put every per-agent entry under one agent group (``"agents"`` by default)
 with a leading agent dimension of ``len(possible_agents)``: agents finish at different times, so a
 fixed-size group plus a live ``mask`` keeps the tensor shapes constant over an episode. A scenario
 with one learning agent (or ``single_agent=True``) uses the flat keys of a single-agent env.
 
-libsumo runs one SUMO per process, so environments with SUMO traffic are batched with worker
-processes (``make_parallel_env``); ``make_serial_env`` batches in this process (no SUMO traffic,
-or one env).
+``SmartsBatchedEnv`` is the batched env to train with: every learning agent of every copy is a
+slot, and copies with SUMO traffic run in worker processes of their own behind it. TorchRL's own
+batching of ``SmartsTorchRLEnv`` stays available: libsumo runs one SUMO per process, so
+``make_parallel_env`` puts each copy in a worker process; ``make_serial_env`` steps copies in this
+process (no SUMO traffic, or one env).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,11 +28,11 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, TensorSpec, Unbounded
 from torchrl.envs import EnvBase, ParallelEnv, SerialEnv
 
-from smarts.core.errors import ActionError
 from smarts.core.simulation import check_seed, derived_seed
-from smarts.dynamics.action_spaces import REAL_KINDS
 from smarts.env.assembly import as_spec
+from smarts.env.batched.driving import BatchedDriving
 from smarts.env.parallel_env import DrivingParallelEnv
+from smarts.env.slots import check_slot_actions, not_started
 from smarts.scenario import ScenarioSpec
 
 ScenarioSource = str | Path | ScenarioSpec | DrivingParallelEnv
@@ -368,12 +371,15 @@ def make_serial_env(
 
 
 class SmartsBatchedEnv(EnvBase):
-    """Every learning agent of K scenario copies as one slot of a TorchRL env of batch size [slots].
+    """Every learning agent of K scenario copies as one slot of a TorchRL env of batch size [slots],
+    over the batched core (``smarts.env.batched.BatchedDriving``).
 
     For collection throughput and parameter sharing: one TensorDict per step for all slots, the
-    observations stacked with one copy per key. Each copy may run a different scenario with any
-    number of learning agents (same observation/action spaces); every agent of every copy is a
-    slot, driven by the one shared policy.
+    observations built straight into [slots, ...] arrays. Each copy may run a different scenario
+    (map, traffic, SUMO or built-in) with any number of learning agents; every agent of every copy
+    is a slot, driven by the one shared policy. The observation spaces must agree; action spaces
+    may differ (then ``action`` is [slots, widest action] and its ``Bounded`` spec bounds each
+    slot's row by its own space; a narrower action reads its first columns).
 
     Agents of a copy finish at different times: a slot whose agent has finished *waits* (its
     observation is zeros, its actions are ignored, its reward is 0) until every agent of its copy
@@ -382,153 +388,148 @@ class SmartsBatchedEnv(EnvBase):
     taken from it is a real transition: training drops the others. ``agent_steps`` counts the
     steps of the slot's current episode (the episode length when ``done``).
 
-    Seeding: ``set_seed(s)`` makes copy ``i`` start at seed ``s + i * 100_003`` and count up by one
-    per episode (modulo 2**64), so the same seed gives the same rollout; ``s`` is an integer from 0
-    to 2**64 - 1, else ``ValueError`` naming it. Built-in traffic only (libsumo allows one
-    SUMO per process: SUMO scenarios need ``make_parallel_env`` or one copy per worker process).
-    ``reward_factory`` builds one reward function per copy (``smarts.env.task_rewards``);
+    Seeding is ``BatchedDriving``'s: ``set_seed(s)`` makes copy ``i`` start at seed
+    ``s + i * 100_003`` and count up by one per episode (modulo 2**64), so the same seed gives the
+    same rollout; ``s`` is an integer from 0 to 2**64 - 1, else ``ValueError`` naming it.
+    ``reward_factory`` builds one task reward per simulation (``smarts.env.task_rewards``);
     ``slots`` pads the batch with slots that never act (always invalid) up to that many, so that
-    batches of different scenarios can be stacked (Ray collectors); ``env_kwargs`` go to every
-    ``DrivingParallelEnv``.
+    batches of different scenarios can be stacked (Ray collectors); ``options`` go to
+    ``BatchedDriving`` (``observation``, ``limits``, ``lane_relative``, ``sim_device``,
+    ``policy_resolver``, ``workers``, ``copy_ids``): a SUMO copy always runs in a worker process of
+    its own (libsumo holds one simulation per process), ``workers`` > 0 spreads the others over
+    that many processes.
     """
 
     def __init__(
         self,
-        scenarios: list[ScenarioSource],
+        scenarios: Sequence[str | Path | ScenarioSpec],
         *,
         reward_factory: Callable[[], Any] | None = None,
         slots: int | None = None,
         device: torch.device | str = "cpu",
-        **env_kwargs: Any,
+        **options: Any,
     ):
         if not scenarios:
             raise ValueError("SmartsBatchedEnv needs at least one scenario")
-        self.envs = [
-            DrivingParallelEnv(
-                as_spec(s) if not isinstance(s, DrivingParallelEnv) else s.scenario,
-                reward=reward_factory() if reward_factory is not None else None,
-                **env_kwargs,
-            )
-            for s in scenarios
-        ]
-        self.slots: list[tuple[int, str]] = [(i, a) for i, env in enumerate(self.envs) for a in env.possible_agents]
-        if slots is not None:
-            if slots < len(self.slots):
-                raise ValueError(f"slots: {slots} is fewer than the {len(self.slots)} learning agents of the scenarios")
-            self.slots += [(-1, "")] * (slots - len(self.slots))  # padding: never acts, always invalid
-        k = len(self.slots)
+        built = [s for s in scenarios if isinstance(s, DrivingParallelEnv)]
+        if built:
+            raise TypeError("SmartsBatchedEnv builds its own copies: pass scenario names, paths or specs, not a built env")
+        self.driving = BatchedDriving(scenarios, reward_factory=reward_factory, **options)
+        n = self.driving.num_slots
+        if slots is not None and slots < n:
+            self.driving.close()
+            raise ValueError(f"slots: {slots} is fewer than the {n} learning agents of the scenarios")
+        k = n if slots is None else int(slots)
         super().__init__(device=device, batch_size=torch.Size([k]))
-        first_env, first_agent = self.envs[0], self.envs[0].possible_agents[0]
-        obs_space = first_env.observation_space(first_agent)
-        act_space = first_env.action_space(first_agent)
-        for i, agent in self.slots:
-            if i < 0:
-                continue
-            env = self.envs[i]
-            if _layout(env.observation_space(agent)) != _layout(obs_space) or env.action_space(agent) != act_space:
-                raise ValueError(
-                    f"{env.scenario.source}: {agent}'s observation or action space differs from "
-                    f"{first_env.scenario.source}'s {first_agent}; batched scenarios must share one"
-                )
+        self._n = n  # the slots that drive; the rest is padding
+        obs_space = self.driving.observation_space
         self._keys = list(obs_space.spaces)
         self.observation_spec = slot_observation_spec(obs_space, k, device)
-        self.action_spec = space_to_spec(act_space, (k,), device)
+        self.action_spec = self._slot_action_spec(k, device)
         self.reward_spec = Unbounded(shape=(k, 1), dtype=torch.float32, device=device)
         self.full_done_spec = Composite(_done_specs((k, 1), device), shape=(k,), device=device)
-        self._slot_of = {(i, a): j for j, (i, a) in enumerate(self.slots) if i >= 0}
-        self._zero = {key: np.zeros(sp.shape, dtype=sp.dtype) for key, sp in obs_space.spaces.items()}
         self._obs = {key: np.zeros((k, *sp.shape), dtype=sp.dtype) for key, sp in obs_space.spaces.items()}
+        self._stash = {key: np.zeros_like(v) for key, v in self._obs.items()}
+        self._stashed = np.zeros(k, dtype=bool)  # a first observation waits for torchrl's reset
         self._live = np.zeros(k, dtype=bool)
         self._steps = np.zeros(k, dtype=np.float32)
-        self._stash: dict[int, dict[str, np.ndarray]] = {}  # first observations awaiting a reset
-        self._next_seed: list[int | None] = [None] * len(self.envs)
+        self._started = False
+
+    def _slot_action_spec(self, k: int, device) -> TensorSpec:
+        """[k, width] bounded by each slot's own action space (padding rows as slot 0's: their
+        actions are ignored); ``Unbounded`` if any bound is infinite."""
+        d = self.driving
+        low = np.concatenate([d.action_low, np.repeat(d.action_low[:1], k - self._n, axis=0)])
+        high = np.concatenate([d.action_high, np.repeat(d.action_high[:1], k - self._n, axis=0)])
+        if np.isfinite(low).all() and np.isfinite(high).all():
+            low_t, high_t = torch.from_numpy(low), torch.from_numpy(high)
+            return Bounded(low=low_t, high=high_t, shape=low.shape, dtype=low_t.dtype, device=device)
+        return Unbounded(shape=low.shape, dtype=torch.float32, device=device)
+
+    @property
+    def slots(self) -> list[tuple[int, str]]:
+        """``(copy, agent id)`` of every slot; padding slots are ``(-1, "")``."""
+        return list(self.driving.slots) + [(-1, "")] * (self.batch_size[0] - self._n)
 
     def _set_seed(self, seed: int | None) -> None:
         if seed is not None:
             seed = check_seed(seed, "SmartsBatchedEnv.set_seed(seed)")
-        self._next_seed = [None if seed is None else derived_seed(seed, i * 100_003) for i in range(len(self.envs))]
-
-    def _reset_copy(self, e: int) -> dict[int, dict[str, np.ndarray]]:
-        """Reset copy ``e``; returns the first observation of each of its slots."""
-        seed = self._next_seed[e]
-        if seed is not None:
-            self._next_seed[e] = derived_seed(seed, 1)
-        obs, _ = self.envs[e].reset(seed=seed)
-        return {self._slot_of[(e, agent)]: {key: np.array(v) for key, v in o.items()} for agent, o in obs.items()}
-
-    def _start(self, j: int, first: Mapping[str, np.ndarray] | None) -> None:
-        """Slot ``j`` begins an episode from ``first`` (None: it waits, with zeros)."""
-        for key in self._keys:
-            self._obs[key][j] = first[key] if first is not None else self._zero[key]
-        self._live[j] = first is not None
-        self._steps[j] = 0.0
+        self.driving.set_seed(seed)
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         mask = None
         if tensordict is not None and "_reset" in tensordict.keys():
             mask = tensordict.get("_reset").reshape(-1).cpu().numpy()
-        if mask is None:
-            self._stash.clear()
-            for e in range(len(self.envs)):
-                for j, first in self._reset_copy(e).items():
-                    self._start(j, first)
+        n = self._n
+        if mask is None or not self._started:
+            first = self.driving.reset()
+            for key in self._keys:
+                self._obs[key][:n] = first[key]
+            self._live[:n] = True
+            self._steps[:] = 0.0
+            self._stashed[:] = False
+            self._started = True
         else:
-            for j in np.flatnonzero(mask).tolist():
-                if j not in self._stash and not self.envs[self.slots[j][0]].agents:
-                    self._stash.update(self._reset_copy(self.slots[j][0]))  # (normally done by _step)
-                self._start(j, self._stash.pop(j, None))
-        k = len(self.slots)
-        out = {**self._observation(), **_flags(np.zeros((k, 1), bool), np.zeros((k, 1), bool), np.zeros((k, 1), bool))}
+            slots = np.flatnonzero(mask)
+            ready = slots[self._stashed[slots]]
+            waiting = slots[~self._stashed[slots]]
+            for key in self._keys:
+                self._obs[key][ready] = self._stash[key][ready]
+                self._obs[key][waiting] = 0
+            self._live[ready] = True
+            self._live[waiting] = False
+            self._stashed[slots] = False
+            self._steps[slots] = 0.0
+        k = self.batch_size[0]
+        zeros = torch.zeros((k, 1), dtype=torch.bool)
+        out = {**self._observation(), "done": zeros, "terminated": zeros.clone(), "truncated": zeros.clone()}
         return TensorDict(out, batch_size=self.batch_size, device=self.device)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
-        actions = tensordict.get("action").detach().cpu().numpy()
-        k = len(self.slots)
+        if not self._started:
+            raise not_started("SmartsBatchedEnv")
+        k, n = self.batch_size[0], self._n
+        shape = (k, self.driving.action_width)
+        actions = check_slot_actions(tensordict.get("action").detach().cpu().numpy(), shape, "SmartsBatchedEnv")
+        res = self.driving.step(actions[:n])  # atomic: a refused action changes no copy
+        acted = np.zeros(k, dtype=bool)
+        acted[:n] = res.acted
+        restarted = np.zeros(k, dtype=bool)
+        restarted[:n] = res.restarted
+        terminated = np.zeros(k, dtype=bool)
+        terminated[:n] = res.terminated
+        truncated = np.zeros(k, dtype=bool)
+        truncated[:n] = res.truncated
+        for key in self._keys:
+            self._obs[key][:n][res.acted] = res.obs[key][res.acted]
+        self._steps[acted] += 1.0
+        ended = terminated | truncated
+        self._live[ended] = False
+        if restarted.any():
+            # Slots that ended this step take their first observation at torchrl's reset; slots
+            # already waiting take it now (the step that brings it is marked not valid for them).
+            later = restarted & ended
+            now = restarted & ~ended
+            for key in self._keys:
+                first = res.first[key]
+                self._stash[key][later] = first[later[:n]]
+                self._obs[key][now] = first[now[:n]]
+            self._stashed[later] = True
+            self._live[now] = True
+            self._steps[now] = 0.0
         reward = np.zeros((k, 1), dtype=np.float32)
-        term = np.zeros((k, 1), dtype=bool)
-        trunc = np.zeros((k, 1), dtype=bool)
-        steps = [
-            (e, env, {agent: actions[self._slot_of[(e, agent)]] for agent in env.agents})
-            for e, env in enumerate(self.envs)
-            if env.agents
-        ]
-        if actions.dtype.kind not in REAL_KINDS or not np.isfinite(actions).all():
-            # A copy may refuse its actions: every copy checks before any steps (atomic).
-            for e, env, acting in steps:
-                try:
-                    env.check_actions(acting)
-                except ActionError as err:
-                    raise ActionError(f"env copy {e} ({env.scenario.source}): {err}", err.agent_ids) from None
-        for e, env, acting in steps:
-            obs, rewards, terms, truncs, _ = env.step(acting)
-            for agent in acting:
-                j = self._slot_of[(e, agent)]
-                reward[j, 0] = rewards.get(agent, 0.0)
-                self._steps[j] += 1.0
-                o = obs.get(agent)
-                for key in self._keys:
-                    self._obs[key][j] = o[key] if o is not None else self._zero[key]
-                if agent not in env.agents:  # finished; torchrl will reset its slot
-                    term[j, 0] = bool(terms.get(agent, False))
-                    trunc[j, 0] = not term[j, 0]
-                    self._live[j] = False
-            if not env.agents:
-                # The copy is over: restart it now. Slots that ended this step take their first
-                # observation at torchrl's reset; slots already waiting take it at once (the
-                # step that brings it is not a real transition of theirs: it is marked invalid).
-                ended = set(np.flatnonzero((term | trunc)[:, 0]).tolist())
-                for j, first in self._reset_copy(e).items():
-                    if j in ended:
-                        self._stash[j] = first
-                    else:
-                        self._start(j, first)
-        out = {**self._observation(), "reward": torch.from_numpy(reward), **_flags(term | trunc, term, trunc)}
+        reward[:n, 0] = res.reward
+        out = {
+            **self._observation(),
+            "reward": torch.from_numpy(reward),
+            **_flags(ended[:, None], terminated[:, None], truncated[:, None]),
+        }
         return TensorDict(out, batch_size=self.batch_size, device=self.device)
 
     def _observation(self) -> dict[str, Any]:
         return slot_observation(self._obs, self._keys, self._live, self._steps)
 
     def close(self, *, raise_if_closed: bool = True) -> None:
-        for env in self.envs:
-            env.close()
+        if not self.is_closed:
+            self.driving.close()
         super().close(raise_if_closed=raise_if_closed)

@@ -10,8 +10,8 @@ from torchrl.envs.utils import check_env_specs
 from smarts.benchmark.suites import load_suite
 from smarts.core.errors import ActionError
 from smarts.env.batched import BatchedDriving, BatchedSetupError
-from smarts.env.batched.torchrl_env import BatchedTorchRLEnv
 from smarts.env.parallel_env import DrivingParallelEnv
+from smarts.env.sb3_vec_env import SmartsVecEnv
 from smarts.env.task_rewards import RewardWeights, reward_factory
 from smarts.env.torchrl_env import SmartsBatchedEnv
 from smarts.sensors.interface import AgentInterface
@@ -103,32 +103,39 @@ def _compare_with_single_envs(batch: BatchedDriving, specs: list, steps: int) ->
     return resets, compared
 
 
-def test_torchrl_env_gives_what_the_per_env_batched_env_gives():
-    """Same seeds and actions: BatchedTorchRLEnv and SmartsBatchedEnv produce equal tensors."""
+def test_torchrl_env_gives_the_same_tensors_in_this_process_and_spread_over_workers():
+    """Same seeds and actions: the copies as one simulation here and split over two worker
+    processes (each a simulation of its share) give equal tensors, waiting slots and resets included."""
     specs = _adaptive("a01_straight_free", "a02_straight_two_followers_low", "a08_lead_turns_left_at_junction")
     kwargs = dict(observation=PLATOON, reward_factory=_platoon_reward())
-    fast, slow = BatchedTorchRLEnv(specs, **kwargs), SmartsBatchedEnv(specs, **kwargs)
-    check_env_specs(fast)
-    assert fast.slots == slow.slots and fast.batch_size == slow.batch_size
-    for env in (fast, slow):
-        env.set_seed(11)
-    td_fast, td_slow = fast.reset(), slow.reset()
-    gen = torch.Generator().manual_seed(0)
-    for t in range(300):
-        action = torch.rand((fast.batch_size[0], 2), generator=gen) * 2 - 1
-        td_fast = fast.step(td_fast.set("action", action.clone()))
-        td_slow = slow.step(td_slow.set("action", action.clone()))
-        for key in td_slow["next"].keys(include_nested=True, leaves_only=True):
-            assert torch.equal(td_fast["next", key], td_slow["next", key]) or torch.allclose(
-                td_fast["next", key].float(), td_slow["next", key].float(), atol=1e-5
-            ), (t, key)
-        td_fast, td_slow = fast.step_mdp(td_fast), slow.step_mdp(td_slow)
-        done = td_slow["done"].clone()
-        if done.any():
-            td_fast = fast.reset(td_fast.set("_reset", done.clone()))
-            td_slow = slow.reset(td_slow.set("_reset", done.clone()))
-            for key in ("valid", "agent_steps"):
-                assert torch.equal(td_fast[key], td_slow[key])
+    here, split = SmartsBatchedEnv(specs, **kwargs), SmartsBatchedEnv(specs, workers=2, **kwargs)
+    try:
+        check_env_specs(split)
+        assert len(split.driving.shards) == 2 and not split.driving.groups
+        assert here.slots == split.slots and here.batch_size == split.batch_size
+        for env in (here, split):
+            env.set_seed(11)
+        td_here, td_split = here.reset(), split.reset()
+        gen = torch.Generator().manual_seed(0)
+        resets = 0
+        for t in range(300):
+            action = torch.rand((here.batch_size[0], 2), generator=gen) * 2 - 1
+            td_here = here.step(td_here.set("action", action.clone()))
+            td_split = split.step(td_split.set("action", action.clone()))
+            for key in td_here["next"].keys(include_nested=True, leaves_only=True):
+                assert torch.equal(td_here["next", key], td_split["next", key]), (t, key)
+            td_here, td_split = here.step_mdp(td_here), split.step_mdp(td_split)
+            done = td_here["done"].clone()
+            if done.any():
+                resets += 1
+                td_here = here.reset(td_here.set("_reset", done.clone()))
+                td_split = split.reset(td_split.set("_reset", done.clone()))
+                for key in td_here.keys(include_nested=True, leaves_only=True):
+                    assert torch.equal(td_here[key], td_split[key]), (t, key)
+        assert resets >= 2
+    finally:
+        here.close()
+        split.close()
 
 
 def test_episodes_of_a_batch_do_not_see_each_other():
@@ -144,14 +151,16 @@ def test_episodes_of_a_batch_do_not_see_each_other():
         assert res.obs["neighbour_mask"].sum() == 0
 
 
-def test_unsupported_scenarios_are_refused_naming_the_field():
+def test_scenarios_that_cannot_be_batched_are_refused_naming_why():
+    """What stays refused now that SUMO copies (in worker processes), social agents and mixed
+    action spaces batch: a batch without a learning agent, and learners whose observations differ."""
     suite = {s.name: s.spec for s in load_suite("adaptive").scenarios}
-    sumo = dataclasses.replace(suite["a01_straight_free"], traffic=dataclasses.replace(suite["a01_straight_free"].traffic, engine="sumo"))
-    with pytest.raises(BatchedSetupError, match=r"traffic\.engine: sumo .*per-env backend"):
-        BatchedDriving([sumo])
-    social = dataclasses.replace(sumo, traffic=None, agents=[dataclasses.replace(a, policy="zoo:keep-lane") for a in sumo.agents])
-    with pytest.raises(BatchedSetupError, match=r"agents\[0\]\.policy: social agents"):
+    social = dataclasses.replace(suite["a01_straight_free"], agents=[dataclasses.replace(a, policy="zoo:keep-lane") for a in suite["a01_straight_free"].agents])
+    with pytest.raises(BatchedSetupError, match=r"every agent has a policy; at least one must learn"):
         BatchedDriving([social])
+    plain, lead = make_spec([agent()]), make_spec([agent(interface={"lead": True})])
+    with pytest.raises(BatchedSetupError, match=r"agent_0's observation space differs from test-scenario's agent_0"):
+        BatchedDriving([plain, lead])
 
 
 def test_bad_actions_raise_naming_the_agents_and_change_nothing():
@@ -168,10 +177,8 @@ def test_bad_actions_raise_naming_the_agents_and_change_nothing():
 
 
 def test_sb3_vec_env_reports_each_end_once_and_restarts_copies_in_the_step():
-    from smarts.env.batched.sb3_vec_env import BatchedVecEnv
-
     specs = _adaptive("a01_straight_free", "a02_straight_two_followers_low")
-    vec = BatchedVecEnv(specs, observation=PLATOON, reward_factory=_platoon_reward(), normalize_actions=True, seed=3)
+    vec = SmartsVecEnv(specs, observation=PLATOON, reward_factory=_platoon_reward(), normalize_actions=True, seed=3)
     assert vec.num_envs == 3 and vec.slot_agents == [(0, "agent_0"), (1, "agent_0"), (1, "agent_1")]
     obs = vec.reset()
     assert set(obs) == set(vec.observation_space.spaces) and obs["ego"].shape == (3, 12)

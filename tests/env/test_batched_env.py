@@ -3,9 +3,12 @@
 import numpy as np
 import pytest
 import torch
+from torchrl.data import Bounded
 from torchrl.envs.utils import check_env_specs
 
 from smarts.core.errors import ActionError
+from smarts.env.batched import BatchedSetupError
+from smarts.env.parallel_env import DrivingParallelEnv
 from smarts.env.task_rewards import RewardWeights, reward_factory
 from smarts.env.torchrl_env import SmartsBatchedEnv
 from tests.builders import agent, make_spec
@@ -70,10 +73,42 @@ def test_same_seed_same_rollout_and_task_rewards_reach_the_slots():
     assert a["next", "reward"].abs().sum() > 0
 
 
-def test_scenarios_must_share_spaces():
-    other = make_spec([agent(offset=10.0, speed=10.0, action_space="continuous")])
-    with pytest.raises(ValueError, match="observation or action space differs"):
-        SmartsBatchedEnv([_specs()[0], other])
+def test_mixed_action_spaces_get_per_slot_bounds_and_padding_slots_never_act():
+    """Copies on RelativeTargetPose, Continuous and Lane: one ``Bounded`` action spec whose rows
+    are each slot's own box (the narrower Lane action in the first two columns), padded with slots
+    that stay invalid, never end and get no reward; torchrl's spec check passes."""
+    continuous = make_spec([agent(offset=10.0, speed=10.0, action_space="continuous")], episode_steps=60)
+    lane = make_spec([agent(offset=10.0, speed=10.0, action_space="lane")], episode_steps=60)
+    specs = [_specs()[0], continuous, lane]
+    env = SmartsBatchedEnv(specs, slots=5)
+    try:
+        assert env.batch_size == torch.Size([5])
+        assert env.slots == [(0, "agent_0"), (1, "agent_0"), (2, "agent_0"), (-1, ""), (-1, "")]
+        spec = env.action_spec
+        assert isinstance(spec, Bounded) and spec.shape == torch.Size([5, 3])
+        for j, s in enumerate(specs):
+            box = DrivingParallelEnv(s).action_space("agent_0")
+            width = box.shape[0]
+            assert torch.equal(spec.space.low[j, :width], torch.from_numpy(box.low)), j
+            assert torch.equal(spec.space.high[j, :width], torch.from_numpy(box.high)), j
+        assert float(spec.space.high[2, 2]) == float(spec.space.low[2, 2]) == 0.0  # lane: two numbers
+        check_env_specs(env)
+        env.set_seed(0)
+        td = env.rollout(70, break_when_any_done=False)  # random actions within each slot's box
+        valid, done = td["valid"][..., 0], td["next", "done"][..., 0]  # [slots, time]
+        assert valid[:3].any(-1).all() and not valid[3:].any()
+        assert not done[3:].any() and not td["next", "reward"][3:].any()
+        assert done[:3].any(-1).all()  # every real slot ended (episode_steps 60)
+    finally:
+        env.close()
+
+
+def test_copies_must_share_one_observation_space_and_slots_cover_the_agents():
+    lead = make_spec([agent(offset=10.0, speed=10.0, interface={"lead": True})])
+    with pytest.raises(BatchedSetupError, match=r"agent_0's observation space differs .* give one interface"):
+        SmartsBatchedEnv([_specs()[0], lead])
+    with pytest.raises(ValueError, match="slots: 2 is fewer than the 3 learning agents"):
+        SmartsBatchedEnv(_specs(), slots=2)
 
 
 def test_a_bad_action_in_one_copy_steps_no_copy():
@@ -82,9 +117,13 @@ def test_a_bad_action_in_one_copy_steps_no_copy():
     td = env.reset()
     td = _one_metre_per_step(td)
     td["action"][2, 1] = float("nan")  # copy 1, agent_1
-    with pytest.raises(ActionError, match=r"env copy 1 \(test-scenario\): agent_1: relative_target_pose action component dy is nan"):
+    with pytest.raises(ActionError, match=r"1/agent_1.* not finite"):
         env.step(td)
-    assert [e.sim.step_count for e in env.envs] == [0, 0]
+    sim = env.driving.groups[0].sim
+    assert sim.episode_step.tolist() == [0, 0]
     td = _one_metre_per_step(env.reset())
     env.step(td)
-    assert [e.sim.step_count for e in env.envs] == [1, 1]
+    assert sim.episode_step.tolist() == [1, 1]
+    with pytest.raises(ActionError, match=r"SmartsBatchedEnv: actions: expected shape \(3, 3\)"):
+        env.step(td.set("action", torch.zeros(3, 2)))
+    assert sim.episode_step.tolist() == [1, 1]

@@ -9,8 +9,10 @@ from stable_baselines3.common.env_checker import check_env
 
 import smarts.env  # noqa: F401  (registers smarts/Driving-v0)
 from smarts.core.errors import ActionError
+from smarts.core.events import EVENT_NAMES
 from smarts.env import DrivingParallelEnv
-from smarts.env.sb3_vec_env import SmartsVecEnv, WorkerError
+from smarts.env.batched import BatchedSetupError
+from smarts.env.sb3_vec_env import SmartsVecEnv
 from tests.builders import agent, make_spec
 
 CRUISE = np.array([1.0, 0.0, 0.0], dtype=np.float32)
@@ -52,7 +54,7 @@ def test_two_copies_of_a_two_agent_scenario_are_four_slots_with_stacked_dict_obs
 
 
 def test_finished_agent_gets_terminal_observation_once_then_waits_inactive_until_its_copy_resets():
-    vec = SmartsVecEnv([lambda: DrivingParallelEnv(short_two_agent_spec(40))] * 2, seed=0)
+    vec = SmartsVecEnv([short_two_agent_spec(40)] * 2, seed=0)
     first = vec.reset()
     actions = np.stack([SWERVE_RIGHT, CRUISE, CRUISE, CRUISE])  # slot 0 leaves the road
     finished_at = None
@@ -64,7 +66,7 @@ def test_finished_agent_gets_terminal_observation_once_then_waits_inactive_until
             assert "off_road" in info["events"] and not info["TimeLimit.truncated"]
             terminal = info["terminal_observation"]
             assert set(terminal) == set(first) and vec.observation_space.contains(terminal)
-            assert terminal["events"].any()  # the final observation, not a zero filler
+            assert terminal["events"][EVENT_NAMES.index("off_road")] == 1.0  # the final observation, not a zero filler
             assert info["episode"]["l"] == step + 1 and info["episode"]["r"] < 0
             assert not any(obs[k][0].any() for k in obs)  # its row is zero from now on
         elif finished_at is not None and step < 39:
@@ -87,9 +89,14 @@ def test_finished_agent_gets_terminal_observation_once_then_waits_inactive_until
 
 
 def test_ppo_multi_input_policy_trains_on_the_slots_unchanged():
-    vec = SmartsVecEnv([lambda: DrivingParallelEnv(short_two_agent_spec(30))] * 2, normalize_actions=True)
+    """SB3's PPO on the adapter, under SB3's own VecEnv check (``VecCheckNan``: every action,
+    observation and reward of every step finite, else it raises)."""
+    from stable_baselines3.common.vec_env import VecCheckNan
+
+    vec = SmartsVecEnv([short_two_agent_spec(30)] * 2, normalize_actions=True)
     assert vec.action_space == gymnasium.spaces.Box(-1.0, 1.0, (3,), np.float32)
-    model = PPO("MultiInputPolicy", vec, n_steps=64, batch_size=64, n_epochs=2, seed=0, device="cpu")
+    checked = VecCheckNan(vec, raise_exception=True)
+    model = PPO("MultiInputPolicy", checked, n_steps=64, batch_size=64, n_epochs=2, seed=0, device="cpu")
     before = [p.detach().clone() for p in model.policy.parameters()]
     model.learn(256)
     assert model.num_timesteps == 256
@@ -125,12 +132,11 @@ def test_sb3_check_env_passes_on_the_single_agent_gymnasium_env():
 
 
 def test_worker_processes_give_the_same_rollout_as_in_process_copies():
-    def factory():
-        return DrivingParallelEnv(short_two_agent_spec(12))
-
-    in_process = SmartsVecEnv([factory] * 2)
-    workers = SmartsVecEnv([factory] * 2, processes=True)
+    spec = short_two_agent_spec(12)
+    in_process = SmartsVecEnv([spec] * 2)
+    workers = SmartsVecEnv([spec] * 2, workers=2)
     try:
+        assert len(workers.driving.shards) == 2 and not workers.driving.groups  # one copy per worker
         assert workers.num_envs == 4 and workers.observation_space == in_process.observation_space
         a, b = workers.reset(), in_process.reset()
         rng = np.random.default_rng(0)
@@ -152,33 +158,34 @@ def test_worker_processes_give_the_same_rollout_as_in_process_copies():
                     seen.add("truncated" if x["TimeLimit.truncated"] else "terminated")
                 seen.update({"inactive"} & set(x))
         assert seen == {"terminated", "truncated", "inactive"}
-        assert workers.get_attr("possible_agents", indices=[0, 3]) == [["agent_0", "agent_1"]] * 2
-        # An error inside a worker comes back naming the agent, and the pipes stay usable.
-        with pytest.raises(WorkerError, match="agent_0.*is nan"):
+        assert workers.get_attr("slots", indices=[0, 3]) == [workers.slot_agents] * 2
+        # A refused action names the slot before any worker moves, and the pipes stay usable.
+        with pytest.raises(ActionError, match=r"slot 0.*not finite"):
             workers.step(np.full((4, 3), np.nan, dtype=np.float32))
-        assert workers.env_method("observation_space", "agent_1", indices=[2]) == [workers.observation_space]
+        a, ra, *_ = workers.step(np.stack([CRUISE] * 4))
+        b, rb, *_ = in_process.step(np.stack([CRUISE] * 4))
+        np.testing.assert_array_equal(ra, rb)
+        np.testing.assert_array_equal(a["ego"], b["ego"])
     finally:
         workers.close()
         in_process.close()
 
 
-def test_spaces_must_be_shared_and_sumo_copies_need_processes():
+def test_one_action_space_for_one_policy():
     mixed = make_spec([agent(lane=0), agent(lane=1, action_space="target_pose")])
-    with pytest.raises(ValueError, match="agent 'agent_1': action space .* differs"):
-        SmartsVecEnv([lambda: DrivingParallelEnv(mixed)])
-    with pytest.raises(ValueError, match="SUMO traffic.*processes=True"):
-        SmartsVecEnv.from_scenario("intersection_pedestrians", n_envs=2)
+    with pytest.raises(BatchedSetupError, match=r"SB3 trains one policy with one Box action space.*2 different.*"
+                                                r"slot 0 \(copy 0, test-scenario, agent_0\): Box.*"
+                                                r"slot 1 \(copy 0, test-scenario, agent_1\): Box"):
+        SmartsVecEnv([mixed])
 
 
-@pytest.mark.parametrize("processes", [False, True], ids=["in_process", "workers"])
-def test_a_bad_action_in_one_copy_steps_no_copy(processes):
-    """The copies check before any steps: after a refused step the VecEnv goes on exactly like one
+@pytest.mark.parametrize("workers", [0, 2], ids=["in_process", "workers"])
+def test_a_bad_action_in_one_copy_steps_no_copy(workers):
+    """Every copy checks before any steps: after a refused step the VecEnv goes on exactly like one
     that never saw it."""
-    def factory():
-        return DrivingParallelEnv(short_two_agent_spec(30))
-
-    vec = SmartsVecEnv([factory] * 2, processes=processes, seed=5)
-    fresh = SmartsVecEnv([factory] * 2, seed=5)
+    spec = short_two_agent_spec(30)
+    vec = SmartsVecEnv([spec] * 2, workers=workers, seed=5)
+    fresh = SmartsVecEnv([spec] * 2, seed=5)
     try:
         vec.reset(), fresh.reset()
         good = np.stack([CRUISE, CRUISE * 0.5, CRUISE * 0.7, CRUISE])
@@ -186,12 +193,11 @@ def test_a_bad_action_in_one_copy_steps_no_copy(processes):
             v.step(good)
         bad = good.copy()
         bad[3, 2] = np.nan  # copy 1, agent_1
-        error = WorkerError if processes else ActionError
-        with pytest.raises(error, match=r"env copy 1: agent_1: relative_target_pose action component dheading is nan"):
+        with pytest.raises(ActionError, match=r"1/agent_1|slot 3"):
             vec.step(bad)
-        if not processes:
-            assert [c.env.sim.step_count for c in vec._copies] == [1, 1]
-        with pytest.raises(ValueError, match=r"expected one row per slot \(4\) of the agents' action shape \(3,\)"):
+        if not workers:
+            assert vec.driving.groups[0].sim.episode_step.tolist() == [1, 1]
+        with pytest.raises(ActionError, match=r"SmartsVecEnv: actions: expected shape \(4, 3\) .* got shape \(4, 2\)"):
             vec.step(good[:, :2])
         for _ in range(3):
             a, ra, da, _ = vec.step(good)

@@ -98,7 +98,11 @@ def test_seed_counts_wrap_past_the_top():
     assert env.env.sim.seed == 0
     env.close()
     vec = SmartsVecEnv.from_scenario(_spec(), n_envs=2)
-    assert vec.seed(SEED_MAX) == [SEED_MAX, 0]
+    assert vec.seed(SEED_MAX) == [SEED_MAX, 100_002]  # copy 1 starts 100_003 on (the one rule), wrapped
+    vec.reset()
+    assert list(vec.driving.groups[0].sim.episode_seed) == [SEED_MAX, 100_002]
+    vec.reset()
+    assert list(vec.driving.groups[0].sim.episode_seed) == [0, 100_003]
     vec.close()
 
 

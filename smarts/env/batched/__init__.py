@@ -1,7 +1,7 @@
-"""The batched backend: B episodes stepped as one vectorised simulation (``smarts.core.batched``),
-with observations and rewards built once for all of them, as a numpy vector env
-(:class:`BatchedDriving`), a TorchRL env (``smarts.env.batched.torchrl_env.BatchedTorchRLEnv``) and
-an SB3 VecEnv (``smarts.env.batched.sb3_vec_env.BatchedVecEnv``)."""
+"""The batched core: B scenario copies stepped as one simulation (``smarts.core.simulation``),
+with every learning agent of every copy a slot of plain arrays (:class:`BatchedDriving`). The
+library adapters over it are ``smarts.env.torchrl_env.SmartsBatchedEnv`` (TorchRL) and
+``smarts.env.sb3_vec_env.SmartsVecEnv`` (Stable-Baselines3)."""
 
 from smarts.env.batched.driving import BatchedDriving, BatchedSetupError
 

@@ -150,6 +150,7 @@ class BatchedDriving:
         self._next_seed: list[int | None] = [None] * len(self.specs)
         self._listeners: list[Callable[[], Any]] = []
         self._arange: np.ndarray | None = None
+        self._started = False  # stepping before the first reset is refused (nothing would move)
 
     def _shared_spaces(self) -> tuple[gym.spaces.Box | None, gym.spaces.Dict]:
         """The action space every slot shares (None when scenarios mix action spaces: then
@@ -240,6 +241,7 @@ class BatchedDriving:
             obs = shard.receive()
             for key, value in obs.items():
                 self._obs[key][shard.slots] = value
+        self._started = True
         return self._obs
 
     def _restart(self, group: _Group, episodes: np.ndarray, out: dict[str, np.ndarray]) -> np.ndarray:
@@ -259,6 +261,8 @@ class BatchedDriving:
     def step(self, actions: np.ndarray) -> StepResult:
         """One step of every copy with ``actions[slot]`` (slots whose agent is not live are
         ignored); copies that end are reset before this returns."""
+        if not self._started:
+            raise RuntimeError("BatchedDriving.step() before reset(): call reset() first")
         actions = np.asarray(actions)
         n = len(self.slots)
         k = self.action_width
