@@ -1,7 +1,8 @@
 """Where generated files (netconvert output, compiled maps) are cached, and how entries are written.
 
-Every entry is either one file written atomically (:func:`atomic_write_bytes`: a temporary file in
-the same folder, flushed to disk, then renamed over the final name) or a folder built privately and
+Every entry is either one file written atomically (:func:`atomic_write_bytes`, the project's one
+atomic write in ``smarts.files``: a temporary file in the same folder, flushed to disk, then
+renamed over the final name) or a folder built privately and
 renamed into place whole (:func:`publish_dir`) with a ``SHA256SUMS`` manifest of its files
 (:func:`write_manifest`, checked by :func:`check_manifest`). A process killed half-way therefore
 leaves only a temporary name behind, never an entry that looks complete; an entry damaged later
@@ -29,12 +30,15 @@ import warnings
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
+from smarts import files
+from smarts.files import fsync_dir
+
 ENV_VAR = "SMARTS_CACHE_DIR"
 FALLBACK_PREFIX = "smarts-cache-"
 """Name prefix of the per-process temporary cache used when the cache folder is unwritable."""
 MANIFEST = "SHA256SUMS"
 """File in a folder entry listing ``<sha256>  <name>`` for each of its files (``sha256sum -c``)."""
-TEMP_PREFIX = ".tmp-"
+TEMP_PREFIX = files.TEMP_PREFIX
 """Name prefix of files and folders still being written; never read as entries."""
 STALE_AFTER_S = 24 * 3600.0
 """Temporary names older than this are left-overs of killed processes and are swept."""
@@ -128,31 +132,11 @@ def fallback_for(path: Path, err: OSError, home: Path | None = None) -> Path:
 
 
 # ------------------------------------------------------------------ atomic writes and checks
-def _fsync_dir(path: Path) -> None:
-    """Make a rename in ``path`` durable (best effort: not every platform can open a folder)."""
-    with contextlib.suppress(OSError):
-        fd = os.open(path, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-
-
 def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` so readers see the old file, no file, or all of ``data``."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f"{TEMP_PREFIX}{path.name}-", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    _fsync_dir(path.parent)
+    """Write ``data`` to ``path`` so readers see the old file, no file, or all of ``data``
+    (``smarts.files.atomic_write_bytes``, the project's one atomic write: readable by others as
+    a plain ``open()`` would make it)."""
+    files.atomic_write_bytes(path, data)
 
 
 def sha256_file(path: Path) -> str:
@@ -215,7 +199,7 @@ def publish_dir(build: Path, final: Path, is_valid: Callable[[Path], bool]) -> P
     first: ``build`` is then left for the caller to remove) and moved aside and deleted otherwise.
     """
     build, final = Path(build), Path(final)
-    _fsync_dir(build)
+    fsync_dir(build)
     for _ in range(5):
         try:
             os.rename(build, final)
@@ -233,7 +217,7 @@ def publish_dir(build: Path, final: Path, is_valid: Callable[[Path], bool]) -> P
                 with contextlib.suppress(OSError):
                     aside.unlink()
             continue
-        _fsync_dir(final.parent)
+        fsync_dir(final.parent)
         return final
     raise OSError(f"could not put the cache entry {final} in place")
 

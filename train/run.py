@@ -39,6 +39,7 @@ import torch
 from agents.checkpoint import CheckpointError, checkpoint_format, read_checkpoint
 from agents.ppo import CHECKPOINT_FORMAT, check_checkpoint
 from agents.sb3_policy import SB3_FORMAT, check_export
+from smarts.files import atomic_write_text, next_numbered, point_latest
 from train.config import ACTION_SPACES, TrainConfig
 
 SCALAR_TAGS = (
@@ -154,25 +155,7 @@ def run_folder(cfg: TrainConfig, resume: Path | None = None) -> Path:
         return Path(cfg.out)
     if resume is not None:
         return Path(resume).parent
-    root = Path(cfg.runs_dir)
-    taken = [int(p.name) for p in root.iterdir() if p.name.isdigit()] if root.is_dir() else []
-    return root / f"{max(taken, default=0) + 1:03d}"
-
-
-def point_latest(root: Path, folder: Path) -> None:
-    """``root/latest`` -> ``folder`` (a relative symlink, replaced atomically; a text file holding
-    the folder's name where symlinks are not allowed)."""
-    link = root / "latest"
-    temporary = root / f".latest-{folder.name}"
-    try:
-        temporary.unlink(missing_ok=True)
-        temporary.symlink_to(folder.name, target_is_directory=True)
-        temporary.replace(link)
-    except OSError:
-        temporary.unlink(missing_ok=True)
-        if not link.is_symlink() and link.is_dir():
-            return  # a real folder of that name is the user's: leave it alone
-        (root / "latest.txt").write_text(folder.name + "\n")
+    return next_numbered(cfg.runs_dir)
 
 
 def checkpoint_setup(blob: dict) -> dict:
@@ -244,7 +227,7 @@ class Run:
         out.mkdir(parents=True, exist_ok=True)
         if out.name.isdigit() and out.parent.resolve() == Path(cfg.runs_dir).resolve():
             point_latest(out.parent, out)  # a numbered run: runs_dir/latest -> this one
-        (out / "config.json").write_text(json.dumps(cfg.model_dump(), indent=2))
+        atomic_write_text(out / "config.json", json.dumps(cfg.model_dump(), indent=2))
         self.writer = SummaryWriter(log_dir=str(out / "tensorboard"))
         self.best_score = -np.inf
         if continuing and (out / "best.pt").is_file():  # a resumed run keeps its selection

@@ -17,8 +17,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +25,7 @@ import numpy as np
 from smarts.benchmark.metrics import load_params, read_episode, score_suite
 from smarts.benchmark.metrics.scores import CI_LEVEL, CI_RESAMPLES, CI_SEED, ci_method, metric_names
 from smarts.benchmark.suites import Suite
+from smarts.files import atomic_write_text
 
 
 def _cell(value: float, ci) -> str:
@@ -35,19 +34,6 @@ def _cell(value: float, ci) -> str:
 
 def _seed_list(seeds: dict) -> str:
     return ", ".join(f"{e}={s}" for e, s in sorted(seeds.items()))
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and ``os.replace``: a reader (or a
-    run killed meanwhile) sees the old file or the new one, never half of one."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def write_report(
@@ -140,7 +126,7 @@ def write_report(
             for agent in shown
         },
     }
-    _write_atomic(out / "results.json", json.dumps(doc, indent=2, default=float))
+    atomic_write_text(out / "results.json", json.dumps(doc, indent=2, default=float))
     difficulty = {s.name: s.difficulty for s in suite.scenarios}
     with io.StringIO(newline="") as f:
         writer = csv.writer(f)
@@ -162,7 +148,7 @@ def write_report(
                                  *(f"{v:.4f}" for n in names for v in (row[n], *ci[n]))])  # fmt: skip
             writer.writerow([*head, "overall", "", sum(s.episodes.values()), "", sum(n_failed.values()),
                              *(f"{v:.4f}" for n in names for v in (s.overall[n], *s.overall_ci[n]))])  # fmt: skip
-        _write_atomic(out / "results.csv", f.getvalue())
+        atomic_write_text(out / "results.csv", f.getvalue())
 
     plots = out / "plots"
     plots.mkdir(parents=True, exist_ok=True)
@@ -222,7 +208,7 @@ def write_report(
                   for r in retried]  # fmt: skip
     lines += ["", "Plots: `plots/`; TensorBoard: `tensorboard --logdir " + str(out / "tensorboard") + "`."]
     report = out / "report.md"
-    _write_atomic(report, "\n".join(lines) + "\n")
+    atomic_write_text(report, "\n".join(lines) + "\n")
     return report
 
 

@@ -546,10 +546,10 @@ def finished_episode(job: Job) -> dict | None:
 
 def _remove_partial_writes(job: Job) -> None:
     """Delete the temporary files of this job's log that a killed writer left behind."""
-    path = Path(job.log_path)
-    if path.parent.is_dir():
-        for stale in path.parent.glob(f".{path.name}.*"):
-            stale.unlink(missing_ok=True)
+    from smarts.files import partial_writes
+
+    for stale in partial_writes(job.log_path):
+        stale.unlink(missing_ok=True)
 
 
 def _death(code: int | None) -> str:

@@ -141,7 +141,7 @@ def test_resume_runs_only_missing_or_broken_episodes(tmp_path, capsys):
     missing, cut, stale = logs[0], logs[3], logs[5]
     missing.unlink()
     cut.write_bytes(cut.read_bytes()[:500])  # a partial file (what a non-atomic writer could leave)
-    leftover = stale.with_name(f".{stale.name}.tmp123")  # a killed writer's temporary file
+    leftover = stale.with_name(f".tmp-{stale.name}-123")  # a killed writer's temporary file (smarts.files)
     leftover.write_bytes(b"half")
     before = {p: p.stat().st_mtime_ns for p in logs if p not in (missing, cut)}
     assert _bench(out, "--episodes", "1", "--workers", "1", "--resume") == 0

@@ -71,7 +71,6 @@ import csv
 import json
 import math
 import os
-import tempfile
 import zipfile
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -81,6 +80,7 @@ from typing import Any
 import numpy as np
 
 from smarts.core.errors import LogError
+from smarts.files import atomic_write
 
 FORMAT_NAME = "smarts-episode-log"
 FORMAT_VERSION = 1
@@ -506,14 +506,8 @@ def write_episode(log: EpisodeLog, path: str | os.PathLike) -> Path:
         for name, value in trace.extra.items():
             arrays[f"extra/{index}/{name}"] = value
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path) as fh:
+        np.savez_compressed(fh, **arrays)
     return path
 
 
