@@ -177,7 +177,7 @@ def resolve_mission(
         goal_radius = float(goal.radius)
         proj = project(road_map, goal_xy[None, :])
         if proj.lane[0] < 0:
-            raise MapError(f"{where}.goal.position: {list(goal_xy)} is not near any lane")
+            raise MapError(f"{where}.goal.position: {[round(float(v), 3) for v in goal_xy]} is not near any lane")
         goal_lane_of_xy = int(proj.lane[0])
         same_road = road_map.lane_road[goal_lane_of_xy] == road_map.lane_road[start_lane]
         if not route_parts and same_road and proj.s[0] + goal_radius < start.offset:

@@ -31,6 +31,7 @@ class VehicleType(IntEnum):
     TRUCK = 2
     MOTORCYCLE = 3
     PEDESTRIAN = 4
+    BICYCLE = 5  # a cyclist (replayed from datasets that record them)
 
 
 # Typical box size (length, width, height) in metres and mass in kg per vehicle type; scenarios may
@@ -41,6 +42,7 @@ VEHICLE_DIMENSIONS: dict[VehicleType, tuple[float, float, float, float]] = {
     VehicleType.TRUCK: (10.0, 2.5, 3.6, 10000.0),
     VehicleType.MOTORCYCLE: (2.2, 0.8, 1.4, 250.0),
     VehicleType.PEDESTRIAN: (0.5, 0.5, 1.7, 75.0),
+    VehicleType.BICYCLE: (1.8, 0.7, 1.7, 90.0),
 }
 
 NO_OWNER = -1

@@ -197,7 +197,7 @@ def _time_v2v(env, actions: dict, parts: dict[str, list[float]], record: bool = 
     ids = [sim.agent_ids[i] for i in agents]
     t0 = time.perf_counter()
     _, payloads, channels = comms.split(actions, ids, agents)
-    received_to_observation(comms.exchange(sim, agents, payloads, channels))
+    received_to_observation(comms.exchange(agents, payloads, channels)[1])
     if record:
         parts["v2v"].append((time.perf_counter() - t0) * 1e3)
 

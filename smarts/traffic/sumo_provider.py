@@ -499,7 +499,7 @@ class SumoTrafficProvider(ProviderBase):
         t, rm = sim.table, self.road_map
         lane = t.lane[rows]
         ok = t.alive[rows] & (lane >= 0) & (t.owner[rows] != self.provider_id)
-        ok &= t.vtype[rows] != int(VehicleType.PEDESTRIAN)
+        ok &= (t.vtype[rows] != int(VehicleType.PEDESTRIAN)) & (t.vtype[rows] != int(VehicleType.BICYCLE))
         safe_lane = np.where(lane >= 0, lane, 0)
         ok &= t.lane_distance[rows] <= 0.5 * rm.lane_width[safe_lane]
         internal = rm.lane_internal[safe_lane]

@@ -250,7 +250,7 @@ def test_pedestrians_and_cyclists_replay_as_their_own_kinds(tmp_path):
     t = sim.table
     walker, rider = t.row_of["replay-4"], t.row_of["replay-3"]
     assert t.role[walker] == Role.PEDESTRIAN and t.vtype[walker] == VehicleType.PEDESTRIAN
-    assert t.role[rider] == Role.REPLAY and t.vtype[rider] == VehicleType.MOTORCYCLE  # the table's two-wheeler
+    assert t.role[rider] == Role.REPLAY and t.vtype[rider] == VehicleType.BICYCLE  # a cyclist, its own type
     assert (t.length[rider], t.width[rider]) == pytest.approx((1.82, 0.7))
 
 

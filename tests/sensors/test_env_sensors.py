@@ -134,9 +134,9 @@ def test_extended_neighbours_carry_speed_lane_and_type():
     behind = nb[np.argmin(nb[:, 0])]
     assert ahead[0] == pytest.approx(10.0) and ahead[9] == pytest.approx(7.0) and ahead[10] == pytest.approx(0.5)
     assert ahead[12] == 1.0 and ahead[13] == 1.0  # lane 1, same road
-    np.testing.assert_array_equal(ahead[14:], [1, 0, 0, 0, 0])  # passenger
+    np.testing.assert_array_equal(ahead[14:], [1, 0, 0, 0, 0, 0])  # passenger
     assert behind[12] == 0.0
-    np.testing.assert_array_equal(behind[14:], [0, 0, 1, 0, 0])  # truck
+    np.testing.assert_array_equal(behind[14:], [0, 0, 1, 0, 0, 0])  # truck
     env.close()
 
 

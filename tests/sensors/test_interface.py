@@ -5,6 +5,7 @@ import pytest
 import yaml
 
 from smarts.core.errors import InterfaceError
+from smarts.core.vehicle_table import VehicleType
 from smarts.scenario import ScenarioError, ScenarioSpec
 from smarts.sensors.interface import (
     RASTER_LAYERS,
@@ -67,8 +68,8 @@ def test_every_sensor_adds_keys_or_trailing_columns():
     shapes = {k: s.shape for k, s in space.spaces.items()}
     assert shapes["ego"] == (13,)
     names = neighbour_feature_names(interface)
-    assert len(names) == 9 + 10 + 1 and names[-1] == "visible_fraction" and names[12] == "lane_index"
-    assert shapes["neighbours"] == (6, 20) and shapes["waypoints"] == (3, 12, 3)
+    assert len(names) == 9 + 5 + len(VehicleType) + 1 and names[-1] == "visible_fraction" and names[12] == "lane_index"
+    assert shapes["neighbours"] == (6, len(names)) and shapes["waypoints"] == (3, 12, 3)
     assert "signal" not in shapes
     assert shapes["rasters"] == (2, 32, 32) and space["rasters"].dtype == np.uint8
     assert shapes["rgb"] == (32, 32, 3) and space["rgb"].dtype == np.uint8

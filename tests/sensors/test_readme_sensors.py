@@ -20,7 +20,7 @@ def test_readme_interface_example_runs():
     o = obs["agent_0"]
     assert env.observation_space("agent_0").contains(o)
     assert o["rasters"].shape == (5, 64, 64) and o["rgb"].shape == (64, 64, 3)
-    assert o["lidar"].shape == (64,) and o["neighbours"].shape == (8, 20) and o["ego"].shape == (13,)
+    assert o["lidar"].shape == (64,) and o["neighbours"].shape == (8, 21) and o["ego"].shape == (13,)
     assert set(np.unique(o["lidar_hit"])) <= {0.0, 1.0, 2.0, 3.0}
     assert Path(__file__).resolve().parents[2].joinpath("docs", "figure1.png").stat().st_size < 200_000
     env.close()

@@ -45,4 +45,5 @@ class ReplaySpec:
     offset: tuple[float, float] = (0.0, 0.0)
     """Metres added to every position after swapping and flipping (lines the data up with the map)."""
     scenario: str | None = None
-    """Waymo: the scenario id (or 0-based record index) in the TFRecord file; None: the first."""
+    """Which part of the recording: for Waymo the scenario id (or 0-based record index) in the
+    TFRecord file (None: the first); for NGSIM the ``Location`` of a file holding several sites."""

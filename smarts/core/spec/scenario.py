@@ -55,7 +55,9 @@ class VehicleDimensions:
 
 
 VEHICLE_TYPES: dict[str, VehicleDimensions] = {
-    t.name.lower(): VehicleDimensions(*VEHICLE_DIMENSIONS[t]) for t in VehicleType if t is not VehicleType.PEDESTRIAN
+    t.name.lower(): VehicleDimensions(*VEHICLE_DIMENSIONS[t])
+    for t in VehicleType
+    if t not in (VehicleType.PEDESTRIAN, VehicleType.BICYCLE)
 }
 """Typical dimensions (m) and mass (kg) per vehicle type; a scenario may override each one."""
 
