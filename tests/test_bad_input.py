@@ -1,6 +1,7 @@
 """Bad input, as users give it, through the command lines they use: every case ends with exit code
-2 (or 1 where a CLI has its own), one message naming the file, field, flag or agent at fault and
-what was expected, no traceback, and nothing written where it should not be.
+2 (``smarts.exit_codes.BAD_INPUT``, the same for every command), one message naming the file,
+field, flag or agent at fault and what was expected, no traceback, and nothing written where it
+should not be.
 
 The per-module tests check the messages in detail; this corpus checks the joints: that each error
 reaches the user through the CLI intact."""
@@ -109,7 +110,7 @@ def test_bad_input_names_its_source_without_a_traceback(files, name, command, fr
             part = part.replace("{" + key + "}", str(path))
         args.append(part)
     result = run(*args, cwd=files["tmp"])
-    assert result.returncode in (1, 2), (name, result.returncode, result.stderr[-2000:])
+    assert result.returncode == 2, (name, result.returncode, result.stderr[-2000:])
     assert "Traceback" not in result.stderr, result.stderr[-3000:]
     for fragment in fragments:
         assert fragment in result.stderr, (name, fragment, result.stderr[-2000:])
@@ -194,7 +195,7 @@ def test_bad_replay_input_is_one_clear_error(replay_files, name, command, fragme
             part = part.replace("{" + key + "}", str(path))
         args.append(part)
     result = run(*args, cwd=replay_files["tmp"])
-    assert result.returncode == 1, (name, result.returncode, result.stdout[-1000:], result.stderr[-2000:])
+    assert result.returncode == 2, (name, result.returncode, result.stdout[-1000:], result.stderr[-2000:])
     assert "Traceback" not in result.stderr and "MemoryError" not in result.stderr, result.stderr[-3000:]
     for fragment in fragments:
         assert fragment in result.stderr, (name, fragment, result.stderr[-2000:])

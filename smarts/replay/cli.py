@@ -16,6 +16,7 @@ from typing import Annotated
 import numpy as np
 from pydantic import Field, ValidationError
 
+from smarts import exit_codes
 from smarts.core.errors import MapError, ReplayError, ScenarioError
 from smarts.core.schema import Schema, locate
 from smarts.core.spec.replay import COORDINATES, REACTIVE_MODES, REPLAY_FORMATS
@@ -170,8 +171,9 @@ def summary(rec) -> dict:
 
 
 def _fail(err: Exception) -> int:
+    """A refused recording, map or option: one ``error:`` line, the input exit code of every command."""
     print(f"error: {err}", file=sys.stderr)
-    return 1
+    return exit_codes.BAD_INPUT
 
 
 def _info(args: argparse.Namespace) -> int:

@@ -8,6 +8,7 @@ import sys
 from rich.console import Console
 from rich.table import Table
 
+from smarts import exit_codes
 from smarts.core.errors import NetconvertError, ScenarioError
 from smarts.scenario.builtin_maps import BUILTIN_MAPS, builtin_map_path
 from smarts.scenario.library import list_scenarios, load_scenario
@@ -25,7 +26,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--build",
         action="store_true",
-        help="also build and load its map and make the checks of 'validate' (exit code 1 on a problem)",
+        help="also build and load its map and make the checks of 'validate' (exit code 2 on a problem, as validate)",
     )
     p.set_defaults(run=_scenario_show)
     p = scenario_sub.add_parser(
@@ -55,9 +56,10 @@ def _console() -> Console:
     return Console(width=None if sys.stdout.isatty() else 200, highlight=False)
 
 
-def _fail(message: str) -> int:
+def _fail(message: str, code: int = exit_codes.BAD_INPUT) -> int:
+    """One ``error:`` line on stderr and the exit code of its kind (``smarts.exit_codes``)."""
     print(f"error: {message}", file=sys.stderr)
-    return 1
+    return code
 
 
 def _scenario_list(args: argparse.Namespace) -> int:
@@ -104,7 +106,7 @@ def _scenario_validate(args: argparse.Namespace) -> int:
             print(line)
     if len(args.files) > 1:
         print(f"{len(args.files) - invalid} of {len(args.files)} scenarios valid", file=sys.stderr)
-    return 2 if invalid else 0
+    return exit_codes.BAD_INPUT if invalid else exit_codes.OK
 
 
 def _validate(name: str):
@@ -135,7 +137,9 @@ def _map_list(args: argparse.Namespace) -> int:
 def _map_build(args: argparse.Namespace) -> int:
     try:
         path = builtin_map_path(args.name)
-    except (ScenarioError, NetconvertError) as exc:
+    except ScenarioError as exc:
         return _fail(str(exc))
+    except NetconvertError as exc:  # the tool failed on a map of ours: not the user's input
+        return _fail(str(exc), exit_codes.FAILED)
     print(path)
     return 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from smarts import exit_codes
 from smarts.viz.live import DEFAULT_HOST, DEFAULT_PORT
 
 DESCRIPTION = """Serve the diagnostic viewer: recorded episodes under PATH (episode recordings and
@@ -33,12 +34,12 @@ def run(args: argparse.Namespace) -> int:
         if not 0 <= args.port <= 65535:
             raise ValueError(f"--port {args.port}: expected 0 to 65535")
         serve(args.path, args.host, args.port, allow_remote=args.allow_remote)
-    except ValueError as err:  # refused bind, unreadable recording or log: say which and why
+    except ValueError as err:  # refused bind, port in use, unreadable recording or log: say which and why
         print(f"error: {err}", file=sys.stderr)
-        return 2
+        return exit_codes.BAD_INPUT
     except KeyboardInterrupt:
-        return 0
-    return 0
+        return exit_codes.OK
+    return exit_codes.OK
 
 
 def add_commands(subparsers) -> None:

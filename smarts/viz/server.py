@@ -21,6 +21,7 @@ re-serialised, within the byte limits below; frames nobody watches are dropped.
 from __future__ import annotations
 
 import asyncio
+import errno
 import ipaddress
 import json
 import logging
@@ -406,6 +407,28 @@ def create_app(
     return app
 
 
+def bind(host: str, port: int) -> socket.socket:
+    """A listening socket on ``host:port`` (0: any free port), bound here rather than by uvicorn so
+    that a port in use is one plain ``ValueError`` before anything is printed or served."""
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
+    except socket.gaierror as err:
+        raise ValueError(f"--host {host}: not an address of this machine ({err.strerror})") from None
+    sock = socket.socket(family, kind, proto)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn does: no wait after a restart
+        sock.bind(address)
+        sock.listen(128)
+    except OSError as err:
+        sock.close()
+        if err.errno == errno.EADDRINUSE:
+            raise ValueError(f"--port {port}: {host}:{port} is already in use (another viewer or server?); give "
+                             "another --port, or --port 0 for any free one") from None  # fmt: skip
+        raise ValueError(f"--host {host} --port {port}: cannot listen there ({err.strerror or err})") from None
+    sock.set_inheritable(True)
+    return sock
+
+
 def serve(
     path: str | Path | None = None,
     host: str = DEFAULT_HOST,
@@ -415,17 +438,27 @@ def serve(
     log_level: str = "warning",
 ) -> None:
     """Run the viewer until interrupted (refuses a non-loopback ``host`` without ``allow_remote``,
-    which also widens the Host check)."""
+    which also widens the Host check; a port in use is a ``ValueError`` saying so)."""
     import uvicorn
 
     warning = check_bind(host, allow_remote)
     if warning:
         print(warning, file=sys.stderr)
     app = create_app(path, allow_remote=allow_remote, host=host)
+    sock = bind(host, port)
+    port = sock.getsockname()[1]
     n = len(app.state.episodes)
     what = f"{n} recorded episode(s) under {path}" if path is not None else "waiting for live envs"
-    print(f"smarts viz: http://{host}:{port}/ ({what}; Ctrl-C stops)", flush=True)
-    uvicorn.run(app, host=host, port=port, log_level=log_level, ws_max_size=MAX_EPISODE_BYTES)
+    print(f"smarts viz: http://{_url_host(host)}:{port}/ ({what}; Ctrl-C stops)", flush=True)
+    config = uvicorn.Config(app, host=host, port=port, log_level=log_level, ws_max_size=MAX_EPISODE_BYTES)
+    try:
+        uvicorn.Server(config).run(sockets=[sock])
+    finally:
+        sock.close()
+
+
+def _url_host(host: str) -> str:
+    return f"[{host}]" if ":" in host else host
 
 
 class BackgroundServer:
@@ -439,9 +472,12 @@ class BackgroundServer:
 
         check_bind(host, allow_remote)
         self.app = create_app(path, allow_remote=allow_remote, host=host)
-        config = uvicorn.Config(self.app, host=host, port=port, log_level="warning", ws_max_size=MAX_EPISODE_BYTES)
+        self._socket = bind(host, port)
+        config = uvicorn.Config(self.app, host=host, port=self._socket.getsockname()[1], log_level="warning",
+                                ws_max_size=MAX_EPISODE_BYTES)  # fmt: skip
         self.server = uvicorn.Server(config)
-        self._thread = threading.Thread(target=self.server.run, name="smarts-viz-server", daemon=True)
+        self._thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self._socket]},
+                                        name="smarts-viz-server", daemon=True)  # fmt: skip
         self._thread.start()
         import time
 
@@ -452,11 +488,12 @@ class BackgroundServer:
             time.sleep(0.02)
         sock = self.server.servers[0].sockets[0]
         self.host, self.port = sock.getsockname()[:2]
-        self.url = f"http://{host}:{self.port}"
+        self.url = f"http://{_url_host(host)}:{self.port}"
 
     def stop(self) -> None:
         self.server.should_exit = True
         self._thread.join(timeout=10)
+        self._socket.close()
 
     def __enter__(self) -> "BackgroundServer":
         return self

@@ -32,7 +32,7 @@ def test_info_table_and_errors_through_the_installed_command(tmp_path):
     (tmp_path / "bad.csv").write_text("Vehicle_ID,Frame_ID\n1,2\n")
     done = subprocess.run([sys.executable, "-m", "smarts", "replay", "info", str(tmp_path / "bad.csv"), "--format",
                            "ngsim"], capture_output=True, text=True, check=False)  # fmt: skip
-    assert done.returncode == 1 and "bad.csv" in done.stderr and "Local_X" in done.stderr
+    assert done.returncode == 2 and "bad.csv" in done.stderr and "Local_X" in done.stderr
     assert "Traceback" not in done.stderr
 
 
@@ -57,7 +57,7 @@ def test_show_draws_the_vehicles_where_they_are(tmp_path, capsys):
     assert gif.n_frames == 45  # 8.9 s at 5 frames per second
     assert main(["replay", "show", str(path), "--format", "ngsim", "--out", str(tmp_path / "v.mp4")]) == 0
     assert (tmp_path / "v.mp4").stat().st_size > 1000
-    assert main(["replay", "show", str(path), "--format", "ngsim", "--out", str(tmp_path / "v.txt")]) == 1
+    assert main(["replay", "show", str(path), "--format", "ngsim", "--out", str(tmp_path / "v.txt")]) == 2
     assert "expected a .png image" in capsys.readouterr().err
 
 

@@ -80,7 +80,7 @@ def test_argoverse2_and_ngsim_folders_and_what_is_left_out(tmp_path, capsys):
     write_ngsim(ngsim / "trajectories-0400-0415.csv", three_vehicles())
     shutil.copy(builtin_map_path("straight_2lane"), tmp_path / "site.net.xml")
     out = tmp_path / "ngsim.yaml"
-    assert main(["replay", "suite", str(ngsim), "--format", "ngsim", "--out", str(out), "--swap-xy", "--flip-y"]) == 1
+    assert main(["replay", "suite", str(ngsim), "--format", "ngsim", "--out", str(out), "--swap-xy", "--flip-y"]) == 2
     assert "--map: NGSIM recordings have no map of their own" in capsys.readouterr().err
     assert main(["replay", "suite", str(ngsim), "--format", "ngsim", "--out", str(out), "--swap-xy", "--flip-y",
                  "--map", str(tmp_path / "site.net.xml")]) == 0  # fmt: skip
@@ -90,5 +90,5 @@ def test_argoverse2_and_ngsim_folders_and_what_is_left_out(tmp_path, capsys):
     # a folder with nothing to take over is one error naming each reason
     empty = tmp_path / "empty"
     empty.mkdir()
-    assert main(["replay", "suite", str(empty), "--format", "waymo", "--out", str(tmp_path / "none.yaml")]) == 1
+    assert main(["replay", "suite", str(empty), "--format", "waymo", "--out", str(tmp_path / "none.yaml")]) == 2
     assert "no scenario to take over in the waymo recordings" in capsys.readouterr().err

@@ -41,12 +41,12 @@ def test_scenario_show_accepts_a_file(tmp_path, capsys):
 
 
 def test_scenario_show_reports_errors_on_stderr(tmp_path, capsys):
-    assert main(["scenario", "show", "no_such_scenario"]) == 1
+    assert main(["scenario", "show", "no_such_scenario"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: unknown scenario 'no_such_scenario'")
     bad = tmp_path / "bad.yaml"
     bad.write_text("map: builtin:straight_2lane\nagents: []\n", encoding="utf-8")
-    assert main(["scenario", "show", str(bad)]) == 1
+    assert main(["scenario", "show", str(bad)]) == 2
     assert f"{bad}: agents: list should have at least 1 item" in capsys.readouterr().err
 
 
@@ -57,7 +57,7 @@ def test_map_list_and_build(capsys, monkeypatch, map_cache_dir, built_maps):
     monkeypatch.setenv("SMARTS_CACHE_DIR", str(map_cache_dir))
     assert main(["map", "build", "t_junction"]) == 0
     assert capsys.readouterr().out.strip() == str(built_maps["t_junction"])
-    assert main(["map", "build", "moon_base"]) == 1
+    assert main(["map", "build", "moon_base"]) == 2
     assert "unknown built-in map 'moon_base'" in capsys.readouterr().err
 
 

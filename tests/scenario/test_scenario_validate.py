@@ -64,7 +64,7 @@ def test_an_unreachable_goal_is_reported_naming_the_field(tmp_path, capsys):
 
 def test_show_build_makes_the_same_checks(tmp_path, capsys):
     file = write(tmp_path, with_(TWO_WAY, agents__0__mission__goal={"road": "westbound"}))
-    assert main(["scenario", "show", str(file), "--build"]) == 1
+    assert main(["scenario", "show", str(file), "--build"]) == 2  # as validate: one code for one kind of error
     captured = capsys.readouterr()
     assert "# roads: 2 (+0 inside junctions), lanes: 2" in captured.out
     assert captured.err == f"error: {file}: agents[0].mission.goal: no route from road 'eastbound' lane 0 to road 'westbound'\n"

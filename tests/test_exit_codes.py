@@ -1,0 +1,48 @@
+"""One exit code for one kind of outcome across the command lines (``smarts.exit_codes``): a bad
+scenario file is 2 whether it is validated or shown, a port in use is one plain line and 2, a
+mid-run write failure is 1."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+from smarts import exit_codes
+from smarts.__main__ import main as smarts_main
+
+BAD = "name: x\nmap: builtin:straight_2lane\nagents:\n  - mission: {start: {road: main, ofset: 3}, goal: {road: main, offset: 50}}\n"
+
+
+def test_a_bad_scenario_file_is_the_same_code_for_validate_and_show(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(BAD)
+    codes = {
+        "validate": smarts_main(["scenario", "validate", str(bad)]),
+        "show": smarts_main(["scenario", "show", str(bad)]),
+        "show --build": smarts_main(["scenario", "show", str(bad), "--build"]),
+        "unknown map": smarts_main(["map", "build", "moon_base"]),
+        "unreadable recording": smarts_main(["replay", "info", str(bad), "--format", "waymo"]),
+    }
+    assert codes == dict.fromkeys(codes, exit_codes.BAD_INPUT), codes
+    err = capsys.readouterr()
+    assert "ofset" in err.out + err.err and "Traceback" not in err.err
+
+
+def test_a_port_in_use_is_one_clear_line(tmp_path):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        done = subprocess.run([sys.executable, "-m", "smarts", "viz", str(tmp_path), "--port", str(port)],
+                              capture_output=True, text=True, timeout=120, cwd=Path(__file__).parents[1])  # fmt: skip
+    assert done.returncode == exit_codes.BAD_INPUT, done.stderr
+    lines = [line for line in (done.stdout + done.stderr).splitlines() if line.strip()]
+    assert lines == [f"error: --port {port}: 127.0.0.1:{port} is already in use (another viewer or server?); give "
+                     "another --port, or --port 0 for any free one"]  # fmt: skip
+
+
+def test_the_codes_are_distinct():
+    codes = [exit_codes.OK, exit_codes.FAILED, exit_codes.BAD_INPUT, exit_codes.INTERRUPTED]
+    assert len(set(codes)) == 4 and exit_codes.BAD_INPUT == 2  # argparse's usage errors are 2 as well
