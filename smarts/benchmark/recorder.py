@@ -19,6 +19,19 @@ Following columns: from ``smarts.core.following.lead_state``, the one lead defin
 project. The lead is "in lane and visible" when it is ahead on the follower's lane or on a lane
 reached from it through successor lanes (lane continuity: a lead straight ahead stays in lane
 across road-segment boundaries), within sight; the gap is bumper to bumper along those lanes.
+
+Rule columns. ``red_light``: on this row the agent's vehicle entered a junction lane (the first
+lane of a signal-controlled connection, ``SignalState.via_colour``) whose colour was red at that
+moment. ``left_map``: the end-of-map rule (see ``smarts.benchmark.metrics.scores``): once the
+front of an agent's vehicle passes the end of a lane of its route that has no successor (the
+map's edge), within the lane's width, the vehicle has left the map; its trace ends on the row
+before, which is marked ``left_map``, and what the events say from then on (partial off road,
+then off road) is not recorded. The events kernel does not know this rule yet: the env still
+ends such an agent with ``off_road`` a step or two later.
+
+The scene (``EpisodeLog.scene``): at every row time, every other road user (leads, social
+agents, traffic, replay, pedestrians) within ``SCENE_RADIUS`` of a live agent or a lead, and the
+colours of the map's signals, so the viewer and the report's plots show the whole episode.
 """
 
 from __future__ import annotations
@@ -27,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from smarts.benchmark.metrics.log import TIME_LIMIT_TOLERANCE, AgentTrace, EpisodeLog
+from smarts.benchmark.metrics.log import SCENE_RADIUS, TIME_LIMIT_TOLERANCE, AgentTrace, EpisodeLog, SceneTrace
 from smarts.benchmark.metrics.params import MetricParams
 from smarts.benchmark.metrics.scores import time_gap_to_margin
 from smarts.core.errors import MapError
@@ -36,6 +49,7 @@ from smarts.core.following import LEAD_SIGHT, lead_state
 from smarts.core.missions import GOAL_ROAD
 from smarts.core.simulation import Simulation
 from smarts.maps import project, route_polyline, shortest_route
+from smarts.traffic.signals import RED
 
 _COLUMNS = (
     "time", "x", "y", "heading", "speed", "accel_long", "accel_lat", "jerk_long", "jerk_lat",
@@ -43,8 +57,9 @@ _COLUMNS = (
 )  # fmt: skip
 _FLAGS = (
     "wrong_way", "partial_off_road", "off_road", "goal_reached", "in_follow_margin",
-    "lead_in_lane_and_visible",
+    "lead_in_lane_and_visible", "red_light", "left_map",
 )  # fmt: skip
+_LEFT_MAP = len(_COLUMNS) + _FLAGS.index("left_map")
 
 
 class EpisodeRecorder:
@@ -95,6 +110,15 @@ class EpisodeRecorder:
         rows = sim.agent_row[self.agents]
         self._prev_lat = np.full(len(sim.agent_ids), np.nan)
         self._prev_lat[self.agents[live]] = t.lat_accel[rows[live]]
+        self._prev_lane = np.full(len(sim.agent_ids), -1, dtype=np.int64)
+        self._prev_lane[self.agents[live]] = t.lane[rows[live]]
+        self._gone = np.zeros(len(sim.agent_ids), dtype=bool)  # left the map at its route's end
+        self._map_ends = self._route_map_ends()
+        signals = getattr(sim, "signals", None)
+        self._signals = signals if signals is not None and signals.has_signals else None
+        self._scene_rows: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._scene_ids: dict[str, int] = {}
+        self._scene_size: list[tuple[float, float, int]] = []
         self.start_pose: dict[str, tuple[float, float, float]] = {}
         self.initial_route_distance: dict[str, float] = {}
         to_goal = self._route_distance(self.agents[live], rows[live])
@@ -126,6 +150,92 @@ class EpisodeRecorder:
                 out[a] = max(float(m.path_s[-1]) - max(beyond, 0.0), 0.0)
         return out
 
+    def _route_map_ends(self) -> list[frozenset[int]]:
+        """Per agent index: the lanes of its route without a successor (where the map stops)."""
+        rm = self.sim.road_map
+        out = []
+        for m in self.sim.missions:
+            lanes = {int(lane) for lane in np.unique(np.asarray(m.path_lane)) if lane >= 0}
+            out.append(frozenset(lane for lane in lanes if len(rm.successors(lane)) == 0))
+        return out
+
+    def _leaving_map(self, agents: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Per agent: its vehicle's front has passed the end of a route lane where the map stops,
+        within the lane's width (on a later row it may be matched to no lane: the previous one
+        counts)."""
+        t, rm = self.sim.table, self.sim.road_map
+        out = np.zeros(len(agents), dtype=bool)
+        for k, (a, r) in enumerate(zip(agents.tolist(), rows.tolist())):
+            ends = self._map_ends[a]
+            if not ends:
+                continue
+            lane = int(t.lane[r]) if t.lane[r] >= 0 else int(self._prev_lane[a])
+            if lane not in ends:
+                continue
+            if t.lane[r] < 0:  # off every lane straight after being on a map end: past it
+                out[k] = True
+                continue
+            front = float(t.s[r]) + 0.5 * float(t.length[r])
+            out[k] = front >= float(rm.lane_length[lane]) - 1e-6 and abs(float(t.t[r])) <= 0.5 * float(rm.lane_width[lane])
+        return out
+
+    def _red_light(self, agents: np.ndarray, lanes: np.ndarray) -> np.ndarray:
+        """Per agent: entered, on this step, a junction lane whose signal is red now."""
+        entered = (lanes >= 0) & (lanes != self._prev_lane[agents])
+        if self._signals is None:
+            return np.zeros(len(agents), dtype=bool)
+        colour = self._signals.via_colour[np.maximum(lanes, 0)]
+        return entered & (colour == RED)
+
+    def _record_scene(self) -> None:
+        """One scene row: the other road users near the live agents and the leads, and the
+        signal colours (the reset state is not a row)."""
+        sim, t = self.sim, self.sim.table
+        rows = np.asarray(t.alive_rows, dtype=np.int64)
+        if sim.episodes > 1:  # one episode of a batch: its own block of the table
+            rows = rows[rows // sim.episode_capacity == sim.agent_episode[self.agents[0]]]
+        agent_rows = sim.agent_row[self.agents]
+        mine = agent_rows[(agent_rows >= 0) & sim.agent_active[self.agents]]
+        leads = [t.row_of.get(lead) for lead in self.follow.values()]
+        leads = np.array([r for r in leads if r is not None], dtype=np.int64)
+        others = rows[~np.isin(rows, agent_rows[agent_rows >= 0])]
+        centres = np.concatenate([mine, leads])
+        if centres.size and others.size:
+            d2 = (t.x[others][:, None] - t.x[centres][None, :]) ** 2 + (t.y[others][:, None] - t.y[centres][None, :]) ** 2
+            near = (d2 <= SCENE_RADIUS**2).any(axis=1) | np.isin(others, leads)
+            others = others[near]
+        elif not centres.size:
+            others = others[:0]
+        index = np.empty(len(others), dtype=np.int32)
+        for k, r in enumerate(others.tolist()):
+            vid = str(t.ids[r])
+            i = self._scene_ids.get(vid)
+            if i is None:
+                i = self._scene_ids[vid] = len(self._scene_ids)
+                self._scene_size.append((float(t.length[r]), float(t.width[r]), int(t.role[r])))
+            index[k] = i
+        state = np.stack([t.x[others], t.y[others], t.heading[others], t.speed[others]], axis=1).astype(np.float32)
+        colours = self._signals.colour.astype(np.int8) if self._signals is not None else np.zeros(0, np.int8)
+        self._scene_rows.append((float(sim.time - self.start_time), index, state, colours.copy()))
+
+    def scene(self) -> SceneTrace:
+        """The scene recorded so far."""
+        rows = self._scene_rows
+        n_signals = len(self._signals.colour) if self._signals is not None else 0
+        counts = [len(r[1]) for r in rows]
+        state = np.concatenate([r[2] for r in rows]) if rows else np.zeros((0, 4), np.float32)
+        size = np.array(self._scene_size, dtype=np.float64).reshape(-1, 3)
+        return SceneTrace(
+            time=np.array([r[0] for r in rows], dtype=np.float64),
+            offsets=np.concatenate([[0], np.cumsum(counts, dtype=np.int64)]).astype(np.int64),
+            index=np.concatenate([r[1] for r in rows]).astype(np.int32) if rows else np.zeros(0, np.int32),
+            x=state[:, 0].copy(), y=state[:, 1].copy(), heading=state[:, 2].copy(), speed=state[:, 3].copy(),
+            ids=list(self._scene_ids), length=size[:, 0].astype(np.float32), width=size[:, 1].astype(np.float32),
+            role=size[:, 2].astype(np.int8),
+            signals=np.array([r[3] for r in rows], dtype=np.int8).reshape(len(rows), n_signals),
+            leads=dict(self.follow),
+        )  # fmt: skip
+
     def _note_leads(self) -> None:
         t = self.sim.table
         for agent_id, lead_id in self.follow.items():
@@ -143,7 +253,17 @@ class EpisodeRecorder:
         if sim.time - self.start_time > self.meta["time_limit"] + TIME_LIMIT_TOLERANCE:
             return  # past the time limit: the episode is over for the metrics
         self.end_time = float(sim.time - self.start_time)
-        live = sim.agent_active[self.agents]
+        self._record_scene()
+        live = sim.agent_active[self.agents] & ~self._gone[self.agents]
+        if live.any():
+            leaving = self._leaving_map(self.agents[live], sim.agent_row[self.agents[live]])
+            if leaving.any():  # the end-of-map rule: the last row inside the map ends the trace
+                for a in self.agents[live][leaving].tolist():
+                    self._gone[a] = True
+                    mine = self.rows[self.agent_ids[int(np.flatnonzero(self.agents == a)[0])]]
+                    if mine:
+                        mine[-1][_LEFT_MAP] = 1.0
+                live = sim.agent_active[self.agents] & ~self._gone[self.agents]
         if not live.any():
             self._note_leads()  # the scenario goes on: where the lead gets to is the followers' goal
             return
@@ -154,13 +274,15 @@ class EpisodeRecorder:
         to_goal = self._route_distance(agents, rows)
         ev = sim.agent_events[agents]
         gap, in_margin, visible = self._follow_state(agents, speed)
+        red = self._red_light(agents, t.lane[rows])
+        self._prev_lane[agents] = np.where(t.lane[rows] >= 0, t.lane[rows], self._prev_lane[agents])
         values = np.stack(
             [
                 np.full(len(agents), sim.time - self.start_time), t.x[rows], t.y[rows], t.heading[rows],
                 speed, t.accel[rows], t.lat_accel[rows], t.jerk[rows], self._lat_jerk(agents, rows),
                 t.t[rows], rm.lane_width[lane], rm.lane_speed_limit[lane], to_goal, gap,
                 ev[:, Event.WRONG_WAY], ev[:, Event.PARTIAL_OFF_ROAD], ev[:, Event.OFF_ROAD],
-                ev[:, Event.REACHED_GOAL], in_margin, visible,
+                ev[:, Event.REACHED_GOAL], in_margin, visible, red, np.zeros(len(agents)),
             ],
             axis=1,
         )  # fmt: skip
@@ -221,6 +343,8 @@ class EpisodeRecorder:
             failure=self.failure,
             end_time=self.end_time,
             info=self.info,
+            signals=0 if self._signals is None else int(len(self._signals.colour)),
+            scene=self.scene(),
         )
 
     def _distance_to_lead_end(self, agent_id: str, xyh: np.ndarray) -> np.ndarray:

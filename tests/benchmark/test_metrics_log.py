@@ -80,7 +80,7 @@ def test_round_trip(tmp_path):
     # No pickles: every stored array loads with allow_pickle=False and the metadata is JSON.
     with np.load(path, allow_pickle=False) as npz:
         meta = json.loads(str(npz["metadata"]))
-    assert meta["version"] == 1 and meta["task"] == "adaptive"
+    assert meta["version"] == 2 and meta["task"] == "adaptive"
 
 
 def test_round_trip_collaborative_without_following_columns(tmp_path):

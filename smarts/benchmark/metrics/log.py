@@ -51,18 +51,39 @@ the same definition the lead observation and the platoon reward read.
 
 The three following columns are required for the ``adaptive`` task (unless the episode failed)
 and optional otherwise.
+
+Optional rule columns (absent: all false; logs of version 1 have neither):
+
+=========================  =====  =====================================================
+red_light                  bool   on this row the vehicle entered a junction lane whose
+                                  signal was red at that moment
+left_map                   bool   the vehicle left the map at the end of its route after
+                                  this row (the map's edge, not a road edge): set only on
+                                  a trace's last row; off-road flags on it are no
+                                  violation (see ``smarts.benchmark.metrics.scores``)
+=========================  =====  =====================================================
 Any further 1-D per-step arrays may ride along in ``AgentTrace.extra`` (checked for length only).
 
 Episode metadata: scenario name, task (``collaborative`` | ``adaptive``), episode index, seed,
 dt (s), time limit (s), goal radius (m), agent ids, initial route distance per agent (m), an
 optional failure reason (the episode did not finish normally, e.g. the agent raised), an
 optional ``end_time`` (when the scenario ended: the time limit, or earlier when a following
-task's lead left the map; a vehicle whose rows stop before it did not complete the scenario) and
-a free-form JSON ``info`` mapping.
+task's lead left the map; a vehicle whose rows stop before it did not complete the scenario),
+``signals`` (how many signal-controlled junction connections the map has: the red-light rule
+enters RC only where there are signals; 0 when absent) and a free-form JSON ``info`` mapping.
+
+The scene (optional, :class:`SceneTrace`): the other road users near the agents (leads, social
+agents, traffic, replayed vehicles, pedestrians) and the signal colours at every row time, so a
+viewer or a plot can show the whole episode. The metrics never read it. Sizes are kept modest:
+only road users within :data:`SCENE_RADIUS` of an agent or a lead, positions and speeds as
+float32, sizes and roles once per road user.
 
 On disk: one ``.npz`` per episode (:func:`write_episode` / :func:`read_episode`), never pickled.
 The metadata is a JSON string stored as the ``metadata`` array; agent ``i`` (in ``agent_ids``
-order) stores column ``c`` as the array ``agents/<i>/<c>`` and extras as ``extra/<i>/<name>``.
+order) stores column ``c`` as the array ``agents/<i>/<c>`` and extras as ``extra/<i>/<name>``;
+the scene's arrays are ``scene/<name>`` and its road-user ids, leads and radius the metadata's
+``scene`` entry. Version 2 added the scene, ``signals`` and the rule columns; version 1 logs are
+read as before.
 """
 
 from __future__ import annotations
@@ -83,8 +104,12 @@ from smarts.core.errors import LogError
 from smarts.files import atomic_write
 
 FORMAT_NAME = "smarts-episode-log"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+READABLE_VERSIONS = (1, 2)
+"""Versions this reader accepts (1: no scene, no signal count, no rule columns)."""
 TASKS = ("collaborative", "adaptive")
+SCENE_RADIUS = 80.0
+"""m: road users farther than this from every agent and lead are left out of a log's scene."""
 
 FLOAT_COLUMNS = (
     "time",
@@ -103,9 +128,11 @@ FLOAT_COLUMNS = (
 )
 BOOL_COLUMNS = ("wrong_way", "partial_off_road", "off_road", "goal_reached")
 FOLLOW_COLUMNS = ("follow_time_gap", "in_follow_margin", "lead_in_lane_and_visible")
+RULE_COLUMNS = ("red_light", "left_map")
+"""Optional bool columns of version 2 (absent: all false)."""
 REQUIRED_COLUMNS = FLOAT_COLUMNS + BOOL_COLUMNS
-ALL_COLUMNS = REQUIRED_COLUMNS + FOLLOW_COLUMNS
-_BOOL_KINDS = set(BOOL_COLUMNS) | {"in_follow_margin", "lead_in_lane_and_visible"}
+ALL_COLUMNS = REQUIRED_COLUMNS + FOLLOW_COLUMNS + RULE_COLUMNS
+_BOOL_KINDS = set(BOOL_COLUMNS) | {"in_follow_margin", "lead_in_lane_and_visible"} | set(RULE_COLUMNS)
 # Columns that are undefined once the vehicle has left the road entirely.
 _ON_ROAD_ONLY = ("lane_offset", "lane_width")
 
@@ -134,6 +161,10 @@ class AgentTrace:
     follow_time_gap: np.ndarray | None = None
     in_follow_margin: np.ndarray | None = None
     lead_in_lane_and_visible: np.ndarray | None = None
+    red_light: np.ndarray | None = None
+    """Entered a junction lane on red on this row (optional; absent: never)."""
+    left_map: np.ndarray | None = None
+    """Left the map at its route's end after this row (optional; only the last row may be set)."""
     extra: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -159,9 +190,15 @@ class AgentTrace:
         """A zero-step trace (for a failed episode whose agent never stepped)."""
         cols: dict[str, Any] = {
             n: np.zeros(0, dtype=bool if n in _BOOL_KINDS else np.float64)
-            for n in (ALL_COLUMNS if with_following else REQUIRED_COLUMNS)
+            for n in (REQUIRED_COLUMNS + FOLLOW_COLUMNS if with_following else REQUIRED_COLUMNS)
         }
         return cls(**cols)
+
+    def flag(self, name: str) -> np.ndarray:
+        """An optional bool column, all false where the log does not have it."""
+        value = getattr(self, name)
+        return np.zeros(self.num_steps, dtype=bool) if value is None else value
+
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, AgentTrace):
@@ -173,6 +210,58 @@ class AgentTrace:
         pairs += [(self.extra[k], other.extra[k]) for k in self.extra]
         return all(
             np.array_equal(a, b, equal_nan=a.dtype.kind == "f") for a, b in pairs
+        )
+
+
+@dataclass(eq=False)
+class SceneTrace:
+    """The other road users near the agents and the signal colours, per row time (see the module
+    docstring). Road users are rows ``offsets[k]:offsets[k + 1]`` of the flat arrays at time
+    ``time[k]``; ``index`` points into ``ids`` (and ``length``, ``width``, ``role``, one per road
+    user); ``signals[k]`` are the colours of the map's signal-controlled connections
+    (``smarts.traffic.signals``: 0 none, 1 red, 2 yellow, 3 green) in the map's connection order.
+    ``leads``: agent id -> the id of the vehicle it follows."""
+
+    time: np.ndarray
+    offsets: np.ndarray
+    index: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    heading: np.ndarray
+    speed: np.ndarray
+    ids: list[str]
+    length: np.ndarray
+    width: np.ndarray
+    role: np.ndarray
+    signals: np.ndarray
+    leads: dict[str, str] = field(default_factory=dict)
+    radius: float = SCENE_RADIUS
+
+    ARRAYS = {
+        "time": (np.float64, 1), "offsets": (np.int64, 1), "index": (np.int32, 1), "x": (np.float32, 1),
+        "y": (np.float32, 1), "heading": (np.float32, 1), "speed": (np.float32, 1), "length": (np.float32, 1),
+        "width": (np.float32, 1), "role": (np.int8, 1), "signals": (np.int8, 2),
+    }  # fmt: skip
+
+    @property
+    def num_rows(self) -> int:
+        return int(len(self.time))
+
+    def at(self, k: int) -> slice:
+        """The flat-array slice of row ``k``."""
+        return slice(int(self.offsets[k]), int(self.offsets[k + 1]))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {name: np.asarray(getattr(self, name), dtype=dtype) for name, (dtype, _) in self.ARRAYS.items()}
+
+    def metadata(self) -> dict[str, Any]:
+        return {"ids": list(self.ids), "leads": dict(self.leads), "radius": float(self.radius)}
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, SceneTrace):
+            return NotImplemented
+        return self.metadata() == other.metadata() and all(
+            np.array_equal(a, b) for a, b in zip(self.arrays().values(), other.arrays().values())
         )
 
 
@@ -198,6 +287,10 @@ class EpisodeLog:
     the last logged row of the episode."""
     info: dict[str, Any] = field(default_factory=dict)
     """Free-form JSON-serialisable extras (agent locator, action space, ...)."""
+    signals: int = 0
+    """Signal-controlled junction connections on the map (the red-light rule applies where > 0)."""
+    scene: SceneTrace | None = None
+    """The other road users and the signal colours (version 2; never read by the metrics)."""
     source: str | None = None
     """Where the log was read from; prefixes error messages. Not stored."""
 
@@ -227,6 +320,8 @@ class EpisodeLog:
             },
             "failure": self.failure,
             "end_time": None if self.end_time is None else float(self.end_time),
+            "signals": int(self.signals),
+            "scene": None if self.scene is None else self.scene.metadata(),
             "info": self.info,
         }
 
@@ -241,6 +336,8 @@ class EpisodeLog:
             self.metadata() == other.metadata()
             and self.agents.keys() == other.agents.keys()
             and all(self.agents[a] == other.agents[a] for a in self.agents)
+            and (self.scene is None) == (other.scene is None)
+            and (self.scene is None or self.scene == other.scene)
         )
 
 
@@ -267,6 +364,43 @@ def validate_episode(log: EpisodeLog) -> None:
                 agent=agent_id,
             )
         _validate_trace(trace, agent_id, log.task, log.failed, src, float(log.time_limit))
+    if log.scene is not None:
+        _validate_scene(log.scene, src)
+
+
+def _validate_scene(scene: SceneTrace, src: str | None) -> None:
+    """Shapes, kinds and index ranges of a scene, and finite positions."""
+
+    def bad(name: str, problem: str) -> LogError:
+        return LogError(problem, source=src, column=f"scene.{name}")
+
+    if not isinstance(scene, SceneTrace):
+        raise LogError(f"expected a SceneTrace, got {type(scene).__name__}", source=src, column="scene")
+    for name, (dtype, ndim) in SceneTrace.ARRAYS.items():
+        value = getattr(scene, name)
+        if not isinstance(value, np.ndarray) or value.ndim != ndim or value.dtype != np.dtype(dtype):
+            got = f"{value.ndim}-D {value.dtype}" if isinstance(value, np.ndarray) else type(value).__name__
+            raise bad(name, f"expected a {ndim}-D {np.dtype(dtype).name} array, got {got}")
+    t, n, v = len(scene.time), len(scene.index), len(scene.ids)
+    off = scene.offsets
+    if len(off) != t + 1 or (t + 1 and (off[0] != 0 or off[-1] != n)) or np.any(np.diff(off) < 0):
+        raise bad("offsets", f"expected {t + 1} non-decreasing offsets from 0 to {n}")
+    for name in ("x", "y", "heading", "speed"):
+        if len(getattr(scene, name)) != n:
+            raise bad(name, f"expected {n} values like scene.index, got {len(getattr(scene, name))}")
+        if not np.isfinite(getattr(scene, name)).all():
+            raise bad(name, "non-finite value (must be finite)")
+    for name in ("length", "width", "role"):
+        if len(getattr(scene, name)) != v:
+            raise bad(name, f"expected one value per road user ({v}), got {len(getattr(scene, name))}")
+    if n and (scene.index.min() < 0 or scene.index.max() >= v):
+        raise bad("index", f"a road user outside the {v} ids")
+    if len(scene.signals) != t:
+        raise bad("signals", f"expected {t} rows like scene.time, got {len(scene.signals)}")
+    if t > 1 and not (np.diff(scene.time) > 0).all():
+        raise bad("time", "must be strictly increasing")
+    if not all(isinstance(i, str) for i in scene.ids) or not isinstance(scene.leads, dict):
+        raise LogError("scene ids must be strings and leads a mapping", source=src, column="metadata.scene")
 
 
 def _validate_metadata(log: EpisodeLog) -> None:
@@ -295,6 +429,8 @@ def _validate_metadata(log: EpisodeLog) -> None:
             raise bad(name, f"expected a finite number {need}, got {value!r}")
     if log.failure is not None and not isinstance(log.failure, str):
         raise bad("failure", f"expected a string or null, got {log.failure!r}")
+    if not _is_int(log.signals) or log.signals < 0:
+        raise bad("signals", f"expected an integer >= 0, got {log.signals!r}")
     if not isinstance(log.info, dict):
         raise bad("info", f"expected a mapping, got {type(log.info).__name__}")
     if not isinstance(log.agents, dict):
@@ -441,6 +577,9 @@ def _validate_trace(
         "lane_width",
         "> 0 on road",
     )
+    if trace.left_map is not None and trace.left_map[:-1].any():
+        step = int(np.argmax(trace.left_map))
+        raise bad("left_map", f"set on row {step} of {n}; a vehicle that left the map has no rows after (only the last row)")
     if (
         trace.follow_time_gap is not None
         and trace.lead_in_lane_and_visible is not None
@@ -505,6 +644,8 @@ def write_episode(log: EpisodeLog, path: str | os.PathLike) -> Path:
             arrays[f"agents/{index}/{name}"] = value
         for name, value in trace.extra.items():
             arrays[f"extra/{index}/{name}"] = value
+    if log.scene is not None:
+        arrays.update({f"scene/{name}": value for name, value in log.scene.arrays().items()})
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_write(path) as fh:
         np.savez_compressed(fh, **arrays)
@@ -537,9 +678,9 @@ def read_episode(path: str | os.PathLike) -> EpisodeLog:
             source=src,
             column="metadata.format",
         )
-    if meta.get("version") != FORMAT_VERSION:
+    if meta.get("version") not in READABLE_VERSIONS:
         raise LogError(
-            f"unsupported version {meta.get('version')!r} (this reader knows {FORMAT_VERSION})",
+            f"unsupported version {meta.get('version')!r} (this reader knows {', '.join(map(str, READABLE_VERSIONS))})",
             source=src,
             column="metadata.version",
         )
@@ -590,9 +731,10 @@ def read_episode(path: str | os.PathLike) -> EpisodeLog:
             k[len(xprefix) :]: v for k, v in arrays.items() if k.startswith(xprefix)
         }
         agents[agent_id] = AgentTrace(**cols, extra=extra)
+    scene = _read_scene(arrays, meta.get("scene"), src)
     known = tuple(f"agents/{i}/" for i in range(len(agent_ids))) + tuple(
         f"extra/{i}/" for i in range(len(agent_ids))
-    )
+    ) + ("scene/",)
     stray = sorted(k for k in arrays if not k.startswith(known))
     if stray:
         raise LogError(
@@ -613,10 +755,30 @@ def read_episode(path: str | os.PathLike) -> EpisodeLog:
         failure=meta.get("failure"),
         end_time=meta.get("end_time"),
         info=meta.get("info") or {},
+        signals=meta.get("signals", 0),
+        scene=scene,
         source=src,
     )
     validate_episode(log)
     return log
+
+
+def _read_scene(arrays: dict[str, np.ndarray], meta: Any, src: str) -> SceneTrace | None:
+    """The scene of a version 2 log (None when it has none); checked by :func:`validate_episode`."""
+    names = {k[len("scene/") :] for k in arrays if k.startswith("scene/")}
+    if meta is None and not names:
+        return None
+    if not isinstance(meta, dict) or not isinstance(meta.get("ids"), list):
+        raise LogError("expected a mapping with the road users' ids", source=src, column="metadata.scene")
+    missing = sorted(set(SceneTrace.ARRAYS) - names)
+    if missing:
+        raise LogError(f"missing scene array(s) {missing}", source=src, column="scene")
+    unknown = sorted(names - set(SceneTrace.ARRAYS))
+    if unknown:
+        raise LogError(f"unknown scene array(s) {unknown}", source=src, column="scene")
+    radius = meta.get("radius", SCENE_RADIUS)
+    return SceneTrace(**{n: arrays[f"scene/{n}"] for n in SceneTrace.ARRAYS}, ids=meta["ids"],
+                      leads=meta.get("leads") or {}, radius=float(radius) if _is_number(radius) else SCENE_RADIUS)  # fmt: skip
 
 
 def read_episodes(
@@ -676,6 +838,9 @@ def export_csv(log: EpisodeLog, path: str | os.PathLike) -> Path:
 
 __all__ = [
     "ALL_COLUMNS",
+    "RULE_COLUMNS",
+    "SCENE_RADIUS",
+    "SceneTrace",
     "BOOL_COLUMNS",
     "FLOAT_COLUMNS",
     "FOLLOW_COLUMNS",

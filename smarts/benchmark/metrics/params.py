@@ -60,12 +60,30 @@ class HumannessParams(Schema):
     )
 
 
+class RuleWeights(Schema):
+    """Weights of RC's terms: RC = 1 - the weighted mean of the terms that apply. The paper's three
+    terms weigh the same; the red-light term applies only on maps with traffic signals, so suites
+    without signals score exactly as the paper's RC."""
+
+    overspeed: Weight = 1.0
+    wrong_way: Weight = 1.0
+    off_road: Weight = 1.0
+    red_light: Weight = Field(1.0, description="Entering a junction lane on red (maps with signals only).")
+
+    @model_validator(mode="after")
+    def _some_weight(self) -> RuleWeights:
+        if self.overspeed + self.wrong_way + self.off_road <= 0:
+            raise ValueError("overspeed, wrong_way and off_road must not all weigh zero (RC needs a term everywhere)")
+        return self
+
+
 class RulesParams(Schema):
     """Road-rule compliance."""
 
     overspeed_scale: Positive = Field(
         0.5, description="The speeding cost saturates at 1 when the excess reaches this fraction of the limit."
     )
+    weights: RuleWeights = RuleWeights()
 
 
 class FollowingParams(Schema):

@@ -21,9 +21,21 @@ Per-vehicle costs (``p`` = :class:`MetricParams`):
   so one uncomfortable step at ``k`` switches ``u`` on for steps ``k..k+T_p`` (``T_p + 1`` steps);
   ``comfort = sum(u) / (T_trv + T_p)``. ``lane_centre = 1`` on rows fully off road, else
   ``min(|lane_offset| / (lane_offset_scale * lane_width), 1)``.
-- rules (RC): ``(mean_steps(min(max(v - v_limit, 0) / (overspeed_scale * v_limit), 1))
-  + wrong_way_ever + off_road_ever) / 3``; ``off_road_ever`` is set when any row has
-  ``partial_off_road`` or ``off_road``.
+- rules (RC): the weighted mean (``p.rules.weights``, 1 each by default) of
+  ``overspeed = mean_steps(min(max(v - v_limit, 0) / (overspeed_scale * v_limit), 1))``,
+  ``wrong_way_ever``, ``off_road_ever`` and, on maps with traffic signals only (the log's
+  ``signals`` > 0), ``red_light_ever``: with the default weights ``(overspeed + wrong_way +
+  off_road) / 3`` as in the paper where there are no signals, ``(... + red_light) / 4`` where
+  there are. ``off_road_ever`` is set when any row has ``partial_off_road`` or ``off_road``,
+  except a row marked ``left_map``; ``red_light_ever`` when any row has ``red_light`` (the
+  vehicle entered a junction lane whose signal was red at that moment; yellow is no violation).
+
+  The end of the map is not the edge of the road. A vehicle that drives past the end of the last
+  lane of its route, where the map stops (a lane without successors), has left the map, as SUMO
+  removes a vehicle at its route's end: the recorder ends its trace on its last row inside the
+  map and marks that row ``left_map``, and any ``partial_off_road``/``off_road`` on a
+  ``left_map`` row is no violation. Leaving the road sideways, or off the end of a lane that is
+  not on the route, is still off road.
 - time (MTE, collaborative): ``T_arrive / T_limit``, ``T_arrive`` the ``time`` of the first row
   with ``goal_reached`` (clipped to ``T_limit``), ``T_limit`` when the goal is never reached.
 - follow gap (SFD, adaptive): mean over steps of ``gap``; ``gap = 1`` when the lead is out of the
@@ -218,6 +230,10 @@ class AgentCosts:
     """MTE cost; collaborative task only."""
     follow_gap: float | None = None
     """SFD cost; adaptive task only."""
+    red_light: float | None = None
+    """Red-light cost; None where the map has no signals (the rule cannot apply)."""
+    rule_weights: tuple[float, float, float, float] = field(default=(1.0, 1.0, 1.0, 1.0), repr=False)
+    """Weights of overspeed, wrong_way, off_road and red_light in ``rules`` (``p.rules.weights``)."""
 
     @property
     def humanness(self) -> float:
@@ -225,15 +241,21 @@ class AgentCosts:
 
     @property
     def rules(self) -> float:
-        return (self.overspeed + self.wrong_way + self.off_road) / 3.0
+        """The weighted mean of the RC terms that apply (red_light only where there are signals)."""
+        w_speed, w_way, w_off, w_red = self.rule_weights
+        terms = [(w_speed, self.overspeed), (w_way, self.wrong_way), (w_off, self.off_road)]
+        if self.red_light is not None:
+            terms.append((w_red, self.red_light))
+        total = sum(w for w, _ in terms)
+        return sum(w * c for w, c in terms) / total
 
     def as_dict(self) -> dict[str, float]:
-        out = {k: v for k, v in asdict(self).items() if v is not None}
+        out = {k: v for k, v in asdict(self).items() if v is not None and k != "rule_weights"}
         out.update(humanness=self.humanness, rules=self.rules)
         return out
 
     @classmethod
-    def worst(cls, task: str) -> AgentCosts:
+    def worst(cls, task: str, signals: bool = False) -> AgentCosts:
         return cls(
             progress=1.0,
             comfort=1.0,
@@ -243,6 +265,7 @@ class AgentCosts:
             off_road=1.0,
             time=1.0 if task == "collaborative" else None,
             follow_gap=1.0 if task == "adaptive" else None,
+            red_light=1.0 if signals else None,
         )
 
 
@@ -258,7 +281,9 @@ def agent_costs(
     params = load_params() if params is None else params
     validate_episode(log)
     if log.failed:
-        return {a: AgentCosts.worst(log.task) for a in log.agents}
+        return {a: AgentCosts.worst(log.task, log.signals > 0) for a in log.agents}
+    rw = params.rules.weights
+    weights = (rw.overspeed, rw.wrong_way, rw.off_road, rw.red_light)
     steps_p = penalty_steps(log.dt, params)
     out: dict[str, AgentCosts] = {}
     for agent_id, tr in log.agents.items():
@@ -293,7 +318,10 @@ def agent_costs(
                 ).mean()
             ),
             wrong_way=float(tr.wrong_way.any()),
-            off_road=float((tr.partial_off_road | tr.off_road).any()),
+            # leaving the map at its route's end is not leaving the road
+            off_road=float(((tr.partial_off_road | tr.off_road) & ~tr.flag("left_map")).any()),
+            red_light=float(tr.flag("red_light").any()) if log.signals > 0 else None,
+            rule_weights=weights,
             time=time_cost(tr.time, tr.goal_reached, float(log.time_limit))
             if log.task == "collaborative"
             else None,
@@ -333,7 +361,7 @@ def score_episode(
         rows = [c.as_dict() for c in per_agent.values()]
         costs = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
     else:  # a failed episode that never spawned its agents
-        costs = AgentCosts.worst(log.task).as_dict()
+        costs = AgentCosts.worst(log.task, log.signals > 0).as_dict()
     metrics = {m: 1.0 - costs[COST_OF_METRIC[m]] for m in metric_names(log.task)[:-1]}
     metrics["S_bench"] = s_bench(metrics, log.task, params)
     metrics.update({f"cost.{k}": v for k, v in costs.items()})
@@ -557,7 +585,8 @@ def score_suite(
     scenarios: dict[str, dict[str, float]] = {}
     for name in sorted(per_scenario):
         rows = per_scenario[name]
-        scenarios[name] = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
+        keys = dict.fromkeys(k for r in rows for k in r)  # cost.red_light: not in a failed episode's worst row
+        scenarios[name] = {k: float(np.mean([r[k] for r in rows if k in r])) for k in keys}
     overall = {
         m: float(np.mean([row[m] for row in scenarios.values()]))
         for m in names[:-1]

@@ -80,6 +80,7 @@ def make_episode(
     failure: str | None = None,
     info: dict[str, Any] | None = None,
     end_time: float | None = None,
+    signals: int = 0,
 ) -> EpisodeLog:
     """Wrap traces in an :class:`EpisodeLog`; a single float sets every agent's initial distance."""
     if not isinstance(initial_route_distance, dict):
@@ -97,4 +98,5 @@ def make_episode(
         initial_route_distance=initial_route_distance,
         failure=failure,
         info=dict(info or {}),
+        signals=signals,
     )
