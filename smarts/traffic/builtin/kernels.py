@@ -20,10 +20,12 @@ not be enough.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
+from smarts.core.records import declare, freeze_fields, view
 from smarts.core.vehicle_table import COLUMN
 from smarts.traffic.builtin.junctions import NOMINAL_LENGTH
 
@@ -78,6 +80,199 @@ IDM_DELTA = 4.0
 INF = 1e9
 
 
+# ----------------------------------------------------------------------------- records
+class LaneGraph(NamedTuple):
+    """The map's lanes as the driver model reads them (the same for every set of providers: one
+    map, or one stack of maps)."""
+
+    lane_f: np.ndarray  # float64[4, L] rows LEN, WIDTH, SPEED_LIMIT, INTERNAL
+    lane_lr: np.ndarray  # int64[2, L] neighbour to the left (row 0) and right (row 1), -1 none
+    pred_off: np.ndarray  # int64[L + 1] CSR of each lane's predecessors
+    pred: np.ndarray  # int64[E]
+    point_off: np.ndarray  # int64[L + 1] CSR of each lane's centre-line points
+    point_s: np.ndarray  # float64[P] arc length of each point within its lane
+    points: np.ndarray  # float64[P, 2]
+    seg_heading: np.ndarray  # float64[P - L] heading of each segment (segment k of lane l: k - l)
+
+
+class Routes(NamedTuple):
+    """The route slots and junction tables of one set of providers (``routes``, ``junctions``)."""
+
+    slot_int: np.ndarray  # int64[5, slots] rows S_LANE, S_NEXT, S_LEFT, S_RIGHT, S_DIR
+    slot_cost: np.ndarray  # float64[slots] lane changes still needed from each slot
+    conn_int: np.ndarray  # int64[5, C] rows C_FROM, C_TO, C_FIRST, C_MAJOR, C_MERGE_ONLY
+    conn_len: np.ndarray  # float64[C]
+    clanes_off: np.ndarray  # int64[C + 1] CSR of each connection's junction lanes
+    clanes: np.ndarray  # int64[...]
+    conn_of_lane: np.ndarray  # int64[L] connection of a junction lane, -1 elsewhere
+    offset_of_lane: np.ndarray  # float64[L] position of the lane's start along its connection
+    foe_off: np.ndarray  # int64[C + 1] CSR of each connection's conflict zones
+    foe: np.ndarray  # int64[F] the other connection
+    foe_kind: np.ndarray  # int64[F] CROSS, MERGE or DIVERGE
+    zone: np.ndarray  # float64[4, F] (in, out) on this connection, (in, out) on the foe
+
+
+class RouteSets(NamedTuple):
+    """The ``Routes`` of several sets of providers: each table concatenated along its last axis
+    over the sets (``tables``) and, per table, where each set's part starts (``bounds``, each an
+    int64[sets + 1]): set ``t``'s own table is ``table[..., bound[t]:bound[t + 1]]`` (indices in
+    it stay the set's own). ``set_routes`` cuts one set's out."""
+
+    tables: Routes
+    bounds: Routes
+
+
+class RowState(NamedTuple):
+    """The driver state of one provider's rows, kept between steps."""
+
+    si: np.ndarray  # int64[NUM_INT_STATE, rows] SLOT, PREV_LANE, LC_LANE, LC_FROM
+    st: np.ndarray  # float64[NUM_FLOAT_STATE, rows] S, LAT, LAT0, LC_PROG, COOL, FACTOR, WAIT
+    pa: np.ndarray  # float64[NUM_PARAMS, rows] ACCEL ... KEEP_RIGHT
+    mine: np.ndarray  # bool[rows] the provider drives the row
+
+
+class Decisions(NamedTuple):
+    """``step_vehicles``' scratch and results, per own vehicle (``turn``: per row)."""
+
+    acc: np.ndarray  # float64[rows] acceleration decided
+    guard: np.ndarray  # float64[rows] gap the move must stay within
+    change: np.ndarray  # int64[rows] slot to change into, -1 none
+    turn: np.ndarray  # int64[rows] by row: side of the lane change decided this step (+1 left)
+    arrived: np.ndarray  # bool[rows] left the map at the end of its route
+
+
+class RawEntries(NamedTuple):
+    """Road users on lanes, unsorted (``build_occupancy``'s first pass)."""
+
+    lane: np.ndarray  # int64[entries]
+    s: np.ndarray  # float64[entries] arc length of the centre
+    half: np.ndarray  # float64[entries] half length
+    v: np.ndarray  # float64[entries] speed along the lane
+    row: np.ndarray  # int64[entries]
+    kind: np.ndarray  # int64[entries] PRIMARY, DUPLICATE or OVERHANG
+
+
+class Occupancy(NamedTuple):
+    """Road users on lanes: entries of lane ``l`` are ``lane_off[l]:lane_off[l + 1]``, sorted by
+    (arc length, row)."""
+
+    lane_off: np.ndarray  # int64[L + 1]
+    s: np.ndarray  # float64[entries]
+    half: np.ndarray  # float64[entries]
+    v: np.ndarray  # float64[entries]
+    row: np.ndarray  # int64[entries]
+    kind: np.ndarray  # int64[entries]
+
+
+class Others(NamedTuple):
+    """Rows of other providers (agents, replay, ...) projected onto the map this step."""
+
+    rows: np.ndarray  # int64[n]
+    lane: np.ndarray  # int64[n], -1 off every lane
+    s: np.ndarray  # float64[n]
+    t: np.ndarray  # float64[n]
+    dh: np.ndarray  # float64[n] heading minus the lane's heading
+
+
+class World(NamedTuple):
+    """Everything of one provider's step that the decisions read (built inside the kernel)."""
+
+    data: np.ndarray  # float64[columns, rows] the episode's block of the vehicle table
+    state: RowState
+    occ: Occupancy
+    lanes: LaneGraph
+    routes: Routes
+    via_colour: np.ndarray  # int8[L] signal colour of each junction lane
+
+
+class Driver(NamedTuple):
+    """The own vehicle deciding (built inside the kernel): its row, speed, half length, desired
+    speed and driver parameters."""
+
+    r: int
+    v: float
+    h: float
+    v0: float
+    accel: float
+    decel: float
+    tau: float
+    s0: float
+    emerg: float
+
+
+class Mover(NamedTuple):
+    """An own vehicle on a junction connection, as right of way sees it: ``p`` is its centre's
+    position along the connection, ``bold`` its impatience, ``major`` and ``length`` its
+    connection's."""
+
+    me: Driver
+    p: float
+    bold: float
+    major: int
+    length: float
+
+
+class Zone(NamedTuple):
+    """A conflict zone with a foe connection: ``(zin, zout)`` on the own connection, ``(fin,
+    fout)`` on the foe's; the foe's right of way, merge-only flag, length and signal colour."""
+
+    kind: int
+    zin: float
+    zout: float
+    fin: float
+    fout: float
+    major: int
+    merge: bool
+    length: float
+    colour: int
+
+
+class RoadUser(NamedTuple):
+    """A road user on or approaching a foe connection: row ``w`` at ``p`` along it, speed, half
+    length, whether it is own (with its driver's acceleration, deceleration, desired speed and
+    waiting time; others get typical ones)."""
+
+    w: int
+    p: float
+    v: float
+    h: float
+    own: bool
+    accel: float
+    decel: float
+    v0: float
+    wait: float
+
+
+for _record in (LaneGraph, Routes, RouteSets, RowState):
+    declare(_record)
+
+
+@numba.njit(cache=True, nogil=True)
+def freeze(fields):  # pragma: no cover - compiled
+    """The frozen record of one of this module's records (see ``smarts.core.records``)."""
+    return freeze_fields(fields)
+
+
+@numba.njit(cache=True, nogil=True)
+def set_routes(sets, t):  # pragma: no cover - compiled
+    """Set ``t``'s ``Routes`` out of ``RouteSets`` ``sets`` (views)."""
+    tb, b = sets.tables, sets.bounds
+    return Routes(
+        slot_int=tb.slot_int[:, b.slot_int[t]:b.slot_int[t + 1]],
+        slot_cost=tb.slot_cost[b.slot_cost[t]:b.slot_cost[t + 1]],
+        conn_int=tb.conn_int[:, b.conn_int[t]:b.conn_int[t + 1]],
+        conn_len=tb.conn_len[b.conn_len[t]:b.conn_len[t + 1]],
+        clanes_off=tb.clanes_off[b.clanes_off[t]:b.clanes_off[t + 1]],
+        clanes=tb.clanes[b.clanes[t]:b.clanes[t + 1]],
+        conn_of_lane=tb.conn_of_lane[b.conn_of_lane[t]:b.conn_of_lane[t + 1]],
+        offset_of_lane=tb.offset_of_lane[b.offset_of_lane[t]:b.offset_of_lane[t + 1]],
+        foe_off=tb.foe_off[b.foe_off[t]:b.foe_off[t + 1]],
+        foe=tb.foe[b.foe[t]:b.foe[t + 1]],
+        foe_kind=tb.foe_kind[b.foe_kind[t]:b.foe_kind[t + 1]],
+        zone=tb.zone[:, b.zone[t]:b.zone[t + 1]],
+    )
+
+
 # ----------------------------------------------------------------------------- small helpers
 @numba.njit(cache=True, nogil=True)
 def idm(v, v0, gap, v_lead, a, b, tau, s0):  # pragma: no cover - compiled
@@ -106,12 +301,13 @@ def travel_time(dist, v, a, v_max):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def lane_pose(lane, s, point_off, point_s, points, seg_heading):  # pragma: no cover - compiled
+def lane_pose(lanes, lane, s):  # pragma: no cover - compiled
     """Centre-line point and heading of ``lane`` at arc length ``s`` (extrapolated past the ends).
 
     The heading blends linearly between neighbouring segments' headings from one segment middle
     to the next, so it turns smoothly at the polyline's vertices instead of jumping.
     """
+    point_off, point_s, points, seg_heading = lanes.point_off, lanes.point_s, lanes.points, lanes.seg_heading
     a, b = point_off[lane], point_off[lane + 1]
     lo, hi = a, b - 2  # segment index range (segment k joins points k and k + 1)
     while lo < hi:
@@ -138,10 +334,11 @@ def lane_pose(lane, s, point_off, point_s, points, seg_heading):  # pragma: no c
 
 
 @numba.njit(cache=True, nogil=True)
-def _first_ahead(lane, s, row, lane_off, e_s, e_row):  # pragma: no cover - compiled
+def _first_ahead(occ, lane, s, row):  # pragma: no cover - compiled
     """Index of the first entry on ``lane`` ordered after (s, row), skipping ``row``'s own
     entries, or -1. Entries are sorted by (arc length, row), so two road users at the same arc
     length still see one another as ahead and behind."""
+    lane_off, e_s, e_row = occ.lane_off, occ.s, occ.row
     lo, hi = lane_off[lane], lane_off[lane + 1]
     while lo < hi:
         mid = (lo + hi) // 2
@@ -157,8 +354,9 @@ def _first_ahead(lane, s, row, lane_off, e_s, e_row):  # pragma: no cover - comp
 
 
 @numba.njit(cache=True, nogil=True)
-def _last_behind(lane, s, row, lane_off, e_s, e_row):  # pragma: no cover - compiled
+def _last_behind(occ, lane, s, row):  # pragma: no cover - compiled
     """Index of the last entry on ``lane`` ordered before (s, row), skipping ``row``, or -1."""
+    lane_off, e_s, e_row = occ.lane_off, occ.s, occ.row
     lo, hi = lane_off[lane], lane_off[lane + 1]
     while lo < hi:
         mid = (lo + hi) // 2
@@ -174,13 +372,16 @@ def _last_behind(lane, s, row, lane_off, e_s, e_row):  # pragma: no cover - comp
 
 
 @numba.njit(cache=True, nogil=True)
-def find_leader(slot, s, row, max_dist, slot_int, lane_f, lane_off, e_s, e_half, e_row):  # pragma: no cover
-    """Entry ahead of arc length ``s`` on the slot's lane and the route's next lanes.
+def find_leader(w, slot, s, row, max_dist):  # pragma: no cover - compiled
+    """Entry ahead of arc length ``s`` on the slot's lane and the route's next lanes (``w``: the
+    step's ``World``).
 
     Returns (entry index or -1, distance from ``s`` to that entry's rear).
     """
+    slot_int, lane_f = w.routes.slot_int, w.lanes.lane_f
+    lane_off, e_s, e_half, e_row = w.occ.lane_off, w.occ.s, w.occ.half, w.occ.row
     lane = slot_int[S_LANE, slot]
-    k = _first_ahead(lane, s, row, lane_off, e_s, e_row)
+    k = _first_ahead(w.occ, lane, s, row)
     if k >= 0:
         return k, e_s[k] - e_half[k] - s
     dist = lane_f[LEN, lane] - s
@@ -199,15 +400,15 @@ def find_leader(slot, s, row, max_dist, slot_int, lane_f, lane_off, e_s, e_half,
 
 
 @numba.njit(cache=True, nogil=True)
-def find_follower(
-    lane, s, row, max_back, lane_f, lane_off, e_s, e_half, e_row, pred_off, pred
-):  # pragma: no cover - compiled
+def find_follower(w, lane, s, row, max_back):  # pragma: no cover - compiled
     """Entry behind arc length ``s`` on ``lane`` or, looking back up to ``max_back`` metres, on
     the lanes leading into it (the nearest one over all branches).
 
     Returns (entry index or -1, distance from that entry's front to ``s``).
     """
-    k = _last_behind(lane, s, row, lane_off, e_s, e_row)
+    lane_f, pred_off, pred = w.lanes.lane_f, w.lanes.pred_off, w.lanes.pred
+    lane_off, e_s, e_half, e_row = w.occ.lane_off, w.occ.s, w.occ.half, w.occ.row
+    k = _last_behind(w.occ, lane, s, row)
     if k >= 0:
         return k, s - e_s[k] - e_half[k]
     best, best_gap = -1, INF
@@ -241,72 +442,71 @@ def find_follower(
 
 # ----------------------------------------------------------------------------- occupancy
 @numba.njit(cache=True, nogil=True)
-def _put(n, lane, s, half, v, row, kind, raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind):
-    raw_lane[n], raw_s[n], raw_half[n] = lane, s, half
-    raw_v[n], raw_row[n], raw_kind[n] = v, row, kind
+def _put(raw, n, lane, s, half, v, row, kind):  # pragma: no cover - compiled
+    raw.lane[n], raw.s[n], raw.half[n] = lane, s, half
+    raw.v[n], raw.row[n], raw.kind[n] = v, row, kind
     return n + 1
 
 
 @numba.njit(cache=True, nogil=True)
-def build_occupancy(
-    own, f_rows, f_lane, f_s, f_t, f_dh, data, si, st, slot_int, lane_f, lane_lr, pred_off, pred,
-    lane_off, raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind, e_s, e_half, e_v, e_row, e_kind,
-):  # pragma: no cover - compiled
-    """Fill the per-lane entry lists sorted by arc length; returns the number of entries.
+def build_occupancy(own, others, data, state, lanes, routes, raw, occ):  # pragma: no cover - compiled
+    """Fill ``occ`` (an ``Occupancy``; ``raw``, ``RawEntries`` of the same size, is scratch) with
+    every road user on the lanes; returns the number of entries.
 
-    Own vehicles appear on their lane, on the lane they are leaving while a lane change still
-    puts their body over it, and at the end of the previous lane while their rear overhangs it.
-    Other rows (``f_*``: projected lane, s, t and heading minus lane heading) appear on their
-    lane, on the neighbour lane their body reaches into, and on a single predecessor lane while
-    their rear overhangs it, with their speed along the lane.
+    Own vehicles (rows ``own``, their ``RowState`` ``state``) appear on their lane, on the lane
+    they are leaving while a lane change still puts their body over it, and at the end of the
+    previous lane while their rear overhangs it. Other rows (``others``, ``Others``) appear on
+    their lane, on the neighbour lane their body reaches into, and on a single predecessor lane
+    while their rear overhangs it, with their speed along the lane.
     """
+    si, st = state.si, state.st
+    slot_int = routes.slot_int
+    lane_f, lane_lr, pred_off, pred = lanes.lane_f, lanes.lane_lr, lanes.pred_off, lanes.pred
     n = 0
     for i in range(own.shape[0]):
         r = own[i]
         lane = slot_int[S_LANE, si[SLOT, r]]
         s, half, v = st[S, r], 0.5 * data[_LENGTH, r], data[_V, r]
-        n = _put(n, lane, s, half, v, r, PRIMARY, raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind)
+        n = _put(raw, n, lane, s, half, v, r, PRIMARY)
         src = si[LC_FROM, r]
         if (st[LC_PROG, r] < 1.0 and si[LC_LANE, r] == lane and src >= 0
                 and abs(st[LAT, r]) > 0.5 * (lane_f[WIDTH, lane] - data[_WIDTH, r]) - 0.2):
             s_src = s * lane_f[LEN, src] / max(lane_f[LEN, lane], 1e-9)
-            n = _put(n, src, s_src, half, v, r, DUPLICATE,
-                     raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind)
+            n = _put(raw, n, src, s_src, half, v, r, DUPLICATE)
         prev = si[PREV_LANE, r]
         if prev >= 0 and s < half:
-            n = _put(n, prev, lane_f[LEN, prev] + s, half, v, r, OVERHANG,
-                     raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind)
-    for i in range(f_rows.shape[0]):
-        r, lane = f_rows[i], f_lane[i]
+            n = _put(raw, n, prev, lane_f[LEN, prev] + s, half, v, r, OVERHANG)
+    for i in range(others.rows.shape[0]):
+        r, lane = others.rows[i], others.lane[i]
         if lane < 0:
             continue
         half, w = 0.5 * data[_LENGTH, r], data[_WIDTH, r]
         reach = 0.5 * lane_f[WIDTH, lane]
-        t = f_t[i]
+        t = others.t[i]
         if abs(t) > reach + 0.5 * w:
             continue  # beside the lane, not on it
-        v = max(data[_V, r] * math.cos(f_dh[i]), 0.0)
-        s = f_s[i]
-        n = _put(n, lane, s, half, v, r, PRIMARY, raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind)
+        v = max(data[_V, r] * math.cos(others.dh[i]), 0.0)
+        s = others.s[i]
+        n = _put(raw, n, lane, s, half, v, r, PRIMARY)
         if abs(t) + 0.5 * w > reach + 0.3:
             nb = lane_lr[0, lane] if t > 0 else lane_lr[1, lane]
             if nb >= 0:
                 s_nb = s * lane_f[LEN, nb] / max(lane_f[LEN, lane], 1e-9)
-                n = _put(n, nb, s_nb, half, v, r, DUPLICATE,
-                         raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind)
+                n = _put(raw, n, nb, s_nb, half, v, r, DUPLICATE)
         if s < half and pred_off[lane + 1] - pred_off[lane] == 1:
             p = pred[pred_off[lane]]
-            n = _put(n, p, lane_f[LEN, p] + s, half, v, r, OVERHANG,
-                     raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind)
-    _sort_entries(n, lane_off.shape[0] - 1, lane_off, raw_lane, raw_s, raw_half, raw_v, raw_row,
-                  raw_kind, e_s, e_half, e_v, e_row, e_kind)
+            n = _put(raw, n, p, lane_f[LEN, p] + s, half, v, r, OVERHANG)
+    _sort_entries(n, raw, occ)
     return n
 
 
 @numba.njit(cache=True, nogil=True)
-def _sort_entries(n, n_lanes, lane_off, raw_lane, raw_s, raw_half, raw_v, raw_row, raw_kind,
-                  e_s, e_half, e_v, e_row, e_kind):  # pragma: no cover - compiled
-    """Counting sort by lane, then insertion sort by arc length within each (short) lane list."""
+def _sort_entries(n, raw, occ):  # pragma: no cover - compiled
+    """Counting sort of the first ``n`` raw entries by lane into ``occ``, then insertion sort by
+    arc length within each (short) lane list."""
+    lane_off, raw_lane = occ.lane_off, raw.lane
+    e_s, e_half, e_v, e_row, e_kind = occ.s, occ.half, occ.v, occ.row, occ.kind
+    n_lanes = lane_off.shape[0] - 1
     for k in range(n_lanes + 1):
         lane_off[k] = 0
     for k in range(n):
@@ -317,8 +517,8 @@ def _sort_entries(n, n_lanes, lane_off, raw_lane, raw_s, raw_half, raw_v, raw_ro
     for k in range(n):
         p = cursor[raw_lane[k]]
         cursor[raw_lane[k]] += 1
-        e_s[p], e_half[p], e_v[p] = raw_s[k], raw_half[k], raw_v[k]
-        e_row[p], e_kind[p] = raw_row[k], raw_kind[k]
+        e_s[p], e_half[p], e_v[p] = raw.s[k], raw.half[k], raw.v[k]
+        e_row[p], e_kind[p] = raw.row[k], raw.kind[k]
     for lane in range(n_lanes):
         a, b = lane_off[lane], lane_off[lane + 1]
         for k in range(a + 1, b):
@@ -334,34 +534,41 @@ def _sort_entries(n, n_lanes, lane_off, raw_lane, raw_s, raw_half, raw_v, raw_ro
 
 # ----------------------------------------------------------------------------- driver model
 @numba.njit(cache=True, nogil=True)
-def desired_speed(r, lane, pa, st, lane_f):  # pragma: no cover - compiled
-    return min(pa[MAX_SPEED, r], lane_f[SPEED_LIMIT, lane] * st[FACTOR, r])
+def desired_speed(state, lanes, r, lane):  # pragma: no cover - compiled
+    """Own vehicle ``r``'s desired speed on ``lane``."""
+    return min(state.pa[MAX_SPEED, r], lanes.lane_f[SPEED_LIMIT, lane] * state.st[FACTOR, r])
 
 
 @numba.njit(cache=True, nogil=True)
-def impatience(r, st):  # pragma: no cover - compiled
+def impatience(state, r):  # pragma: no cover - compiled
     """1 + the share of IMPATIENCE_TIME that vehicle ``r`` has been waiting."""
-    return 1.0 + min(st[WAIT, r] / IMPATIENCE_TIME, 1.0)
+    return 1.0 + min(state.st[WAIT, r] / IMPATIENCE_TIME, 1.0)
 
 
 @numba.njit(cache=True, nogil=True)
-def _other_accel(row, v, gap, v_lead, lane, mine, pa, st, lane_f):  # pragma: no cover - compiled
+def _other_accel(world, row, v, gap, v_lead, lane):  # pragma: no cover - compiled
     """IDM acceleration of road user ``row`` (own: its parameters; others: typical ones)."""
-    if mine[row]:
-        v0 = desired_speed(row, lane, pa, st, lane_f)
+    state = world.state
+    if state.mine[row]:
+        pa = state.pa
+        v0 = desired_speed(state, world.lanes, row, lane)
         return idm(v, v0, gap, v_lead, pa[ACCEL, row], pa[DECEL, row], pa[TAU, row], pa[MIN_GAP, row])
-    return idm(v, max(v, lane_f[SPEED_LIMIT, lane]), gap, v_lead, 2.6, 4.5, 1.0, 2.5)
+    return idm(v, max(v, world.lanes.lane_f[SPEED_LIMIT, lane]), gap, v_lead, 2.6, 4.5, 1.0, 2.5)
 
 
 @numba.njit(cache=True, nogil=True)
-def _judge_foe(
-    r, p_v, v, h, v0, accel, decel, tau, emerg, bold, major_c, len_c,
-    kind, zin, zout, fin, fout, major_f, merge_f, len_f, colour_f,
-    w, p_w, v_w, h_w, w_own, w_accel, w_decel, w_v0, w_wait, a_min, guard,
-):  # pragma: no cover - compiled
-    """Right of way between own vehicle ``r`` (at ``p_v`` along its connection) and road user
-    ``w`` (at ``p_w`` along a foe connection). Returns the updated (acceleration bound, gap bound).
+def _judge_foe(mover, zone, user, a_min, guard):  # pragma: no cover - compiled
+    """Right of way between own vehicle ``r`` (``mover``: at ``p_v`` along its connection) and
+    road user ``w`` (``user``: at ``p_w`` along the foe connection of conflict zone ``zone``).
+    Returns the updated (acceleration bound, gap bound).
     """
+    me = mover.me
+    r, v, h, v0, accel, decel, tau, emerg = me.r, me.v, me.h, me.v0, me.accel, me.decel, me.tau, me.emerg
+    p_v, bold, major_c, len_c = mover.p, mover.bold, mover.major, mover.length
+    kind, zin, zout, fin, fout = zone.kind, zone.zin, zone.zout, zone.fin, zone.fout
+    major_f, merge_f, len_f, colour_f = zone.major, zone.merge, zone.length, zone.colour
+    w, p_w, v_w, h_w, w_own = user.w, user.p, user.v, user.h, user.own
+    w_accel, w_decel, w_v0, w_wait = user.accel, user.decel, user.v0, user.wait
     if w == r:
         return a_min, guard
     extra_v = max(h - NOMINAL_HALF, 0.0)
@@ -440,55 +647,57 @@ def _judge_foe(
 
 
 @numba.njit(cache=True, nogil=True)
-def _junction(
-    r, c, p_v, v, h, v0, accel, decel, tau, emerg, a_min, guard,
-    data, si, st, pa, mine, lane_off, e_s, e_half, e_v, e_row, e_kind, lane_f, slot_int,
-    conn_int, conn_len, clanes_off, clanes, offset_of_lane, foe_off, foe, foe_kind, zone,
-    via_colour,
-):  # pragma: no cover - compiled
-    """Apply right of way on connection ``c`` against every road user on or approaching a foe."""
-    bold = impatience(r, st)
+def _junction(world, me, c, p_v, a_min, guard):  # pragma: no cover - compiled
+    """Apply right of way on connection ``c`` (own vehicle ``me``, a ``Driver``, at ``p_v`` along
+    it) against every road user on or approaching a foe."""
+    state, occ, ro = world.state, world.occ, world.routes
+    si, st, pa, mine = state.si, state.st, state.pa, state.mine
+    lane_off, e_s, e_half, e_v, e_row, e_kind = occ.lane_off, occ.s, occ.half, occ.v, occ.row, occ.kind
+    lane_f, slot_int, conn_int, conn_len = world.lanes.lane_f, ro.slot_int, ro.conn_int, ro.conn_len
+    clanes_off, clanes, offset_of_lane = ro.clanes_off, ro.clanes, ro.offset_of_lane
+    foe_off, foe, foe_kind, zone, via_colour = ro.foe_off, ro.foe, ro.foe_kind, ro.zone, world.via_colour
+    bold = impatience(state, me.r)
     major_c = conn_int[C_MAJOR, c]
     len_c = conn_len[c]
-    extra_v = max(h - NOMINAL_HALF, 0.0)
+    mover = Mover(me=me, p=p_v, bold=bold, major=major_c, length=len_c)
+    extra_v = max(me.h - NOMINAL_HALF, 0.0)
     for f in range(foe_off[c], foe_off[c + 1]):
         if p_v - extra_v > zone[1, f]:
             continue  # already past this zone
         fc = foe[f]
-        kind = foe_kind[f]
-        zin, zout, fin, fout = zone[0, f], zone[1, f], zone[2, f], zone[3, f]
-        major_f, len_f = conn_int[C_MAJOR, fc], conn_len[fc]
-        merge_f = conn_int[C_MERGE_ONLY, fc] > 0
+        fout = zone[3, f]
+        len_f = conn_len[fc]
         first = conn_int[C_FIRST, fc]
-        colour_f = via_colour[first]
+        z = Zone(
+            kind=foe_kind[f], zin=zone[0, f], zout=zone[1, f], fin=zone[2, f], fout=fout,
+            major=conn_int[C_MAJOR, fc], merge=conn_int[C_MERGE_ONLY, fc] > 0, length=len_f,
+            colour=via_colour[first],
+        )
         # 1. on the foe's junction lanes
         for q in range(clanes_off[fc], clanes_off[fc + 1]):
             ln = clanes[q]
             for k in range(lane_off[ln], lane_off[ln + 1]):
                 w = e_row[k]
                 own_w = mine[w]
-                wa = pa[ACCEL, w] if own_w else 0.0
-                wd = pa[DECEL, w] if own_w else 4.5
-                wv0 = desired_speed(w, ln, pa, st, lane_f) if own_w else e_v[k]
-                ww = st[WAIT, w] if own_w else 0.0
-                a_min, guard = _judge_foe(
-                    r, p_v, v, h, v0, accel, decel, tau, emerg, bold, major_c, len_c,
-                    kind, zin, zout, fin, fout, major_f, merge_f, len_f, colour_f,
-                    w, offset_of_lane[ln] + e_s[k], e_v[k], e_half[k], own_w, wa, wd, wv0,
-                    ww, a_min, guard,
+                user = RoadUser(
+                    w=w, p=offset_of_lane[ln] + e_s[k], v=e_v[k], h=e_half[k], own=own_w,
+                    accel=pa[ACCEL, w] if own_w else 0.0,
+                    decel=pa[DECEL, w] if own_w else 4.5,
+                    v0=desired_speed(state, world.lanes, w, ln) if own_w else e_v[k],
+                    wait=st[WAIT, w] if own_w else 0.0,
                 )
+                a_min, guard = _judge_foe(mover, z, user, a_min, guard)
         # 2. just out of it, on its outgoing lane but maybe not yet out of the zone
         to = conn_int[C_TO, fc]
         beyond = max(fout - len_f, 0.0) + NOMINAL_HALF
         for k in range(lane_off[to], lane_off[to + 1]):
             if e_s[k] - e_half[k] > beyond:
                 break
-            w = e_row[k]
-            a_min, guard = _judge_foe(
-                r, p_v, v, h, v0, accel, decel, tau, emerg, bold, major_c, len_c,
-                kind, zin, zout, fin, fout, major_f, merge_f, len_f, colour_f,
-                w, len_f + e_s[k], e_v[k], e_half[k], False, 0.0, 4.5, e_v[k], 0.0, a_min, guard,
+            user = RoadUser(
+                w=e_row[k], p=len_f + e_s[k], v=e_v[k], h=e_half[k], own=False, accel=0.0, decel=4.5, v0=e_v[k],
+                wait=0.0,
             )
+            a_min, guard = _judge_foe(mover, z, user, a_min, guard)
         # 3. the first vehicle approaching on its incoming lane (those behind cannot enter
         #    before it has, and count once they are first)
         src = conn_int[C_FROM, fc]
@@ -505,52 +714,54 @@ def _junction(
                 nxt = slot_int[S_NEXT, si[SLOT, w]]
                 if nxt < 0 or slot_int[S_LANE, nxt] != first:
                     break  # takes another way through the junction
-            wa = pa[ACCEL, w] if own_w else 0.0
-            wd = pa[DECEL, w] if own_w else 4.5
-            wv0 = desired_speed(w, src, pa, st, lane_f) if own_w else e_v[k]
-            ww = st[WAIT, w] if own_w else 0.0
-            a_min, guard = _judge_foe(
-                r, p_v, v, h, v0, accel, decel, tau, emerg, bold, major_c, len_c,
-                kind, zin, zout, fin, fout, major_f, merge_f, len_f, colour_f,
-                w, -dist, e_v[k], e_half[k], own_w, wa, wd, wv0, ww, a_min, guard,
+            user = RoadUser(
+                w=w, p=-dist, v=e_v[k], h=e_half[k], own=own_w,
+                accel=pa[ACCEL, w] if own_w else 0.0,
+                decel=pa[DECEL, w] if own_w else 4.5,
+                v0=desired_speed(state, world.lanes, w, src) if own_w else e_v[k],
+                wait=st[WAIT, w] if own_w else 0.0,
             )
+            a_min, guard = _judge_foe(mover, z, user, a_min, guard)
             break
     return a_min, guard
 
 
 @numba.njit(cache=True, nogil=True)
-def _try_change(
-    r, slot, nslot, d, s, v, h, a_now, lead_gap, lead_v, has_lead, mode, look,
-    data, pa, st, mine, lane_off, e_s, e_half, e_v, e_row, lane_f, slot_int, pred_off, pred,
-):  # pragma: no cover - compiled
+def _try_change(world, me, slot, nslot, d, s, a_now, lead, mode, look):  # pragma: no cover - compiled
     """Check a lane change to ``nslot`` (side ``d``: +1 left, -1 right). mode 0: discretionary
     (MOBIL), 1: towards the route's preferred lane, 2: the lane ends. Returns (safe, incentive,
     own acceleration after, gap to the new leader).
 
     The politeness term weighs the new follower's loss and, for changes to the right only, the
     old follower's gain: drivers keep right to let others pass, but do not pull out to the left
-    for a faster vehicle behind."""
+    for a faster vehicle behind.
+
+    ``me``: the ``Driver`` at arc length ``s`` on ``slot``; ``a_now``: its acceleration staying;
+    ``lead``: its leader now (``Lead``); ``look``: how far ahead it looks."""
+    state, e_v, e_row = world.state, world.occ.v, world.occ.row
+    pa, lane_f, slot_int = state.pa, world.lanes.lane_f, world.routes.slot_int
+    r, v, h = me.r, me.v, me.h
+    lead_gap, lead_v, has_lead = lead.gap, lead.v, lead.present
     lane = slot_int[S_LANE, slot]
     nlane = slot_int[S_LANE, nslot]
     s_n = min(max(s * lane_f[LEN, nlane] / max(lane_f[LEN, lane], 1e-9), 0.0), lane_f[LEN, nlane])
     accel, decel, tau, s0 = pa[ACCEL, r], pa[DECEL, r], pa[TAU, r], pa[MIN_GAP, r]
-    v0_n = desired_speed(r, nlane, pa, st, lane_f)
-    k, g = find_leader(nslot, s_n, r, look, slot_int, lane_f, lane_off, e_s, e_half, e_row)
+    v0_n = desired_speed(state, world.lanes, r, nlane)
+    k, g = find_leader(world, nslot, s_n, r, look)
     gap_nl = g - h
     v_nl = e_v[k] if k >= 0 else 0.0
     if gap_nl < SAFE_GAP:
         return False, 0.0, 0.0, gap_nl
     a_after = idm(v, v0_n, gap_nl, v_nl, accel, decel, tau, s0)
     if mode == 2:
-        b_safe = decel * impatience(r, st)
+        b_safe = decel * impatience(state, r)
     elif mode == 1:
-        b_safe = B_SAFE_PREFERRED * impatience(r, st)
+        b_safe = B_SAFE_PREFERRED * impatience(state, r)
     else:
         b_safe = min(decel, B_SAFE_DISCRETIONARY)
     if a_after < -b_safe and mode < 2:
         return False, 0.0, a_after, gap_nl
-    fk, fg = find_follower(nlane, s_n, r, FOLLOWER_LOOKBACK, lane_f, lane_off, e_s, e_half, e_row,
-                           pred_off, pred)
+    fk, fg = find_follower(world, nlane, s_n, r, FOLLOWER_LOOKBACK)
     gap_nf = fg - h
     a_nf_gain = 0.0
     if fk >= 0:
@@ -558,53 +769,62 @@ def _try_change(
             return False, 0.0, a_after, gap_nl
         fr = e_row[fk]
         vf = e_v[fk]
-        a_nf_after = _other_accel(fr, vf, gap_nf, v, nlane, mine, pa, st, lane_f)
+        a_nf_after = _other_accel(world, fr, vf, gap_nf, v, nlane)
         if a_nf_after < -b_safe:
             return False, 0.0, a_after, gap_nl
         if mode == 0:
             before_gap = gap_nf + 2.0 * h + gap_nl if k >= 0 else INF
-            a_nf_gain = a_nf_after - _other_accel(fr, vf, before_gap, v_nl, nlane, mine, pa, st, lane_f)
+            a_nf_gain = a_nf_after - _other_accel(world, fr, vf, before_gap, v_nl, nlane)
     if mode > 0:
         return True, INF, a_after, gap_nl
     a_of_gain = 0.0
     ok, og = -1, INF
     if d < 0:
-        ok, og = find_follower(lane, s, r, FOLLOWER_LOOKBACK, lane_f, lane_off, e_s, e_half, e_row,
-                               pred_off, pred)
+        ok, og = find_follower(world, lane, s, r, FOLLOWER_LOOKBACK)
     if ok >= 0:
         orow, vo = e_row[ok], e_v[ok]
         gap_of = og - h
         after_gap = gap_of + 2.0 * h + lead_gap if has_lead else INF
-        a_of_gain = (_other_accel(orow, vo, after_gap, lead_v, lane, mine, pa, st, lane_f)
-                     - _other_accel(orow, vo, gap_of, v, lane, mine, pa, st, lane_f))
+        a_of_gain = (_other_accel(world, orow, vo, after_gap, lead_v, lane)
+                     - _other_accel(world, orow, vo, gap_of, v, lane))
     incentive = a_after - a_now + pa[POLITE, r] * (a_nf_gain + a_of_gain)
     return True, incentive, a_after, gap_nl
 
 
 @numba.njit(cache=True, nogil=True)
-def _neighbour_turns(slot, s, r, d, slot_int, lane_off, e_s, e_row, turn):  # pragma: no cover
+def _neighbour_turns(world, turn, slot, s, r, d):  # pragma: no cover - compiled
     """Whether the road user just ahead or just behind on the lane has already decided this step
     to change lanes to the same side (decisions share one start-of-step state, so two of them
     could otherwise move into the same gap)."""
-    lane = slot_int[S_LANE, slot]
-    k = _first_ahead(lane, s, r, lane_off, e_s, e_row)
-    if k >= 0 and turn[e_row[k]] == d:
+    occ = world.occ
+    lane = world.routes.slot_int[S_LANE, slot]
+    k = _first_ahead(occ, lane, s, r)
+    if k >= 0 and turn[occ.row[k]] == d:
         return True
-    k = _last_behind(lane, s, r, lane_off, e_s, e_row)
-    return k >= 0 and turn[e_row[k]] == d
+    k = _last_behind(occ, lane, s, r)
+    return k >= 0 and turn[occ.row[k]] == d
+
+
+class Lead(NamedTuple):
+    """The road user a deciding vehicle follows now: bumper gap, its speed, whether there is one."""
+
+    gap: float
+    v: float
+    present: bool
 
 
 # ----------------------------------------------------------------------------- the step
 @numba.njit(cache=True, nogil=True)
-def step_vehicles(
-    own, data, si, st, pa, mine, arrived, acc, guard_out, change, turn,
-    lane_off, e_s, e_half, e_v, e_row, e_kind,
-    lane_f, lane_lr, point_off, point_s, points, seg_heading, pred_off, pred,
-    slot_int, slot_cost,
-    conn_int, conn_len, clanes_off, clanes, conn_of_lane, offset_of_lane,
-    foe_off, foe, foe_kind, zone, via_colour, dt, step,
-):  # pragma: no cover - compiled
-    """Advance every own vehicle one step (see the module docstring); flags arrivals."""
+def step_vehicles(own, data, state, out, occ, lanes, routes, via_colour, dt, step):  # pragma: no cover - compiled
+    """Advance every own vehicle (rows ``own`` of ``data``, their ``RowState`` ``state``) one step
+    through the road users of ``occ`` (see the module docstring); ``out`` (``Decisions``) flags
+    arrivals. ``via_colour``: the episode's signal colours; ``step``: its step count."""
+    world = World(data=data, state=state, occ=occ, lanes=lanes, routes=routes, via_colour=via_colour)
+    si, st, pa, mine = state.si, state.st, state.pa, state.mine
+    lane_off, e_s, e_half, e_v, e_row, e_kind = occ.lane_off, occ.s, occ.half, occ.v, occ.row, occ.kind
+    lane_f, lane_lr, slot_int, slot_cost = lanes.lane_f, lanes.lane_lr, routes.slot_int, routes.slot_cost
+    conn_of_lane, offset_of_lane = routes.conn_of_lane, routes.offset_of_lane
+    arrived, acc, guard_out, change, turn = out.arrived, out.acc, out.guard, out.change, out.turn
     n = own.shape[0]
     for i in range(n):
         turn[own[i]] = 0
@@ -618,10 +838,11 @@ def step_vehicles(
         h = 0.5 * data[_LENGTH, r]
         accel, decel, emerg = pa[ACCEL, r], pa[DECEL, r], pa[EMERG, r]
         tau, s0 = pa[TAU, r], pa[MIN_GAP, r]
-        v0 = desired_speed(r, lane, pa, st, lane_f)
+        v0 = desired_speed(state, lanes, r, lane)
+        me = Driver(r=r, v=v, h=h, v0=v0, accel=accel, decel=decel, tau=tau, s0=s0, emerg=emerg)
         look = max(50.0, v * v / (2.0 * decel) + 3.0 * v + 20.0)
         # car following on the own route
-        k, g = find_leader(slot, s, r, look, slot_int, lane_f, lane_off, e_s, e_half, e_row)
+        k, g = find_leader(world, slot, s, r, look)
         lead_gap = g - h
         lead_v = e_v[k] if k >= 0 else 0.0
         a_cf = idm(v, v0, lead_gap if k >= 0 else INF, lead_v, accel, decel, tau, s0)
@@ -633,7 +854,7 @@ def step_vehicles(
         if (st[LC_PROG, r] < 1.0 and si[LC_LANE, r] == lane and src >= 0
                 and abs(st[LAT, r]) > 0.5 * (lane_f[WIDTH, lane] - data[_WIDTH, r]) - 0.2):
             s_src = s * lane_f[LEN, src] / max(lane_f[LEN, lane], 1e-9)
-            k2 = _first_ahead(src, s_src, r, lane_off, e_s, e_row)
+            k2 = _first_ahead(occ, src, s_src, r)
             if k2 >= 0:
                 gap2 = e_s[k2] - e_half[k2] - s_src - h
                 a_min = min(a_min, idm(v, v0, gap2, e_v[k2], accel, decel, 0.0, WALL_MIN_GAP))
@@ -646,7 +867,7 @@ def step_vehicles(
                 if nb < 0:
                     continue
                 s_nb = s * lane_f[LEN, nb] / max(lane_f[LEN, lane], 1e-9)
-                k3 = _first_ahead(nb, s_nb, r, lane_off, e_s, e_row)
+                k3 = _first_ahead(occ, nb, s_nb, r)
                 if k3 < 0 or e_kind[k3] != PRIMARY or not mine[e_row[k3]]:
                     continue
                 w = e_row[k3]
@@ -662,12 +883,7 @@ def step_vehicles(
         # junction the vehicle is in
         c_here = conn_of_lane[lane]
         if c_here >= 0:
-            a_min, guard = _junction(
-                r, c_here, offset_of_lane[lane] + s, v, h, v0, accel, decel, tau, emerg, a_min,
-                guard, data, si, st, pa, mine, lane_off, e_s, e_half, e_v, e_row, e_kind, lane_f,
-                slot_int, conn_int, conn_len, clanes_off, clanes, offset_of_lane, foe_off, foe,
-                foe_kind, zone, via_colour,
-            )
+            a_min, guard = _junction(world, me, c_here, offset_of_lane[lane] + s, a_min, guard)
         # the route ahead: lane ends, signals, junctions, lower speed limits
         dist = lane_f[LEN, lane] - s
         cur = slot
@@ -694,13 +910,8 @@ def step_vehicles(
                     break
                 c = conn_of_lane[nlane]
                 if c >= 0:
-                    a_min, guard = _junction(
-                        r, c, -dist, v, h, v0, accel, decel, tau, emerg, a_min, guard,
-                        data, si, st, pa, mine, lane_off, e_s, e_half, e_v, e_row, e_kind, lane_f,
-                        slot_int, conn_int, conn_len, clanes_off, clanes, offset_of_lane, foe_off,
-                        foe, foe_kind, zone, via_colour,
-                    )
-            v_next = desired_speed(r, nlane, pa, st, lane_f)
+                    a_min, guard = _junction(world, me, c, -dist, a_min, guard)
+            v_next = desired_speed(state, lanes, r, nlane)
             if v > v_next:
                 a_min = min(a_min, (v_next * v_next - v * v) / (2.0 * max(dist, 1.0)))
             dist += lane_f[LEN, nlane]
@@ -734,13 +945,10 @@ def step_vehicles(
                         continue
                     if lane_f[LEN, lane] - s < MIN_CHANGE_ROOM + v:
                         continue
-                if _neighbour_turns(slot, s, r, d, slot_int, lane_off, e_s, e_row, turn):
+                if _neighbour_turns(world, turn, slot, s, r, d):
                     continue  # the vehicle just ahead or behind moves over this step
-                ok, inc, a_after, gap_after = _try_change(
-                    r, slot, nslot, d, s, v, h, a_cf, lead_gap, lead_v, k >= 0, mode, look,
-                    data, pa, st, mine, lane_off, e_s, e_half, e_v, e_row, lane_f, slot_int,
-                    pred_off, pred,
-                )
+                lead = Lead(gap=lead_gap, v=lead_v, present=k >= 0)
+                ok, inc, a_after, gap_after = _try_change(world, me, slot, nslot, d, s, a_cf, lead, mode, look)
                 if not ok:
                     continue
                 if mode == 0:
@@ -819,7 +1027,7 @@ def step_vehicles(
         else:
             st[LAT, r] = 0.0
         st[COOL, r] -= dt
-        x, y, hd = lane_pose(lane, s, point_off, point_s, points, seg_heading)
+        x, y, hd = lane_pose(lanes, lane, s)
         lat = st[LAT, r]
         x -= lat * math.sin(hd)
         y += lat * math.cos(hd)
@@ -836,12 +1044,13 @@ def step_vehicles(
 
 
 @numba.njit(cache=True, nogil=True)
-def place_vehicle(
-    r, data, si, st, slot_int, point_off, point_s, points, seg_heading
-):  # pragma: no cover - compiled
-    """Write the pose of a vehicle from its slot, arc length and lateral offset."""
-    lane = slot_int[S_LANE, si[SLOT, r]]
-    x, y, hd = lane_pose(lane, st[S, r], point_off, point_s, points, seg_heading)
+def place_vehicle(frozen_lanes, frozen_routes, frozen_state, data, r):  # pragma: no cover - compiled
+    """Write the pose of own vehicle ``r`` into ``data`` from its slot, arc length and lateral
+    offset (frozen ``LaneGraph``, ``Routes`` and ``RowState``)."""
+    lanes, routes, state = view(frozen_lanes), view(frozen_routes), view(frozen_state)
+    si, st = state.si, state.st
+    lane = routes.slot_int[S_LANE, si[SLOT, r]]
+    x, y, hd = lane_pose(lanes, lane, st[S, r])
     lat = st[LAT, r]
     data[_X, r] = x - lat * math.sin(hd)
     data[_Y, r] = y + lat * math.cos(hd)
@@ -850,11 +1059,15 @@ def place_vehicle(
 
 @numba.njit(cache=True, nogil=True)
 def clearance(
-    lanes, spots, next_lanes, half, own, si, st, data, slot_int, lane_f, f_rows, f_lane, f_s,
+    frozen_lanes, frozen_routes, frozen_state, data, own, f_rows, f_lane, f_s, lanes, spots, next_lanes, half,
 ):  # pragma: no cover - compiled
-    """Room around entry spots for a new vehicle of half length ``half``: float64[4, n] of gap
-    ahead, speed of the road user ahead, gap behind, speed of the one behind (INF: none). Scans
-    every road user on each spot's lane and on the lane after it."""
+    """Room around entry spots (``lanes``, arc lengths ``spots``, the lane after each on the
+    route, -1 none) for a new vehicle of half length ``half``: float64[4, n] of gap ahead, speed
+    of the road user ahead, gap behind, speed of the one behind (INF: none). Scans every road
+    user on each spot's lane and on the lane after it: own vehicles ``own`` (frozen ``RowState``)
+    and other rows ``f_rows`` on ``f_lane`` at ``f_s``."""
+    lane_f, slot_int, state = view(frozen_lanes).lane_f, view(frozen_routes).slot_int, view(frozen_state)
+    si, st = state.si, state.st
     n = lanes.shape[0]
     out = np.empty((4, n))
     for c in range(n):

@@ -110,25 +110,56 @@ class BuiltinTrafficProvider(ProviderBase):
         self.junctions = junction_table(road_map)
         self.sources = self._compile_sources(traffic)
         m = road_map
-        self.lane_f = np.ascontiguousarray(
-            np.stack([m.lane_length, m.lane_width, m.lane_speed_limit, m.lane_internal.astype(float)])
+        self.lanes = K.LaneGraph(
+            lane_f=np.ascontiguousarray(
+                np.stack([m.lane_length, m.lane_width, m.lane_speed_limit, m.lane_internal.astype(float)])
+            ),
+            lane_lr=np.ascontiguousarray(np.stack([m.lane_left, m.lane_right]).astype(np.int64)),
+            pred_off=m.pred_offsets.astype(np.int64),
+            pred=m.pred.astype(np.int64),
+            point_off=m.lane_point_offsets.astype(np.int64),
+            point_s=np.ascontiguousarray(m.point_s, dtype=np.float64),
+            points=np.ascontiguousarray(m.points, dtype=np.float64),
+            seg_heading=np.ascontiguousarray(m.seg_heading, dtype=np.float64),
         )
-        self.lane_lr = np.ascontiguousarray(np.stack([m.lane_left, m.lane_right]).astype(np.int64))
-        self.pred_off = m.pred_offsets.astype(np.int64)
-        self.pred = m.pred.astype(np.int64)
-        self.point_off = m.lane_point_offsets.astype(np.int64)
-        self.points = np.ascontiguousarray(m.points, dtype=np.float64)
-        self.point_s = np.ascontiguousarray(m.point_s, dtype=np.float64)
-        self.seg_heading = np.ascontiguousarray(m.seg_heading, dtype=np.float64)
+        self.frozen_lanes = K.freeze(self.lanes)
         jt = self.junctions
         self.conn_int = np.ascontiguousarray(
             np.stack([jt.conn_from, jt.conn_to, jt.conn_first, jt.conn_major, jt.conn_merge_only])
             .reshape(5, -1)
         )
         self.no_signals = np.zeros(m.num_lanes, dtype=np.int8)
+        self._routes_fields: K.Routes | None = None  # the tables of frozen_routes()
+        self._state_fields: K.RowState | None = None  # the arrays of frozen_state()
         self.capacity = 0
         self.step_count = 0
         self.rng = np.random.default_rng(0)
+
+    # ------------------------------------------------------------------ kernel records
+    def route_tables(self) -> K.Routes:
+        """The route slots and junction tables the kernels read (packing routes added since)."""
+        jt = self.junctions
+        return K.Routes(
+            slot_int=self.routes.slot_int, slot_cost=self.routes.slot_cost, conn_int=self.conn_int,
+            conn_len=jt.conn_length, clanes_off=jt.lanes_offsets, clanes=jt.lanes, conn_of_lane=jt.conn_of_lane,
+            offset_of_lane=jt.offset_of_lane, foe_off=jt.foe_offsets, foe=jt.foe, foe_kind=jt.foe_kind, zone=jt.zone,
+        )  # fmt: skip
+
+    def frozen_routes(self):
+        """``route_tables`` frozen, made again when routes were added (a hand-over adds one)."""
+        if self._routes_fields is None or self._routes_fields.slot_int is not self.routes.slot_int:
+            self._routes_fields = self.route_tables()
+            self._frozen_routes = K.freeze(self._routes_fields)
+        return self._frozen_routes
+
+    def frozen_state(self):
+        """The rows' ``RowState`` frozen, made again when its arrays are replaced (a reset at a
+        new capacity, or the batch stage handing the provider views of its blocks)."""
+        f = self._state_fields
+        if f is None or f.si is not self.si or f.st is not self.st or f.pa is not self.pa or f.mine is not self.mine:
+            self._state_fields = K.RowState(si=self.si, st=self.st, pa=self.pa, mine=self.mine)
+            self._frozen_state = K.freeze(self._state_fields)
+        return self._frozen_state
 
     # ------------------------------------------------------------------ construction
     def _compile_sources(self, traffic: TrafficSpec) -> list[_Source]:
@@ -302,23 +333,11 @@ class BuiltinTrafficProvider(ProviderBase):
         cap = sim.table.capacity
         if cap != self.capacity:
             self.capacity = cap
+            # (the batch stage that steps this provider hands it views of its own blocks instead)
             self.si = np.zeros((K.NUM_INT_STATE, cap), dtype=np.int64)
             self.st = np.zeros((K.NUM_FLOAT_STATE, cap))
             self.pa = np.zeros((K.NUM_PARAMS, cap))
             self.mine = np.zeros(cap, dtype=bool)
-            self.arrived = np.zeros(cap, dtype=bool)
-            self.acc = np.zeros(cap)
-            self.guard = np.zeros(cap)
-            self.change = np.zeros(cap, dtype=np.int64)
-            self.turn = np.zeros(cap, dtype=np.int64)
-            self.raw_lane = np.zeros(3 * cap, dtype=np.int64)
-            self.raw_row = np.zeros(3 * cap, dtype=np.int64)
-            self.raw_kind = np.zeros(3 * cap, dtype=np.int64)
-            self.raw_f = np.zeros((3, 3 * cap))
-            self.e_row = np.zeros(3 * cap, dtype=np.int64)
-            self.e_kind = np.zeros(3 * cap, dtype=np.int64)
-            self.e_f = np.zeros((3, 3 * cap))
-            self.lane_off = np.zeros(self.map.num_lanes + 1, dtype=np.int64)
         self.mine[:] = False
         self.rng = np.random.default_rng(sim.seed)
         self.step_count = 0
@@ -397,10 +416,9 @@ class BuiltinTrafficProvider(ProviderBase):
         if src.depart_lane == "random" and len(spots) > 1:
             spots = spots[int(self.rng.integers(len(spots)))][None]
         room = K.clearance(
+            self.frozen_lanes, self.frozen_routes(), self.frozen_state(), table.data, own, foreign, f_lane, f_s,
             src.spot_lane[spots], src.spot_s[spots], src.spot_next[spots], 0.5 * src.length,
-            own, self.si, self.st, table.data, self.routes.slot_int, self.lane_f, foreign,
-            f_lane, f_s,
-        )
+        )  # fmt: skip
         pick = int(np.argmax(np.minimum(room[0], room[2])))  # the spot with the most room
         ahead, v_ahead, behind, v_behind = room[:, pick]
         i = int(spots[pick])
@@ -439,8 +457,7 @@ class BuiltinTrafficProvider(ProviderBase):
             speed=speed, vtype=src.vtype, length=src.length, width=src.width, height=src.height,
         )
         self._adopt_row(row, int(src.spot_slot[i]), float(src.spot_s[i]), 0.0, factor, src.params)
-        K.place_vehicle(row, table.data, self.si, self.st, self.routes.slot_int, self.point_off,
-                        self.point_s, self.points, self.seg_heading)
+        K.place_vehicle(self.frozen_lanes, self.frozen_routes(), self.frozen_state(), table.data, row)
         return row
 
     def _adopt_row(self, row: int, slot: int, s: float, lat: float, factor: float,

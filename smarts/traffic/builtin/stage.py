@@ -8,17 +8,65 @@ episode, one compiled loop that hands each episode's rows to the provider's own 
 (``build_occupancy``, ``step_vehicles``) on its block of the table, then Python only for the few
 episodes where a vehicle arrives or a departure is due. Episodes with equal traffic specs on the
 same map share route tables (built alike, so equal). Each such set's route and junction tables
-are concatenated with the others' (``_Tables``): the compiled loop hands every provider a view of
+are concatenated with the others' (``RouteSets``): the compiled loop hands every provider a view of
 its own set's part, so one call covers every set, whatever the specs and maps.
+
+The kernel reads three records made once (``StageState``: these blocks and the loop's own
+outputs; the map's ``LaneGraph``; the ``RouteSets``) and this step's values beside them.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
 import smarts.traffic.builtin.kernels as K
+from smarts.core.records import declare, freeze_fields, view
 from smarts.core.simulation import Simulation
+
+
+class StageState(NamedTuple):
+    """The stage's blocks, stacked over its providers (``[m, ...]``), and what its kernel writes
+    for the Python part of the step."""
+
+    members: np.ndarray  # int64[m] providers, set by set
+    set_of: np.ndarray  # int64[m] each provider's set (its part of the RouteSets)
+    episode: np.ndarray  # int64[m] each provider's episode
+    cap: int  # rows per episode
+    si: np.ndarray  # int64[m, NUM_INT_STATE, cap] (each provider's RowState: si, st, pa, mine)
+    st: np.ndarray  # float64[m, NUM_FLOAT_STATE, cap]
+    pa: np.ndarray  # float64[m, NUM_PARAMS, cap]
+    mine: np.ndarray  # bool[m, cap]
+    acc: np.ndarray  # float64[m, cap] (each provider's Decisions: acc ... arrived)
+    guard: np.ndarray  # float64[m, cap]
+    change: np.ndarray  # int64[m, cap]
+    turn: np.ndarray  # int64[m, cap]
+    arrived: np.ndarray  # bool[m, cap]
+    raw_lane: np.ndarray  # int64[m, 3 cap] (each provider's RawEntries)
+    raw_f: np.ndarray  # float64[m, 3, 3 cap] rows s, half, v
+    raw_row: np.ndarray  # int64[m, 3 cap]
+    raw_kind: np.ndarray  # int64[m, 3 cap]
+    lane_off: np.ndarray  # int64[m, L + 1] (each provider's Occupancy)
+    e_f: np.ndarray  # float64[m, 3, 3 cap] rows s, half, v
+    e_row: np.ndarray  # int64[m, 3 cap]
+    e_kind: np.ndarray  # int64[m, 3 cap]
+    own_rows: np.ndarray  # int64[m, cap] out: each provider's own rows (episode rows, ascending) ...
+    own_count: np.ndarray  # int64[m] ... the first own_count[k] of them
+    f_lo: np.ndarray  # int64[m] out: each provider's part of this step's other rows ...
+    f_hi: np.ndarray  # int64[m]
+    f_local: np.ndarray  # int64[rows] ... and those rows in its episode's numbering
+    arrivals: np.ndarray  # bool[m] out: a vehicle of the provider arrived this step
+
+
+declare(StageState)
+
+
+@numba.njit(cache=True, nogil=True)
+def _freeze(fields):  # pragma: no cover - compiled
+    """The frozen record of this module's records (see ``smarts.core.records``)."""
+    return freeze_fields(fields)
 
 
 class BuiltinTrafficStage:
@@ -29,28 +77,6 @@ class BuiltinTrafficStage:
         self.episode = np.array([b for b, _ in members], dtype=np.int64)
         self.provider = [p for _, p in members]
         m, cap, lanes = len(members), sim.episode_capacity, sim.road_map.num_lanes
-        self.si = np.zeros((m, K.NUM_INT_STATE, cap), dtype=np.int64)
-        self.st = np.zeros((m, K.NUM_FLOAT_STATE, cap))
-        self.pa = np.zeros((m, K.NUM_PARAMS, cap))
-        self.mine = np.zeros((m, cap), dtype=bool)
-        self.arrived = np.zeros((m, cap), dtype=bool)
-        self.acc = np.zeros((m, cap))
-        self.guard = np.zeros((m, cap))
-        self.change = np.zeros((m, cap), dtype=np.int64)
-        self.turn = np.zeros((m, cap), dtype=np.int64)
-        self.raw_lane = np.zeros((m, 3 * cap), dtype=np.int64)
-        self.raw_row = np.zeros((m, 3 * cap), dtype=np.int64)
-        self.raw_kind = np.zeros((m, 3 * cap), dtype=np.int64)
-        self.raw_f = np.zeros((m, 3, 3 * cap))
-        self.e_row = np.zeros((m, 3 * cap), dtype=np.int64)
-        self.e_kind = np.zeros((m, 3 * cap), dtype=np.int64)
-        self.e_f = np.zeros((m, 3, 3 * cap))
-        self.lane_off = np.zeros((m, lanes + 1), dtype=np.int64)
-        for k, p in enumerate(self.provider):
-            p.capacity = cap  # its reset keeps these views instead of allocating
-            for name in ("si", "st", "pa", "mine", "arrived", "acc", "guard", "change", "turn", "raw_lane",
-                         "raw_row", "raw_kind", "raw_f", "e_row", "e_kind", "e_f", "lane_off"):  # fmt: skip
-                setattr(p, name, getattr(self, name)[k])
         # Sets of episodes with equal traffic specs on one map share route tables (built alike, so equal).
         sets: dict[int, list[int]] = {}
         specs: list = []
@@ -63,11 +89,31 @@ class BuiltinTrafficStage:
                 sets[len(specs)] = [k]
                 specs.append((p.map, p.traffic))
         set_members = [np.array(v, dtype=np.int64) for v in sets.values()]
-        self.set_of = np.zeros(m, dtype=np.int64)  # each provider's set: its part of the tables
-        for t, members in enumerate(set_members):
-            self.set_of[members] = t
-        self.members = np.concatenate(set_members) if set_members else np.zeros(0, dtype=np.int64)
-        self.tables = _Tables([self.provider[members[0]] for members in set_members])
+        set_of = np.zeros(m, dtype=np.int64)  # each provider's set: its part of the tables
+        for t, members_of_set in enumerate(set_members):
+            set_of[members_of_set] = t
+        self.state = StageState(
+            members=np.concatenate(set_members) if set_members else np.zeros(0, dtype=np.int64),
+            set_of=set_of, episode=self.episode, cap=int(cap),
+            si=np.zeros((m, K.NUM_INT_STATE, cap), dtype=np.int64), st=np.zeros((m, K.NUM_FLOAT_STATE, cap)),
+            pa=np.zeros((m, K.NUM_PARAMS, cap)), mine=np.zeros((m, cap), dtype=bool),
+            acc=np.zeros((m, cap)), guard=np.zeros((m, cap)), change=np.zeros((m, cap), dtype=np.int64),
+            turn=np.zeros((m, cap), dtype=np.int64), arrived=np.zeros((m, cap), dtype=bool),
+            raw_lane=np.zeros((m, 3 * cap), dtype=np.int64), raw_f=np.zeros((m, 3, 3 * cap)),
+            raw_row=np.zeros((m, 3 * cap), dtype=np.int64), raw_kind=np.zeros((m, 3 * cap), dtype=np.int64),
+            lane_off=np.zeros((m, lanes + 1), dtype=np.int64), e_f=np.zeros((m, 3, 3 * cap)),
+            e_row=np.zeros((m, 3 * cap), dtype=np.int64), e_kind=np.zeros((m, 3 * cap), dtype=np.int64),
+            own_rows=np.zeros((m, cap), dtype=np.int64), own_count=np.zeros(m, dtype=np.int64),
+            f_lo=np.zeros(m, dtype=np.int64), f_hi=np.zeros(m, dtype=np.int64),
+            f_local=np.zeros(sim.episodes * cap, dtype=np.int64), arrivals=np.zeros(m, dtype=bool),
+        )  # fmt: skip
+        self.frozen_state = _freeze(self.state)
+        self.mine = self.state.mine
+        for k, p in enumerate(self.provider):
+            p.capacity = cap  # its reset keeps these views instead of allocating
+            p.si, p.st, p.pa, p.mine = self.state.si[k], self.state.st[k], self.state.pa[k], self.state.mine[k]
+        self.members = self.state.members
+        self.tables = _RouteSets([self.provider[members_of_set[0]] for members_of_set in set_members])
         self.next_due = np.zeros(m)  # earliest departure time of each provider (inf: none)
         self.waiting = np.zeros(m, dtype=bool)  # a departure waits for room
         self.member_of = np.full(sim.episodes, -1, dtype=np.int64)
@@ -98,27 +144,17 @@ class BuiltinTrafficStage:
             f_dh = table.heading[foreign] - proj.lane_heading
         else:
             f_lane, f_s, f_t, f_dh = np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros(0)
-        own = np.flatnonzero(union_mine)
-        starts = self.episode * cap
-        f_lo, f_hi = np.searchsorted(foreign, starts), np.searchsorted(foreign, starts + cap)
-        o_lo, o_hi = np.searchsorted(own, starts), np.searchsorted(own, starts + cap)
-        f_local = foreign - np.repeat(starts, f_hi - f_lo)
-        own_local = own - np.repeat(starts, o_hi - o_lo)
-        arrivals = np.zeros(len(self.provider), dtype=bool)
+        state = self.state
         if self.members.size:
-            p, tb = self.provider[0], self.tables
-            tb.check_current()
+            self.tables.check_current()
             _step_episodes(
-                self.members, self.set_of, self.episode, cap, o_lo, o_hi, own_local, f_lo, f_hi, f_local, f_lane,
-                f_s, f_t, f_dh, table.data, self.si, self.st, self.pa, self.mine, self.arrived, self.acc, self.guard,
-                self.change, self.turn, self.lane_off, self.raw_lane, self.raw_f, self.raw_row, self.raw_kind,
-                self.e_f, self.e_row, self.e_kind, p.lane_f, p.lane_lr, p.pred_off, p.pred, p.point_off, p.point_s,
-                p.points, p.seg_heading, *tb.arrays, *tb.bounds, sim.via_colour, dt, sim.episode_step, arrivals,
+                self.frozen_state, self.provider[0].frozen_lanes, self.tables.frozen, table.data, sim.via_colour,
+                sim.episode_step, dt, foreign, f_lane, f_s, f_t, f_dh,
             )  # fmt: skip
-        for k in np.flatnonzero(arrivals).tolist():
-            b, p = int(self.episode[k]), self.provider[k]
-            mine_rows = own_local[o_lo[k]:o_hi[k]]
-            gone = mine_rows[self.arrived[k, : mine_rows.size]]
+        for k in np.flatnonzero(state.arrivals).tolist():
+            b = int(self.episode[k])
+            mine_rows = state.own_rows[k, : state.own_count[k]]
+            gone = mine_rows[state.arrived[k, : mine_rows.size]]
             sim.views[b].table.remove(gone)
             self.mine[k, gone] = False
         time = sim.episode_time[self.episode]
@@ -126,35 +162,30 @@ class BuiltinTrafficStage:
         for k in due.tolist():
             b, p = int(self.episode[k]), self.provider[k]
             view = sim.views[b]
-            lo, hi = f_lo[k], f_hi[k]
-            p._depart(view, view.time, f_local[lo:hi], f_lane[lo:hi], f_s[lo:hi])
+            lo, hi = int(state.f_lo[k]), int(state.f_hi[k])
+            p._depart(view, view.time, state.f_local[lo:hi], f_lane[lo:hi], f_s[lo:hi])
             self._note_departures(k)
         # (each provider's own step_count is not kept: its kernels get the episode's step here)
 
 
-class _Tables:
-    """The route tables (``slot_int``, ``slot_cost``) and junction tables of several sets of
-    providers, each array concatenated along its last axis over the sets, with per-set bounds:
-    set ``t``'s own array is ``array[..., bound[t]:bound[t + 1]]`` (indices inside it stay the
-    set's own). The lane arrays are the same for every set (one map or one stack of maps)."""
+class _RouteSets:
+    """The ``RouteSets`` record of several sets of providers (one provider of each): their route and
+    junction tables concatenated, frozen for the kernel. The lane arrays are the same for every
+    set (one map or one stack of maps)."""
 
     def __init__(self, providers: list):
         self.providers = providers
-        self._packed = [p.routes.slot_int for p in providers]
-        per_set = [self._of(p) for p in providers]
+        per_set = [p.route_tables() for p in providers]
+        self._packed = [t.slot_int for t in per_set]
         if not per_set:
-            self.arrays, self.bounds = (), ()
+            self.fields = self.frozen = None
             return
-        self.arrays = tuple(np.ascontiguousarray(np.concatenate([t[i] for t in per_set], axis=-1))
-                            for i in range(len(per_set[0])))  # fmt: skip
-        self.bounds = tuple(np.concatenate([[0], np.cumsum([t[i].shape[-1] for t in per_set])]).astype(np.int64)
-                            for i in range(len(per_set[0])))  # fmt: skip
-
-    @staticmethod
-    def _of(p) -> tuple:
-        jt = p.junctions
-        return (p.routes.slot_int, p.routes.slot_cost, p.conn_int, jt.conn_length, jt.lanes_offsets, jt.lanes,
-                jt.conn_of_lane, jt.offset_of_lane, jt.foe_offsets, jt.foe, jt.foe_kind, jt.zone)  # fmt: skip
+        self.fields = K.RouteSets(
+            tables=K.Routes(*(np.ascontiguousarray(np.concatenate(parts, axis=-1)) for parts in zip(*per_set))),
+            bounds=K.Routes(*(np.concatenate([[0], np.cumsum([a.shape[-1] for a in parts])]).astype(np.int64)
+                              for parts in zip(*per_set))),
+        )  # fmt: skip
+        self.frozen = K.freeze(self.fields)
 
     def check_current(self) -> None:
         """Routes are added when a provider is built; should one add more later, pack again."""
@@ -166,50 +197,53 @@ class _Tables:
 
 @numba.njit(cache=True, nogil=True)
 def _step_episodes(
-    members, set_of, episode, cap, o_lo, o_hi, own_local, f_lo, f_hi, f_local, f_lane, f_s, f_t, f_dh,
-    data, si, st, pa, mine, arrived, acc, guard, change, turn, lane_off, raw_lane, raw_f, raw_row, raw_kind,
-    e_f, e_row, e_kind, lane_f, lane_lr, pred_off, pred, point_off, point_s, points, seg_heading,
-    slot_int_all, slot_cost_all, conn_int_all, conn_length_all, lanes_offsets_all, lanes_all, conn_of_lane_all,
-    offset_of_lane_all, foe_offsets_all, foe_all, foe_kind_all, zone_all,
-    b_slot_int, b_slot_cost, b_conn_int, b_conn_length, b_lanes_offsets, b_lanes, b_conn_of_lane,
-    b_offset_of_lane, b_foe_offsets, b_foe, b_foe_kind, b_zone, via_colour, dt, episode_step, arrivals,
+    frozen_state, frozen_lanes, frozen_sets, data, via_colour, episode_step, dt, foreign, f_lane, f_s, f_t, f_dh,
 ):  # pragma: no cover - compiled
     """``BuiltinTrafficProvider.step``'s compiled part for each member, on its block of rows, with
-    its set's route and junction tables (views into the concatenated ones, see ``_Tables``)."""
+    its set's route and junction tables (views into the concatenated ones, see ``RouteSets``).
+
+    ``foreign`` (ascending table rows) are this step's other road users of the members' episodes,
+    projected on ``f_lane`` at ``f_s``, ``f_t`` with heading ``f_dh`` off the lane's. Writes each
+    member's own rows, its share of ``foreign`` and whether a vehicle of it arrived into the
+    ``StageState`` for the Python part of the step."""
+    stage, lanes, sets = view(frozen_state), view(frozen_lanes), view(frozen_sets)
+    members, set_of, episode, cap = stage.members, stage.set_of, stage.episode, stage.cap
+    f_local, f_lo, f_hi = stage.f_local, stage.f_lo, stage.f_hi
+    own_rows, own_count, arrivals = stage.own_rows, stage.own_count, stage.arrivals
+    for k in range(episode.shape[0]):
+        start = episode[k] * cap
+        lo, hi = np.searchsorted(foreign, start), np.searchsorted(foreign, start + cap)
+        f_lo[k], f_hi[k] = lo, hi
+        for i in range(lo, hi):
+            f_local[i] = foreign[i] - start
+        n = 0
+        for r in range(cap):
+            if stage.mine[k, r]:
+                own_rows[k, n] = r
+                n += 1
+        own_count[k] = n
+        arrivals[k] = False
     for q in range(members.shape[0]):
         k = members[q]
-        if o_hi[k] == o_lo[k]:
+        if own_count[k] == 0:
             continue
         t = set_of[k]
-        slot_int = slot_int_all[:, b_slot_int[t]:b_slot_int[t + 1]]
-        slot_cost = slot_cost_all[b_slot_cost[t]:b_slot_cost[t + 1]]
-        conn_int = conn_int_all[:, b_conn_int[t]:b_conn_int[t + 1]]
-        conn_length = conn_length_all[b_conn_length[t]:b_conn_length[t + 1]]
-        lanes_offsets = lanes_offsets_all[b_lanes_offsets[t]:b_lanes_offsets[t + 1]]
-        lanes = lanes_all[b_lanes[t]:b_lanes[t + 1]]
-        conn_of_lane = conn_of_lane_all[b_conn_of_lane[t]:b_conn_of_lane[t + 1]]
-        offset_of_lane = offset_of_lane_all[b_offset_of_lane[t]:b_offset_of_lane[t + 1]]
-        foe_offsets = foe_offsets_all[b_foe_offsets[t]:b_foe_offsets[t + 1]]
-        foe = foe_all[b_foe[t]:b_foe[t + 1]]
-        foe_kind = foe_kind_all[b_foe_kind[t]:b_foe_kind[t + 1]]
-        zone = zone_all[:, b_zone[t]:b_zone[t + 1]]
+        routes = K.set_routes(sets, t)
         b = episode[k]
-        own = own_local[o_lo[k]:o_hi[k]]
+        own = own_rows[k, : own_count[k]]
         lo, hi = f_lo[k], f_hi[k]
+        others = K.Others(rows=f_local[lo:hi], lane=f_lane[lo:hi], s=f_s[lo:hi], t=f_t[lo:hi], dh=f_dh[lo:hi])
         block = data[:, b * cap:(b + 1) * cap]
-        K.build_occupancy(
-            own, f_local[lo:hi], f_lane[lo:hi], f_s[lo:hi], f_t[lo:hi], f_dh[lo:hi], block, si[k], st[k],
-            slot_int, lane_f, lane_lr, pred_off, pred, lane_off[k], raw_lane[k], raw_f[k, 0], raw_f[k, 1],
-            raw_f[k, 2], raw_row[k], raw_kind[k], e_f[k, 0], e_f[k, 1], e_f[k, 2], e_row[k], e_kind[k],
-        )  # fmt: skip
-        K.step_vehicles(
-            own, block, si[k], st[k], pa[k], mine[k], arrived[k], acc[k], guard[k], change[k], turn[k],
-            lane_off[k], e_f[k, 0], e_f[k, 1], e_f[k, 2], e_row[k], e_kind[k], lane_f, lane_lr, point_off,
-            point_s, points, seg_heading, pred_off, pred, slot_int, slot_cost, conn_int, conn_length,
-            lanes_offsets, lanes, conn_of_lane, offset_of_lane, foe_offsets, foe, foe_kind, zone, via_colour[b],
-            dt, episode_step[b],
-        )  # fmt: skip
+        state = K.RowState(si=stage.si[k], st=stage.st[k], pa=stage.pa[k], mine=stage.mine[k])
+        raw = K.RawEntries(lane=stage.raw_lane[k], s=stage.raw_f[k, 0], half=stage.raw_f[k, 1], v=stage.raw_f[k, 2],
+                           row=stage.raw_row[k], kind=stage.raw_kind[k])  # fmt: skip
+        occ = K.Occupancy(lane_off=stage.lane_off[k], s=stage.e_f[k, 0], half=stage.e_f[k, 1], v=stage.e_f[k, 2],
+                          row=stage.e_row[k], kind=stage.e_kind[k])  # fmt: skip
+        out = K.Decisions(acc=stage.acc[k], guard=stage.guard[k], change=stage.change[k], turn=stage.turn[k],
+                          arrived=stage.arrived[k])  # fmt: skip
+        K.build_occupancy(own, others, block, state, lanes, routes, raw, occ)
+        K.step_vehicles(own, block, state, out, occ, lanes, routes, via_colour[b], dt, episode_step[b])
         for i in range(own.shape[0]):
-            if arrived[k, i]:
+            if out.arrived[i]:
                 arrivals[k] = True
                 break
