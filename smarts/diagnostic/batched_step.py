@@ -4,7 +4,7 @@
 A row times B single-agent episodes of one case stepped with random actions and the default
 observation, auto-reset included: agent-steps per second of the batched backend
 (``BatchedDriving``: one call per stage for all B episodes) and of the per-env path (one
-``DrivingParallelEnv`` per episode stepped in turn, as ``SmartsBatchedEnv`` does) on the same
+``DrivingParallelEnv`` per episode stepped in turn, as a B = 1 user steps them) on the same
 episodes, their ratio, and the memory one episode takes in the batched backend (traced
 allocations of building and resetting it, divided by B). Rates are means over ``CHUNKS`` timed
 chunks with 95% confidence intervals. Cases:
