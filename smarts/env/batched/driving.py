@@ -9,8 +9,9 @@ stage) whatever their maps, events, rewards, action spaces and sensors; the env 
 (``smarts.env.driving``) adds social agents, V2V, observations and rewards, as it does for
 ``DrivingParallelEnv`` with one episode.
 
-Seeds are those of ``SmartsBatchedEnv``: after ``set_seed(s)`` copy ``i`` starts at seed
-``s + i * 100_003`` and counts up by one per episode, so both backends play the same episodes.
+Seeds (the one rule of every adapter over this env): after ``set_seed(s)`` copy ``i`` starts at
+seed ``s + i * 100_003`` and counts up by one per episode; ``reset(seeds)`` starts each copy at a
+given seed instead.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ class BatchedSetupError(ScenarioError):
 
 
 COPY_SEED_STRIDE = 100_003
-"""Seed distance between copies after ``set_seed`` (as ``SmartsBatchedEnv``)."""
+"""Seed distance between copies after ``set_seed``."""
 
 __all__ = ["BatchedDriving", "BatchedSetupError", "StepResult"]
 
