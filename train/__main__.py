@@ -2,8 +2,9 @@
 
     python -m train ppo --task platoon [--action-space rtp|continuous] [--total-steps N] [--envs E]
     python -m train ppo --task platoon --lib sb3 --resume runs/train/platoon/last.pt
-    python -m train eval --agent runs/train/platoon/final.pt --suite adaptive
+    python -m train eval --agent runs/train/platoon/latest --suite adaptive     (a run folder: its best.pt)
     python -m train benchmark --agent zoo:keep-lane --agent zoo:random --suite collaborative
+        (each run in a new folder runs/benchmark/<suite>/001, 002, ...; latest -> the newest)
     python -m train enjoy --agent zoo:keep-lane --scenario adaptive:a01_straight_free --video out.mp4 [--viz]
     add --ray-address auto|local|HOST:PORT to run episodes (benchmark, eval) or collectors (ppo) on Ray
     python -m train trajectories | aid-predictor | tf-bc | vcr-classifier   (the planners' learned parts)
@@ -16,18 +17,33 @@ import errno
 import sys
 from pathlib import Path
 
+from smarts import exit_codes
+
 
 def _benchmark(args: argparse.Namespace) -> int:
     from smarts.benchmark.report import write_report
-    from smarts.benchmark.runner import REFERENCE_AGENTS, BenchmarkInterrupted, plan_jobs, run_jobs
+    from smarts.benchmark.runner import (
+        REFERENCE_AGENTS,
+        BenchmarkInterrupted,
+        agent_locator,
+        benchmark_folder,
+        claim_folder,
+        plan_jobs,
+        run_jobs,
+    )
     from smarts.benchmark.suites import load_suite
 
     suite = load_suite(args.suite)
-    agents = list(dict.fromkeys(args.agent or []))
+    agents = list(dict.fromkeys(agent_locator(a) for a in args.agent or []))  # a run folder: its best.pt
     episodes = args.episodes or suite.episodes
-    out = args.out or Path("runs") / "benchmark" / suite.name
+    # A new numbered folder per run (runs/benchmark/<suite>/001, ...; latest -> the newest), or
+    # --out, never over another run; --resume finishes the latest (or --out).
+    out, numbered = benchmark_folder(suite.name, args.out, args.resume)
     # Loads every agent and checks the suite hosts its action space before any episode runs.
     jobs = plan_jobs(agents, suite, episodes, out, args.seed)
+    claimed = claim_folder(out, numbered)
+    if claimed != out:  # another run took that number meanwhile
+        out, jobs = claimed, plan_jobs(agents, suite, episodes, claimed, args.seed)
     shown = agents + [a for a in REFERENCE_AGENTS if a not in agents]
     print(f"{suite.name}: {len(suite.scenarios)} scenarios x {episodes} episodes x {len(shown)} agent(s) "
           f"({', '.join(shown)}; references always included) -> {out}")  # fmt: skip
@@ -37,14 +53,16 @@ def _benchmark(args: argparse.Namespace) -> int:
     except BenchmarkInterrupted as stop:  # Ctrl-C: report what finished, no traceback
         write_report(out, suite, agents, stop.finished, not_run=stop.not_run)
         print(f"interrupted: {len(stop.finished)} of {len(jobs)} episodes finished, reported in {out}; "
-              "the same command with --resume runs the rest", file=sys.stderr)  # fmt: skip
-        return 130
+              f"the same command with --resume{'' if numbered else f' --out {out}'} runs the rest",
+              file=sys.stderr)  # fmt: skip
+        return exit_codes.INTERRUPTED
     report = write_report(out, suite, agents, results)
     print(report.read_text())
     failed = [r for r in results if r.get("failure")]
     if failed:
         print(f"{len(failed)} episode(s) failed; reasons are in {out / 'results.json'}", file=sys.stderr)
-    return 0
+    print(f"report: {report}", file=sys.stderr)
+    return exit_codes.OK
 
 
 def _ppo(args: argparse.Namespace) -> int:
@@ -106,33 +124,39 @@ def _given(argv: list[str], option: str) -> str | None:
     return None
 
 
+def _benchmark_options(parser: argparse.ArgumentParser, agent_required: bool) -> None:
+    """The options of ``benchmark`` and ``eval`` (which must name its agents: evaluating only the
+    reference rows is never what ``eval`` means)."""
+    parser.add_argument("--agent", action="append", required=agent_required,
+                        help="agent: a zoo: locator, a checkpoint (.pt) or a training run folder (its best.pt, e.g. "
+                             "runs/train/platoon/latest); repeatable. The reference agents zoo:keep-lane, zoo:random "
+                             "and zoo:stand-still are always benchmarked beside them")  # fmt: skip
+    parser.add_argument("--suite", default="collaborative", help="collaborative | adaptive | path to a suite YAML")
+    parser.add_argument("--episodes", type=int, default=None, help="episodes per scenario (default: the suite's)")
+    parser.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+    parser.add_argument("--seed", type=int, default=None, help="first episode seed (default: the suite's)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="output folder, which must not hold another run (default: the next numbered folder "
+                             "runs/benchmark/<suite>/001, 002, ...; runs/benchmark/<suite>/latest points to it)")  # fmt: skip
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--ray-address", default=None,
+                        help="run episodes as Ray tasks: auto | local | HOST:PORT (needs the ray extra)")  # fmt: skip
+    parser.add_argument("--episode-timeout", type=float, default=None,
+                        help="seconds an episode may run before its worker is killed and the episode recorded as "
+                             "failed (default: no limit; not with --ray-address)")  # fmt: skip
+    parser.add_argument("--resume", action="store_true",
+                        help="finish an interrupted run: the suite's latest run (or --out); episodes whose logs are "
+                             "there and valid are not run again")  # fmt: skip
+    parser.set_defaults(run=_benchmark)
+
+
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m train", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     bench = sub.add_parser("benchmark", help="run agents through a benchmark suite and write a report")
-    bench.add_argument("--agent", action="append",
-                       help="agent locator or checkpoint (repeatable); the reference agents zoo:keep-lane, "
-                            "zoo:random and zoo:stand-still are always benchmarked beside them")  # fmt: skip
-    bench.add_argument("--suite", default="collaborative", help="collaborative | adaptive | path to a suite YAML")
-    bench.add_argument("--episodes", type=int, default=None, help="episodes per scenario (default: the suite's)")
-    bench.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
-    bench.add_argument("--seed", type=int, default=None, help="first episode seed (default: the suite's)")
-    bench.add_argument("--out", type=Path, default=None, help="output folder (default runs/benchmark/<suite>)")
-    bench.add_argument("--quiet", action="store_true", help="no progress bar")
-    bench.add_argument("--ray-address", default=None,
-                       help="run episodes as Ray tasks: auto | local | HOST:PORT (needs the ray extra)")  # fmt: skip
-    bench.add_argument("--episode-timeout", type=float, default=None,
-                       help="seconds an episode may run before its worker is killed and the episode recorded as "
-                            "failed (default: no limit; not with --ray-address)")  # fmt: skip
-    bench.add_argument("--resume", action="store_true",
-                       help="finish an interrupted run in --out: episodes whose logs are there and valid are "
-                            "not run again")  # fmt: skip
-    bench.set_defaults(run=_benchmark)
-
-    evaluate = sub.add_parser("eval", help="benchmark a checkpoint or zoo agent on a suite (same as benchmark)")
-    for action in bench._actions[1:]:
-        evaluate._add_action(action)
-    evaluate.set_defaults(run=_benchmark)
+    _benchmark_options(bench, agent_required=False)
+    evaluate = sub.add_parser("eval", help="benchmark checkpoints or zoo agents on a suite (benchmark with --agent required)")
+    _benchmark_options(evaluate, agent_required=True)
 
     ppo = sub.add_parser("ppo", help="train a PPO driving policy (torchrl collectors, GAE, ClipPPOLoss)",
                          epilog=PPO_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
@@ -174,16 +198,16 @@ def main(argv: list[str] | None = None) -> int:
         return args.run(args)
     except ValueError as err:  # unknown suite, agent or malformed config: say it plainly
         print(f"error: {err}", file=sys.stderr)
-        return 2
+        return exit_codes.BAD_INPUT
     except KeyboardInterrupt:  # what was saved has been said already; no traceback
         print("interrupted", file=sys.stderr)
-        return 130
+        return exit_codes.INTERRUPTED
     except OSError as err:  # a disk that fills up or a folder that stops taking files mid-run
         if err.errno not in WRITE_ERRORS:
             raise
         where = f"{err.filename}: " if err.filename else ""
         print(f"error: {where}{err.strerror or err} (the files written before it are kept)", file=sys.stderr)
-        return 1
+        return exit_codes.FAILED
 
 
 WRITE_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM)

@@ -10,6 +10,20 @@ Failed episodes (the agent raised, its worker process died twice, ...) are score
 config's ``failed_episodes`` says and listed with their reasons; episodes that ran again after a
 dead worker are listed too. A report of an interrupted run says how many episodes did not run.
 ``results.json``, ``results.csv`` and ``report.md`` are each replaced atomically.
+
+An interval of zero width (one episode per scenario, or episodes that all scored alike) says
+nothing about uncertainty, so it is never printed as one: ``report.md`` shows ``n/a`` with a
+warning, ``results.csv`` leaves its cells empty and ``results.json`` has ``null``.
+
+Figures, all embedded in ``report.md`` (paths relative to it, so the folder can be moved):
+
+- ``plots/metric_<M>.png``: metric M per scenario and overall, one bar per agent with its
+  confidence interval, the stand-still agent's value drawn across each group as the floor a
+  policy must beat (doing nothing scores well on RC and Humanness), the legend beside the axes.
+- ``plots/trajectories_<scenario>.png``: the road around where the episode happened (lane
+  surfaces, edges and dividers, junctions; axes in metres), each agent's path in episode 0 with
+  its start and end, and, from the first agent's episode log, the lead vehicle's path and the
+  other road users' paths (``EpisodeLog.scene``).
 """
 
 from __future__ import annotations
@@ -25,11 +39,40 @@ import numpy as np
 from smarts.benchmark.metrics import load_params, read_episode, score_suite
 from smarts.benchmark.metrics.scores import CI_LEVEL, CI_RESAMPLES, CI_SEED, ci_method, metric_names
 from smarts.benchmark.suites import Suite
-from smarts.files import atomic_write_text
+from smarts.files import atomic_write_bytes, atomic_write_text
+
+
+ZERO_WIDTH = 1e-12
+"""An interval narrower than this has no spread behind it and is shown as n/a."""
+NA_REASON = (
+    "the episodes behind the value show no spread (one episode per scenario, or every episode scored "
+    "alike), so no interval can be given; run more episodes (--episodes 5 or more) before reading differences"
+)
+
+
+def has_spread(ci) -> bool:
+    """Whether an interval ``(low, high)`` is one to print (it has a width)."""
+    return bool(ci) and ci[1] - ci[0] > ZERO_WIDTH
 
 
 def _cell(value: float, ci) -> str:
-    return f"{value:.3f} [{ci[0]:.3f}, {ci[1]:.3f}]" if ci else f"{value:.3f}"
+    if not ci:
+        return f"{value:.3f}"
+    return f"{value:.3f} [{ci[0]:.3f}, {ci[1]:.3f}]" if has_spread(ci) else f"{value:.3f} [n/a]"
+
+
+def _ci_or_null(ci):
+    return list(ci) if has_spread(ci) else None
+
+
+def _honest(scores: dict | None) -> dict | None:
+    """``SuiteScores.to_dict()`` with zero-width intervals as None (JSON null)."""
+    if scores is None:
+        return None
+    out = dict(scores)
+    out["overall_ci"] = {m: _ci_or_null(ci) for m, ci in scores["overall_ci"].items()}
+    out["scenario_ci"] = {n: {m: _ci_or_null(ci) for m, ci in cis.items()} for n, cis in scores["scenario_ci"].items()}
+    return out
 
 
 def _seed_list(seeds: dict) -> str:
@@ -54,7 +97,7 @@ def write_report(
     ``plan_jobs``) are reported beside them. Intervals: ``score_suite``'s stratified bootstrap
     with ``ci_level``, ``resamples`` and ``ci_seed``. ``not_run``: planned episodes that did not
     run (an interrupted run); the report says so and ``results.json`` has ``complete: false``."""
-    from smarts.benchmark.runner import REFERENCE_AGENTS, agent_label
+    from smarts.benchmark.runner import REFERENCE_AGENTS, agent_label, agent_name
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -114,13 +157,15 @@ def write_report(
         "seeds": {name: {str(e): sd for e, sd in eps.items()} for name, eps in seeds.items()},
         "failures": failures,
         "retried": retried,
-        "ci": {"level": ci_level, "resamples": resamples, "seed": ci_seed, "method": method},
+        "ci": {"level": ci_level, "resamples": resamples, "seed": ci_seed, "method": method,
+               "null": f"an interval is null where {NA_REASON}"},
         "references": references,
         "agents": {
             agent: {
+                "name": agent_name(agent),
                 "reference": agent in REFERENCE_AGENTS,
                 **setup[agent],
-                "scores": scores[agent].to_dict() if scores[agent] is not None else None,
+                "scores": _honest(scores[agent].to_dict()) if scores[agent] is not None else None,
                 "crashed_episodes": crashed[agent],
             }
             for agent in shown
@@ -145,19 +190,24 @@ def write_report(
                 row, ci = s.scenarios[scenario], s.scenario_ci[scenario]
                 writer.writerow([*head, scenario, difficulty.get(scenario, ""), s.episodes[scenario],
                                  _seed_list(seeds.get(scenario, {})).replace(", ", ";"), n_failed.get(scenario, 0),
-                                 *(f"{v:.4f}" for n in names for v in (row[n], *ci[n]))])  # fmt: skip
+                                 *(c for n in names for c in _csv_cells(row[n], ci[n]))])  # fmt: skip
             writer.writerow([*head, "overall", "", sum(s.episodes.values()), "", sum(n_failed.values()),
-                             *(f"{v:.4f}" for n in names for v in (s.overall[n], *s.overall_ci[n]))])  # fmt: skip
+                             *(c for n in names for c in _csv_cells(s.overall[n], s.overall_ci[n]))])  # fmt: skip
         atomic_write_text(out / "results.csv", f.getvalue())
+
+    def label(agent: str) -> str:
+        return f"{agent_name(agent)} (reference)" if agent in REFERENCE_AGENTS else agent_name(agent)
 
     plots = out / "plots"
     plots.mkdir(parents=True, exist_ok=True)
-    _metric_plots(plots, suite, scores, names)
-    _trajectory_plots(plots, suite, shown, results)
+    metric_figures = _metric_plots(plots, suite, scores, names, label)
+    trajectory_figures = _trajectory_plots(plots, suite, shown, results, label)
     _tensorboard(out / "tensorboard", suite, scores, names, agent_label)
-
-    def label(agent: str) -> str:
-        return f"{agent} (reference)" if agent in REFERENCE_AGENTS else agent
+    no_spread = any(
+        not has_spread(ci)
+        for s in scores.values() if s is not None
+        for cis in [s.overall_ci, *s.scenario_ci.values()] for ci in cis.values()
+    )  # fmt: skip
 
     episodes = sorted({n for eps in seeds.values() for n in [len(eps)]})
     first = sorted({min(eps.values()) for eps in seeds.values() if eps})
@@ -176,12 +226,22 @@ def write_report(
                                                                   + ", ".join(a for a in REFERENCE_AGENTS if a not in shown) + "."),
         "",
     ]  # fmt: skip
+    if no_spread:
+        lines += [f"**Warning:** some intervals below are n/a: {NA_REASON}.", ""]
     lines += ["| method | action space | controller | " + " | ".join(names) + " |",
               "|---|---|---|" + "---:|" * len(names)]  # fmt: skip
     for agent in shown:
         s = scores[agent]
-        cells = " | ".join(_cell(s.overall[n], s.overall_ci.get(n)) if s else "n/a" for n in names)
+        cells = " | ".join(_cell(s.overall[n], s.overall_ci.get(n)) if s else "no episode scored" for n in names)
         lines.append(f"| {label(agent)} | {setup[agent]['action_space']} | {setup[agent]['controller']} | {cells} |")
+    if no_spread:
+        lines += ["", f"n/a: {NA_REASON}."]
+    if metric_figures:
+        lines += ["", "## Metrics per scenario", "",
+                  "Bars: each agent's mean, overall (left) and per scenario, with its confidence interval (none "
+                  "where n/a). Dashed line: the stand-still agent's value, the floor a policy has to beat.", ""]  # fmt: skip
+        for name, path in metric_figures.items():
+            lines += [f"![{name} per scenario](plots/{path.name})", ""]
     lines += ["", "## Per scenario", ""]
     for entry in suite.scenarios:
         lines += [f"### {entry.name} ({entry.difficulty}, {entry.time_limit:g} s; episodes {_seed_list(seeds.get(entry.name, {}))})", ""]
@@ -190,8 +250,10 @@ def write_report(
             s = scores[agent]
             row = s.scenarios.get(entry.name) if s is not None else None
             ci = s.scenario_ci.get(entry.name, {}) if s is not None else {}
-            cells = " | ".join(_cell(row[n], ci.get(n)) if row else "n/a" for n in names)
+            cells = " | ".join(_cell(row[n], ci.get(n)) if row else "no episode scored" for n in names)
             lines.append(f"| {label(agent)} | {cells} |")
+        if entry.name in trajectory_figures:
+            lines += ["", f"![{entry.name}: paths of episode 0](plots/{trajectory_figures[entry.name].name})"]
         lines.append("")
     lines += ["## Episodes and seeds", "", "| scenario | difficulty | time limit (s) | episode=seed | failed episodes |",
               "|---|---|---:|---|---|"]  # fmt: skip
@@ -206,80 +268,221 @@ def write_report(
         lines += ["", "## Episodes run again after their worker process died", ""]
         lines += [f"- {r['agent']}: {r['scenario'] or '?'} #{r['episode']} (seed {r['seed']}): {'; '.join(r['reasons'])}"
                   for r in retried]  # fmt: skip
-    lines += ["", "Plots: `plots/`; TensorBoard: `tensorboard --logdir " + str(out / "tensorboard") + "`."]
+    lines += ["", "Episode logs: `logs/` (`smarts viz " + str(out / "logs") + "` replays them with the lead and "
+              "traffic); TensorBoard: `tensorboard --logdir " + str(out / "tensorboard") + "`."]  # fmt: skip
     report = out / "report.md"
     atomic_write_text(report, "\n".join(lines) + "\n")
     return report
 
 
-def _metric_plots(plots: Path, suite: Suite, scores: dict, names: tuple[str, ...]) -> None:
+def _csv_cells(value: float, ci) -> list[str]:
+    """A value and its interval for the CSV; the interval's cells empty when it has no spread."""
+    return [f"{value:.4f}", *((f"{ci[0]:.4f}", f"{ci[1]:.4f}") if has_spread(ci) else ("", ""))]
+
+
+REFERENCE_COLOURS = {"zoo:keep-lane": "#7a68b8", "zoo:random": "#d9a21b", "zoo:stand-still": "#9a9a9a"}
+"""The references' colours, the same in every report (the requested agents take the others)."""
+AGENT_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#17becf", "#e377c2", "#8c564b", "#bcbd22")
+FLOOR_AGENT = "zoo:stand-still"
+TRAFFIC_COLOUR = "#5b8fd6"
+
+
+def _colours(agents: list[str]) -> dict[str, str]:
+    """One colour per agent, the same in every figure."""
+    out, k = {}, 0
+    for agent in agents:
+        if agent in REFERENCE_COLOURS:
+            out[agent] = REFERENCE_COLOURS[agent]
+        else:
+            out[agent] = AGENT_COLOURS[k % len(AGENT_COLOURS)]
+            k += 1
+    return out
+
+
+def _save(fig, path: Path, dpi: int = 100) -> Path:
+    """A figure as PNG through the one atomic write (readable by others, never half written)."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
+    return atomic_write_bytes(path, buffer.getvalue())
+
+
+def _pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    scenario_names = [s.name for s in suite.scenarios]
+    return plt
+
+
+def _metric_plots(plots: Path, suite: Suite, scores: dict, names: tuple[str, ...], label) -> dict[str, Path]:
+    """One figure per metric: overall and per scenario, a bar per agent with its interval, the
+    stand-still floor across each group, the legend beside the axes. Returns metric -> file."""
+    plt = _pyplot()
     agents = [a for a, s in scores.items() if s is not None]
+    if not agents:
+        return {}
+    colours = _colours(list(scores))
+    groups = ["overall"] + [s.name for s in suite.scenarios]
+    x = np.arange(len(groups), dtype=float)
+    width = 0.8 / len(agents)
+    floor = scores.get(FLOOR_AGENT)
+    out = {}
     for name in names:
-        fig, ax = plt.subplots(figsize=(max(6, 0.5 * len(scenario_names) + 2), 3.5))
-        width = 0.8 / max(len(agents), 1)
-        x = np.arange(len(scenario_names))
+        fig, ax = plt.subplots(figsize=(max(7.0, 0.22 * len(groups) * len(agents) + 3.0), 4.2))
         for k, agent in enumerate(agents):
             sc = scores[agent]
-            values = np.array([sc.scenarios.get(s, {}).get(name, np.nan) for s in scenario_names])
-            ci = np.array([sc.scenario_ci.get(s, {}).get(name, (np.nan, np.nan)) for s in scenario_names])
-            yerr = np.nan_to_num(np.abs(np.stack([values - ci[:, 0], ci[:, 1] - values])))
-            ax.bar(x + k * width, values, width, yerr=yerr, capsize=1.5, label=agent)
-        ax.set_xticks(x + 0.4 - width / 2, scenario_names, rotation=60, ha="right", fontsize=7)
-        ax.set_ylim(0, 1)
-        ax.set_ylabel(name)
-        ax.set_title(f"{suite.name}: {name} per scenario")
-        if ax.get_legend_handles_labels()[0]:  # none when no agent has a finished episode
-            ax.legend(fontsize=7)
-        fig.tight_layout()
-        fig.savefig(plots / f"metric_{name}.png", dpi=90)
+            values = np.array([sc.overall[name]] + [sc.scenarios.get(g, {}).get(name, np.nan) for g in groups[1:]])
+            cis = [sc.overall_ci.get(name)] + [sc.scenario_ci.get(g, {}).get(name) for g in groups[1:]]
+            low = np.array([v - ci[0] if has_spread(ci) else 0.0 for v, ci in zip(values, cis)])
+            high = np.array([ci[1] - v if has_spread(ci) else 0.0 for v, ci in zip(values, cis)])
+            at = x - 0.4 + (k + 0.5) * width
+            ax.bar(at, values, width * 0.92, color=colours[agent], label=label(agent), zorder=2)
+            spread = np.array([has_spread(ci) for ci in cis]) & np.isfinite(values)
+            if spread.any():  # no error bar at all where the interval is n/a
+                ax.errorbar(at[spread], values[spread], yerr=np.stack([low[spread], high[spread]]), fmt="none",
+                            ecolor="black", elinewidth=0.9, capsize=2, zorder=3)  # fmt: skip
+        if floor is not None:
+            level = [floor.overall[name]] + [floor.scenarios.get(g, {}).get(name, np.nan) for g in groups[1:]]
+            ax.hlines(level, x - 0.45, x + 0.45, colors="black", linestyles="--", linewidth=1.1, zorder=3,
+                      label="stand-still (the floor)")  # fmt: skip
+        ax.axvline(0.5, color="0.6", linewidth=0.8)
+        ax.set_xticks(x, groups, rotation=40, ha="right", fontsize=8)
+        ax.get_xticklabels()[0].set_fontweight("bold")
+        ax.set_xlim(-0.6, len(groups) - 0.4)
+        ax.set_ylim(0, 1.05)
+        ax.set_ylabel(f"{name} (higher is better)")
+        ax.grid(axis="y", color="0.9", zorder=0)
+        ax.set_title(f"{suite.name}: {name}, overall and per scenario (bars: mean and confidence interval)", fontsize=10)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+        out[name] = _save(fig, plots / f"metric_{name}.png")
         plt.close(fig)
+    return out
 
 
-def _trajectory_plots(plots: Path, suite: Suite, agents: list[str], results: list[dict]) -> None:
-    """For each scenario: the road (lane centre lines) and every agent's first-episode paths."""
-    import matplotlib
+def _tracks(scene) -> dict[int, np.ndarray]:
+    """Road user index -> its positions [n, 2] over the scene's rows, in time order."""
+    row = np.repeat(np.arange(scene.num_rows), np.diff(scene.offsets))
+    order = np.lexsort((row, scene.index))
+    index = scene.index[order]
+    xy = np.stack([scene.x[order], scene.y[order]], axis=1).astype(np.float64)
+    cuts = np.flatnonzero(np.diff(index)) + 1
+    return {int(index[piece[0]]): xy[piece] for piece in np.split(np.arange(len(index)), cuts) if len(piece)}
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
+STRETCH_ASPECT = 3.0
+"""A crop longer than this many times its width (a long straight road) is drawn stretched across
+(axes in metres, not to scale) instead of as a thin strip."""
+
+
+def _crop(points: np.ndarray, margin: float = 12.0, least: float = 60.0) -> tuple[tuple[float, ...], bool]:
+    """``((xmin, xmax, ymin, ymax), to_scale)`` around ``points``: a margin, at least ``least``
+    metres along the longer side (a junction's arms stay in view). Where the result is flatter
+    than :data:`STRETCH_ASPECT` the short side keeps only the margin and the picture is stretched
+    across it (``to_scale`` False); otherwise the short side is padded so the picture is at most
+    that flat and drawn to scale."""
+    lo, hi = points.min(axis=0) - margin, points.max(axis=0) + margin
+    centre, span = (lo + hi) / 2, hi - lo
+    long = int(np.argmax(span))
+    span[long] = max(span[long], least)
+    to_scale = span[long] <= STRETCH_ASPECT * span[1 - long] or span[long] <= 2 * least
+    if to_scale:
+        span[1 - long] = max(span[1 - long], span[long] / STRETCH_ASPECT, least / 2)
+    box = (centre[0] - span[0] / 2, centre[0] + span[0] / 2, centre[1] - span[1] / 2, centre[1] + span[1] / 2)
+    return box, bool(to_scale)
+
+
+def _draw_road(ax, road_map, box) -> None:
+    """Lane surfaces, junctions, road edges (solid) and lane dividers (dashed) inside ``box``."""
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    from smarts.replay.render import EDGE, Scene
+
+    scene = Scene(None, road_map)
+    xmin, xmax, ymin, ymax = box
+
+    def inside(poly: np.ndarray) -> bool:
+        if not len(poly):
+            return False
+        return poly[:, 0].max() >= xmin and poly[:, 0].min() <= xmax and poly[:, 1].max() >= ymin and poly[:, 1].min() <= ymax
+
+    surfaces = [np.asarray(p) for p in scene.surfaces if len(p) >= 3 and inside(np.asarray(p))]
+    ax.add_collection(PolyCollection(surfaces, facecolors="#d5d5d8", edgecolors="#d5d5d8", linewidths=0.3, zorder=0))
+    edges = [np.asarray(line) for line, colour, dashed in scene.lines if colour == EDGE and inside(np.asarray(line))]
+    dividers = [np.asarray(line) for line, colour, dashed in scene.lines if colour != EDGE and inside(np.asarray(line))]
+    ax.add_collection(LineCollection(edges, colors="#555555", linewidths=1.0, zorder=1))
+    ax.add_collection(LineCollection(dividers, colors="white", linewidths=1.0, linestyles=(0, (4, 4)), zorder=1))
+
+
+def _trajectory_plots(plots: Path, suite: Suite, agents: list[str], results: list[dict], label) -> dict[str, Path]:
+    """Per scenario: the road around the episode, each agent's path in episode 0 (start o, end x),
+    and from the first agent's log the lead's path and the other road users'. Returns scenario ->
+    file."""
+    plt = _pyplot()
     from smarts.env.assembly import scenario_map
 
+    colours = _colours(agents)
+    out = {}
     for entry in suite.scenarios:
-        road_map = scenario_map(entry.spec)
-        fig, ax = plt.subplots(figsize=(5, 5))
-        for lane in range(road_map.num_lanes):
-            pts = road_map.lane_polyline(lane)
-            ax.plot(pts[:, 0], pts[:, 1], color="0.8", linewidth=0.6, zorder=1)
-        colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-        for k, agent in enumerate(agents):
+        logs = {}
+        for agent in agents:
             first = next((r for r in results if r["agent"] == agent and r.get("scenario") == entry.name
                           and r.get("episode") == 0 and r.get("log")), None)  # fmt: skip
-            if first is None:
-                continue
-            log = read_episode(first["log"])
-            for j, trace in enumerate(log.agents.values()):
-                ax.plot(trace.x, trace.y, color=colours[k % len(colours)], linewidth=1.5,
-                        label=agent if j == 0 else None, zorder=2)  # fmt: skip
-                ax.plot(trace.x[:1], trace.y[:1], "o", color=colours[k % len(colours)], markersize=3)
-        drawn = [line.get_xydata() for line in ax.lines[road_map.num_lanes :]]
-        if drawn:  # frame the driven paths, not the whole map
-            xy = np.concatenate(drawn)
-            lo, hi = xy.min(axis=0) - 25.0, xy.max(axis=0) + 25.0
-            ax.set_xlim(lo[0], hi[0])
-            ax.set_ylim(lo[1], hi[1])
-        ax.set_aspect("equal")
-        ax.set_title(entry.name, fontsize=8)
-        if ax.get_legend_handles_labels()[0]:  # none when nothing of this scenario finished
-            ax.legend(fontsize=7)
-        fig.tight_layout()
-        fig.savefig(plots / f"trajectories_{entry.name}.png", dpi=80)
+            if first is not None:
+                log = read_episode(first["log"])
+                if log.agents:
+                    logs[agent] = log
+        if not logs:
+            continue
+        scene_log = next((log for log in logs.values() if log.scene is not None), None)
+        tracks, lead_tracks = {}, {}
+        if scene_log is not None:
+            scene = scene_log.scene
+            tracks = _tracks(scene)
+            lead_ids = {scene.ids.index(v) for v in scene.leads.values() if v in scene.ids}
+            lead_tracks = {i: tracks.pop(i) for i in sorted(lead_ids) if i in tracks}
+        focus = [np.stack([t.x, t.y], axis=1) for log in logs.values() for t in log.agents.values() if t.num_steps]
+        focus += list(lead_tracks.values())
+        box, to_scale = _crop(np.concatenate(focus))
+        span_x, span_y = box[1] - box[0], box[3] - box[2]
+        height = float(np.clip(8.0 * span_y / span_x, 3.2, 8.0)) if to_scale else 3.4
+        width = 8.0 if to_scale or span_x >= span_y else 4.5
+        fig, ax = plt.subplots(figsize=(width, height if span_x >= span_y or to_scale else 8.0))
+        ax.set_facecolor("#f3f6f0")
+        _draw_road(ax, scenario_map(entry.spec), box)
+        for k, xy in enumerate(tracks.values()):
+            ax.plot(xy[:, 0], xy[:, 1], color=TRAFFIC_COLOUR, linewidth=1.0, alpha=0.8, zorder=2,
+                    label=f"other road users ({len(tracks)}; square: last seen)" if k == 0 else None)  # fmt: skip
+            ax.plot(xy[-1:, 0], xy[-1:, 1], "s", color=TRAFFIC_COLOUR, markersize=3, zorder=2)
+        for k, xy in enumerate(lead_tracks.values()):
+            ax.plot(xy[:, 0], xy[:, 1], color="black", linewidth=2.2, linestyle=(0, (5, 2)), zorder=3,
+                    label="lead vehicle" if k == 0 else None)  # fmt: skip
+            ax.plot(xy[:1, 0], xy[:1, 1], "o", color="black", markersize=5, zorder=3)
+        for agent, log in logs.items():
+            several = len(log.agents) > 1
+            for j, (agent_id, t) in enumerate(log.agents.items()):
+                if not t.num_steps:
+                    continue
+                style = ("-", "--", ":", "-.")[j % 4]
+                name = label(agent) + (f" · {agent_id}" if several else "")
+                ax.plot(t.x, t.y, color=colours[agent], linewidth=2.0, linestyle=style, zorder=4, label=name)
+                ax.plot(t.x[:1], t.y[:1], "o", color=colours[agent], markersize=5, zorder=5)
+                ax.plot(t.x[-1:], t.y[-1:], "x", color=colours[agent], markersize=7, mew=2, zorder=5)
+        ax.plot([], [], "ko", markersize=4, label="start")
+        ax.plot([], [], "kx", markersize=6, mew=2, label="end of the path")
+        ax.set_xlim(box[0], box[1])
+        ax.set_ylim(box[2], box[3])
+        if to_scale:
+            ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        seed = next(iter(logs.values())).seed
+        scale = "" if to_scale else f"; not to scale: {'y' if span_x >= span_y else 'x'} stretched to show the lanes"
+        ax.set_title(f"{suite.name} · {entry.name}: episode 0 (seed {seed}{scale})", fontsize=10)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+        out[entry.name] = _save(fig, plots / f"trajectories_{entry.name}.png")
         plt.close(fig)
+    return out
 
 
 def _tensorboard(folder: Path, suite: Suite, scores: dict, names: tuple[str, ...], label) -> None:

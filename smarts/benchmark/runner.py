@@ -161,9 +161,110 @@ class Job:
     the checkpoint of a ``zoo:`` agent or of a path), part of :func:`job_inputs`."""
 
 
+CHECKPOINT_OF_RUN = "best.pt"
+"""The checkpoint a training run folder stands for when it is given as an agent: the one chosen on
+held-out seeds."""
+
+_RUN_WORDS = {"runs", "train", "evals", "eval", "benchmark"}
+
+
+def is_path_locator(locator: str) -> bool:
+    """Whether a locator names a file or folder (a checkpoint, a run) rather than a ``zoo:`` agent."""
+    return "/" in locator or os.sep in locator or Path(locator).suffix in (".pt", ".zip") or Path(locator).is_dir()
+
+
+def agent_locator(locator: str) -> str:
+    """``locator`` as the runner loads it: a training run folder (``runs/train/platoon/latest``)
+    becomes its :data:`CHECKPOINT_OF_RUN`; anything else is returned as given. A run folder
+    without one is an ``AgentSetupError`` naming the folder and the checkpoints it does hold."""
+    path = Path(locator)
+    if not path.is_dir():
+        return locator
+    best = path / CHECKPOINT_OF_RUN
+    if best.is_file():
+        return str(best)
+    held = sorted(p.name for p in path.glob("*.pt"))
+    hint = f"it holds {', '.join(held)}: give one of them" if held else "it holds no checkpoint (*.pt)"
+    raise AgentSetupError(f"agent {locator!r}: a folder without {CHECKPOINT_OF_RUN} (the checkpoint a training run "
+                          f"keeps as its best on held-out seeds); {hint}")  # fmt: skip
+
+
+def agent_name(locator: str) -> str:
+    """How reports, plots and the viewer name an agent: a ``zoo:`` locator as it is; a checkpoint
+    by its run and file (``runs/train/platoon/latest/best.pt`` -> ``platoon/003/best``: the
+    ``latest`` link resolved, so two runs' checkpoints never share a name)."""
+    if not is_path_locator(locator):
+        return locator
+    path = Path(locator)
+    with contextlib.suppress(OSError):
+        path = path.resolve()
+    parts = [p for p in path.with_suffix("").parts[-4:] if p not in _RUN_WORDS and p != path.anchor]
+    return "/".join(parts[-3:]) or locator
+
+
 def agent_label(locator: str) -> str:
-    """A file-system friendly name for an agent locator or checkpoint path."""
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(locator).stem if "/" in locator else locator).strip("_")
+    """A file-system friendly form of :func:`agent_name` (log folders, TensorBoard runs)."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", agent_name(locator)).strip("_") or "agent"
+
+
+# ---------------------------------------------------------------------------------- output folders
+BENCHMARK_ROOT = Path("runs") / "benchmark"
+"""Where ``python -m train benchmark`` puts a suite's runs by default: ``<root>/<suite>/001``, ..."""
+
+
+def holds_benchmark_run(folder: Path) -> bool:
+    """Whether ``folder`` already holds a benchmark run (its report, results or episode logs)."""
+    folder = Path(folder)
+    if any((folder / name).exists() for name in ("report.md", "results.json", "results.csv")):
+        return True
+    logs = folder / "logs"
+    return logs.is_dir() and any(logs.rglob("*.npz"))
+
+
+def benchmark_folder(suite_name: str, out: Path | None, resume: bool, root: Path = BENCHMARK_ROOT) -> tuple[Path, bool]:
+    """``(folder, numbered)``: where a benchmark run writes, never over another run.
+
+    With ``out``: that folder, refused (``OutputError``) when it already holds a run unless
+    ``resume`` (which finishes it). Without: ``resume`` continues the newest numbered run of the
+    suite (``<root>/<suite>/latest``); otherwise the next numbered folder, which the caller
+    creates with :func:`claim_folder` once its checks pass."""
+    from smarts.files import latest, next_numbered
+
+    if out is not None:
+        out = Path(out)
+        if not resume and holds_benchmark_run(out):
+            raise OutputError(f"output folder {out}: already holds a benchmark run (report.md, results, logs); "
+                              "give another --out, or add --resume to finish that run")  # fmt: skip
+        return out, False
+    suite_root = Path(root) / suite_name
+    if resume:
+        found = latest(suite_root)
+        if found is None:
+            raise OutputError(f"--resume: no benchmark run of suite {suite_name!r} under {suite_root} "
+                              "(it has no 'latest'); give the run's folder with --out")  # fmt: skip
+        return found, False
+    return next_numbered(suite_root), True
+
+
+def claim_folder(folder: Path, numbered: bool) -> Path:
+    """Create the run folder. A numbered one is taken with an exclusive ``mkdir`` (two runs
+    started at once get two folders: the later one moves on to the next number) and
+    ``latest`` then points to it."""
+    from smarts.files import next_numbered, point_latest
+
+    folder = Path(folder)
+    if not numbered:
+        folder.mkdir(parents=True, exist_ok=True)
+        return folder
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    for _ in range(1000):
+        try:
+            folder.mkdir()
+            break
+        except FileExistsError:
+            folder = next_numbered(folder.parent)
+    point_latest(folder.parent, folder)
+    return folder
 
 
 def load_policy(locator: str, seed: int = 0, policy_resolver: PolicyResolver | None = None) -> Policy:
@@ -339,7 +440,9 @@ def run_episode(job: Job, policy_resolver: PolicyResolver | None = None) -> dict
 
     suite = load_suite(job.suite_source)
     entry = suite.scenarios[job.scenario_index]
-    info: dict[str, Any] = {"agent": job.agent, "inputs": job_inputs(job)}
+    # The suite travels with the log, so a viewer finds the scenario's map wherever the log is.
+    info: dict[str, Any] = {"agent": job.agent, "inputs": job_inputs(job), "suite": suite.name,
+                            "suite_source": suite.source}  # fmt: skip
     try:
         policy = load_policy(job.agent, job.seed, policy_resolver)
         setup = policy_setup(policy, job.agent)

@@ -121,7 +121,8 @@ def test_rows_start_after_the_first_step_and_end_at_the_time_limit(tmp_path):
     assert log.initial_route_distance["agent_0"] == pytest.approx(140.0, abs=0.01)
     driven = trace.x - 10.0
     np.testing.assert_allclose(trace.route_distance_to_goal, 140.0 - driven, atol=0.01)
-    assert log.info == {"agent": "zoo:keep-lane", "inputs": job_inputs(job), "action_space": "relative_target_pose",
+    assert log.info == {"agent": "zoo:keep-lane", "inputs": job_inputs(job), "suite": "short",
+                        "suite_source": suite.source, "action_space": "relative_target_pose",
                         "controller": "direct", "interface": None, "lane_relative": None}  # fmt: skip
     assert log.end_time == pytest.approx(2.0)
 

@@ -1,0 +1,115 @@
+"""The benchmark report as a reader gets it: every figure embedded in report.md and readable, the
+trajectory figures showing the lead and the traffic from the logs' scene, agents named by name,
+and no zero-width interval printed as if it were certain."""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from smarts.benchmark.report import REFERENCE_COLOURS, TRAFFIC_COLOUR, write_report
+from smarts.benchmark.runner import plan_jobs, run_jobs
+from smarts.benchmark.suites import load_suite
+
+TINY = str(Path(__file__).with_name("tiny_suite.yaml"))
+
+
+def _colour(hex_colour: str) -> np.ndarray:
+    return np.array([int(hex_colour[i : i + 2], 16) for i in (1, 3, 5)])
+
+
+def pixels_near(image: np.ndarray, rgb: np.ndarray, tolerance: int = 12) -> int:
+    return int((np.abs(image[..., :3].astype(int) - rgb).max(axis=-1) <= tolerance).sum())
+
+
+@pytest.fixture(scope="module")
+def adaptive_report(tmp_path_factory) -> Path:
+    """The adaptive suite cut to a01 (empty road, a lead) and a09 (a signalised junction with
+    traffic), one episode each: the reference agents only."""
+    import yaml
+
+    from smarts.core.resources import config_path
+
+    out = tmp_path_factory.mktemp("report")
+    data = yaml.safe_load(config_path("benchmark", "adaptive.yaml").read_text())
+    data["scenarios"] = [s for s in data["scenarios"] if s["name"][:3] in ("a01", "a09")]
+    (out / "two.yaml").write_text(yaml.safe_dump(data))  # jobs load their suite from its file
+    suite = load_suite(out / "two.yaml")
+    jobs = plan_jobs([], suite, 1, out)
+    write_report(out, suite, [], run_jobs(jobs, workers=2, progress=False))
+    return out
+
+
+def test_every_figure_is_embedded_and_reads_back(adaptive_report):
+    report = (adaptive_report / "report.md").read_text()
+    embedded = re.findall(r"!\[([^\]]+)\]\((plots/[^)]+\.png)\)", report)
+    on_disk = sorted(p.relative_to(adaptive_report).as_posix() for p in (adaptive_report / "plots").glob("*.png"))
+    assert sorted(path for _, path in embedded) == on_disk
+    assert {"plots/metric_S_bench.png", "plots/trajectories_a01_straight_free.png"} <= set(on_disk)
+    for _, path in embedded:
+        with Image.open(adaptive_report / path) as image:
+            image.load()
+            assert image.format == "PNG" and image.width >= 500 and image.height >= 250, path
+    # Each scenario's figure sits under its own table.
+    section = report.split("### a09_lead_turns_right_at_signal_medium")[1]
+    assert section.index("| zoo:keep-lane (reference) |") < section.index("](plots/trajectories_a09")
+
+
+def test_trajectory_figures_draw_the_lead_the_traffic_and_the_agents(adaptive_report, tmp_path):
+    """The same report from the same logs without their scene: the lead's path (black) and the
+    traffic's (blue) are what the scene adds."""
+    from smarts.benchmark.metrics import read_episode, write_episode
+
+    results = []
+    for path in sorted((adaptive_report / "logs").rglob("*.npz")):
+        log = read_episode(path)
+        log.scene = None
+        bare = tmp_path / "logs" / path.relative_to(adaptive_report / "logs")
+        write_episode(log, bare)
+        results.append({"agent": log.info["agent"], "scenario": log.scenario, "episode": log.episode,
+                        "seed": log.seed, "failure": None, "log": str(bare)})  # fmt: skip
+    write_report(tmp_path, load_suite(adaptive_report / "two.yaml"), [], results)
+
+    def image(folder, scenario):
+        return np.asarray(Image.open(folder / "plots" / f"trajectories_{scenario}.png").convert("RGB"))
+
+    a01, a09 = "a01_straight_free", "a09_lead_turns_right_at_signal_medium"
+    black, traffic = np.zeros(3), _colour(TRAFFIC_COLOUR)
+    for scenario in (a01, a09):
+        full, bare = image(adaptive_report, scenario), image(tmp_path, scenario)
+        assert pixels_near(full, black, 40) > pixels_near(bare, black, 40) + 300, scenario  # the lead
+        assert pixels_near(full, _colour(REFERENCE_COLOURS["zoo:keep-lane"])) > 200  # the agents
+        assert pixels_near(full, _colour("#d5d5d8"), 3) > 2000  # the road surface
+    assert pixels_near(image(adaptive_report, a09), traffic, 30) > pixels_near(image(tmp_path, a09), traffic, 30) + 100
+    assert pixels_near(image(adaptive_report, a01), traffic, 30) < 20  # a01 is an empty road
+
+
+def test_one_episode_gives_no_interval_and_says_so(adaptive_report):
+    report = (adaptive_report / "report.md").read_text()
+    assert "**Warning:** some intervals below are n/a" in report
+    row = next(line for line in report.splitlines() if line.startswith("| zoo:keep-lane (reference) | relative"))
+    assert row.count("[n/a]") == 5 and not re.search(r"\[\d\.\d{3}, \d\.\d{3}\]", row)
+    doc = json.loads((adaptive_report / "results.json").read_text())
+    scores = doc["agents"]["zoo:keep-lane"]["scores"]
+    assert scores["overall_ci"]["S_bench"] is None and "null" in doc["ci"]
+    rows = list(csv.DictReader((adaptive_report / "results.csv").open()))
+    overall = next(r for r in rows if r["agent"] == "zoo:keep-lane" and r["scenario"] == "overall")
+    assert overall["S_bench"] and overall["S_bench_ci_low"] == overall["S_bench_ci_high"] == ""
+
+
+def test_episodes_that_differ_give_intervals(tmp_path):
+    suite = load_suite(TINY)  # seeds 7 and 8: random drives differently in each
+    jobs = plan_jobs(["zoo:random"], suite, 2, tmp_path, references=False)
+    write_report(tmp_path, suite, ["zoo:random"], run_jobs(jobs, workers=1, progress=False))
+    report = (tmp_path / "report.md").read_text()
+    row = next(line for line in report.splitlines() if line.startswith("| zoo:random (reference) | relative"))
+    low, high = map(float, re.findall(r"\[(\d\.\d{3}), (\d\.\d{3})\]", row)[-1])  # S_bench, the last column
+    assert low < high  # (RC and MTE, alike in both episodes, are n/a in this row)
+    doc = json.loads((tmp_path / "results.json").read_text())
+    assert doc["agents"]["zoo:random"]["scores"]["overall_ci"]["S_bench"] == pytest.approx([low, high], abs=5e-4)
