@@ -3,6 +3,16 @@
 The agent provider (controllers for action spaces), traffic engines, replay and signals all plug into
 the step loop through this protocol. Providers write their rows of the table in place; there is no
 merge copy. Ownership is the ``owner`` column: a hand-over rewrites it and tells both providers.
+
+A simulation runs B episodes (``smarts.core.simulation``). Most providers belong to one episode:
+they are given its ``EpisodeView`` as ``sim`` (its block of the table with rows from 0, its clock,
+seed, map, signals and agents), so they are written as for a single simulation and run unchanged
+whatever B is. A kind of episode provider may name a ``batch_stage``: a class built once per
+simulation with every such provider of every episode, ``stage(sim, [(episode, provider), ...])``,
+that steps them all at once (``step(sim, dt)``, ``after_reset(sim, episodes)``); the simulation
+then never calls those providers' own ``step``. The agent provider is a *batch provider*: it is
+given the whole simulation and global rows, and resets per episode (``reset_episode(sim, b,
+agents)`` then, after the episode's providers have reset, ``start_episode(sim, b, agents)``).
 """
 
 from __future__ import annotations
@@ -21,7 +31,8 @@ class Provider(Protocol):
     provider_id: int  # assigned by the simulation when the provider is added
 
     def reset(self, sim: "Simulation") -> None:
-        """Create this provider's vehicles for a new episode (the table is empty of its rows)."""
+        """Create this provider's vehicles for a new episode (the table is empty of its rows; it
+        forgets every row it drove)."""
 
     def start(self, sim: "Simulation") -> None:
         """Second phase of a reset, after every provider's ``reset``: take over vehicles that
