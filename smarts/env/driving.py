@@ -184,7 +184,7 @@ class Driving:
         if social:
             self._keep_social(batches)
             keep = self.learner[agents]
-            batches = _learners(batches, self.learner)
+            batches = learner_batches(batches, self.learner)
             agents = agents[keep]
             count = None if count is None else count[keep]
         if self.reward_fn is not None:
@@ -300,7 +300,7 @@ def _by_episode(sim, agents: np.ndarray) -> list[tuple[int, np.ndarray]]:
     return [(int(episode[g[0]]), agents[g]) for g in np.split(np.arange(len(agents)), cuts)]
 
 
-def _learners(batches: list[Batch], learner: np.ndarray) -> list[Batch]:
+def learner_batches(batches: list[Batch], learner: np.ndarray) -> list[Batch]:
     """The batches without the social agents' rows."""
     out = []
     for members, batch in batches:

@@ -27,7 +27,7 @@ from smarts.dynamics.action_spaces import agent_action_space
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
 from smarts.env.assembly import as_spec
-from smarts.env.driving import Driving, _learners
+from smarts.env.driving import Driving, learner_batches
 from smarts.env.reward import RewardFunction
 from smarts.env.v2v import V2VLink
 from smarts.scenario import ScenarioSpec
@@ -122,7 +122,7 @@ class DrivingParallelEnv(ParallelEnv):
         infos: dict[str, dict] = {a: {} for a in self.agents}
         if count is not None:
             self._count_messages(infos, count, agents)
-        obs = self._split(_learners(batches, self.driving.learner) if self.social.any else batches)
+        obs = self._split(learner_batches(batches, self.driving.learner) if self.social.any else batches)
         return obs, infos
 
     def check_actions(self, actions: Mapping[str, Any]) -> None:
