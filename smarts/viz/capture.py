@@ -20,6 +20,36 @@ from smarts.core.events import EVENT_NAMES
 
 VEHICLE_COLUMNS = ("x", "y", "heading", "speed", "length", "width")
 """Columns of ``Frame["vehicle_state"]``."""
+LEAD_ROLE = 6
+"""The page's role of a vehicle an agent follows (a lead): the table's roles are 0-5; a lead keeps
+whatever it is driven by (traffic, replay, ...) in the simulation, but a viewer must tell it
+apart from the agent and from the rest of the traffic at a glance."""
+ROLE_NAMES = ["none", "agent", "social_agent", "traffic", "replay", "pedestrian", "lead"]
+
+FIELD_UNITS = {
+    "dx": "m", "dy": "m", "dheading": "rad", "x": "m", "y": "m", "heading": "rad", "throttle": "0..1",
+    "brake": "0..1", "steering": "-1..1, + left", "target_speed": "m/s", "speed": "m/s",
+    "lane_change": "-1 right, +1 left",
+}  # fmt: skip
+
+
+def action_fields(spec: Any) -> dict[str, list[str]]:
+    """Per learning agent of a scenario spec: the names of its action's fields with their units
+    (``dx (m)``, ...), from its action space and controller, so the viewer can label an action
+    instead of printing bare numbers."""
+    from smarts.dynamics.action_spaces import ACTION_COMPONENTS, LANE_RELATIVE_COMPONENTS, ActionSpaceType
+
+    out = {}
+    for agent in getattr(spec, "agents", []):
+        if getattr(agent, "is_social", False):
+            continue
+        try:
+            names = (LANE_RELATIVE_COMPONENTS if agent.controller == "lane_relative"
+                     else ACTION_COMPONENTS[ActionSpaceType(agent.action_space)])  # fmt: skip
+        except (ValueError, KeyError):
+            continue
+        out[str(agent.id)] = [f"{n} ({FIELD_UNITS[n]})" if n in FIELD_UNITS else n for n in names]
+    return out
 
 Frame = dict[str, Any]
 
@@ -52,11 +82,15 @@ class StepCapture:
         ids = table.ids
         signals = getattr(sim, "signals", None)
         agent_rows = np.where(sim.agent_active[self._agents], sim.agent_row[self._agents], -1)
+        roles = table.role[rows].copy()
+        leads = [table.row_of.get(lead) for lead in getattr(sim, "lead_ids", []) if lead is not None]
+        if leads:
+            roles[np.isin(rows, [r for r in leads if r is not None])] = LEAD_ROLE
         return {
             "time": float(sim.time),
             "vehicle_ids": _ids_of(ids, rows),
             "vehicle_state": table.data[self._columns][:, rows].T.astype(np.float32),
-            "vehicle_role": table.role[rows].copy(),
+            "vehicle_role": roles,
             "vehicle_lane": table.lane[rows].copy(),
             "signal_colour": (
                 signals.colour.copy() if signals is not None and signals.has_signals else np.zeros(0, np.int8)

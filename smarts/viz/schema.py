@@ -92,6 +92,7 @@ class LiveMeta(_Model):
     agent_ids: list[Name]
     live: bool = True
     events: list[Name] | None = None
+    action_fields: dict[Name, Annotated[list[Name], Field(max_length=16)]] | None = None
 
 
 class AgentFrame(_Model):

@@ -2,10 +2,12 @@
 
 A path is one file or a folder searched for ``*.npz`` below it (a benchmark run's ``logs``
 folder, a folder of recordings, or both). A recording carries everything, the map included. A
-benchmark log holds the agents' traces and no traffic; its map comes from the benchmark suite
-scenario it names (the suite is the folder the run wrote, ``runs/benchmark/<suite>/logs/...``, or
-the built-in suite of the log's task), and its per-agent benchmark metrics are computed from the
-log itself.
+benchmark log holds the agents' traces and, since version 2, its scene: the lead, the other road
+users near the agents and the signal colours at every row (no actions or observations). Its map
+comes from the benchmark suite it was run on: the suite file the log names (``info.suite_source``),
+else the suite it names, else the suite named by the run's folder
+(``runs/benchmark/<suite>/<run>/logs/...``), else the built-in suite of the log's task. Its
+per-agent benchmark metrics are computed from the log itself.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 
 from smarts.core.errors import LogError
 from smarts.core.vehicle_table import Role
+from smarts.viz.capture import LEAD_ROLE
 from smarts.viz.recording import FORMAT_NAME as RECORDING_FORMAT
 from smarts.viz.recording import read_recording
 from smarts.viz.scene import map_scene
@@ -101,19 +104,31 @@ def _episode_json(path: str, kind: str, mtime: int, size: int) -> bytes:
 
 
 # ---------------------------------------------------------------------------------- benchmark logs
-def _suite_entry(log_path: Path, scenario: str, task: str):
-    """The suite scenario a log was run on: the suite named by the run folder, else the built-in
-    suite of the log's task."""
+def _suite_entry(log_path: Path, scenario: str, task: str, info: dict | None = None):
+    """The suite scenario a log was run on (see the module docstring for the search order)."""
     from smarts.benchmark.suites import load_suite, suite_names
 
-    candidates = [p.parent.name for p in log_path.parents if p.name == "logs"]
-    candidates += [task] + suite_names()
+    info = info or {}
+    suites = []
+    source = info.get("suite_source")
+    if isinstance(source, str) and source and Path(source).is_file():
+        suites.append(source)
+    if isinstance(info.get("suite"), str):
+        suites.append(info["suite"])
+    for folder in log_path.parents:
+        if folder.name == "logs":  # <suite>/logs or <suite>/<numbered run>/logs
+            suites += [folder.parent.name, folder.parent.parent.name]
+    suites += [task] + suite_names()
     tried = []
-    for name in dict.fromkeys(candidates):
-        if name not in suite_names():
+    for name in dict.fromkeys(suites):
+        if name not in suite_names() and not (name.endswith((".yaml", ".yml")) and Path(name).is_file()):
             continue
         tried.append(name)
-        for entry in load_suite(name).scenarios:
+        try:
+            entries = load_suite(name).scenarios
+        except ValueError:
+            continue
+        for entry in entries:
             if entry.name == scenario:
                 return entry
     raise LogError(f"scenario {scenario!r} is in none of the benchmark suites {tried}; cannot draw its map",
@@ -122,46 +137,71 @@ def _suite_entry(log_path: Path, scenario: str, task: str):
 
 def log_page_json(path: Path) -> dict[str, Any]:
     """A benchmark log as the page's episode: the suite scenario's map, the agents' traces as
-    vehicles (no traffic: the log has none), and each agent's benchmark metrics."""
+    vehicles, the scene's lead (role ``lead``), other road users and signal colours, and each
+    agent's benchmark metrics."""
     from smarts.benchmark.metrics.log import read_episode
     from smarts.benchmark.metrics.scores import agent_costs, score_episode
     from smarts.env.assembly import scenario_map
 
     log = read_episode(path)
-    entry = _suite_entry(path, log.scenario, log.task)
+    entry = _suite_entry(path, log.scenario, log.task, log.info)
     scene = map_scene(scenario_map(entry.spec))
     dims = {a.id: a.vehicle.dimensions() for a in entry.spec.agents}
     metrics: dict[str, Any] = {"episode": score_episode(log) if log.agents or log.failed else {}}
     metrics["agents"] = {a: c.as_dict() for a, c in agent_costs(log).items()} if log.agents else {}
-    times = sorted({round(float(t), 6) for tr in log.agents.values() for t in tr.time})
+    sc = log.scene
+    times = {round(float(t), 6) for tr in log.agents.values() for t in tr.time}
+    if sc is not None:
+        times |= {round(float(t), 6) for t in sc.time}
+    lead_ids = set(sc.leads.values()) if sc is not None else set()
+    n_signals = len(scene["signals"])
     frames = []
-    for k, t in enumerate(times):
+    for k, t in enumerate(sorted(times)):
         frame: dict[str, Any] = {"step": k + 1, "t": t, "ids": [], "x": [], "y": [], "h": [], "speed": [],
                                  "length": [], "width": [], "role": [], "lane": [], "signals": [], "agents": {}}  # fmt: skip
+
+        def add(vid: str, x: float, y: float, h: float, v: float, length: float, width: float, role: int) -> None:
+            frame["ids"].append(vid)
+            frame["x"].append(round(float(x), 2))
+            frame["y"].append(round(float(y), 2))
+            frame["h"].append(round(float(h), 3))
+            frame["speed"].append(round(float(v), 2))
+            frame["length"].append(round(float(length), 2))
+            frame["width"].append(round(float(width), 2))
+            frame["role"].append(int(role))
+            frame["lane"].append(-1)
+
+        if sc is not None:
+            row = int(np.searchsorted(sc.time, t - 1e-6))
+            if row < sc.num_rows and abs(sc.time[row] - t) < 1e-6:
+                for j in range(int(sc.offsets[row]), int(sc.offsets[row + 1])):
+                    i = int(sc.index[j])
+                    vid = sc.ids[i]
+                    role = LEAD_ROLE if vid in lead_ids else int(sc.role[i])
+                    add(vid, sc.x[j], sc.y[j], sc.heading[j], sc.speed[j], sc.length[i], sc.width[i], role)
+                if sc.signals.shape[1] == n_signals:  # the colours of the map's signals, in its order
+                    frame["signals"] = sc.signals[row].astype(int).tolist()
         for agent, tr in log.agents.items():
             hit = np.flatnonzero(np.abs(tr.time - t) < 1e-6)
             if not hit.size:
                 continue
             i = int(hit[0])
             d = dims.get(agent)
-            frame["ids"].append(agent)
-            frame["x"].append(round(float(tr.x[i]), 2))
-            frame["y"].append(round(float(tr.y[i]), 2))
-            frame["h"].append(round(float(tr.heading[i]), 3))
-            frame["speed"].append(round(float(tr.speed[i]), 2))
-            frame["length"].append(d.length if d else 4.6)
-            frame["width"].append(d.width if d else 1.9)
-            frame["role"].append(int(Role.AGENT))
-            frame["lane"].append(-1)
+            add(agent, tr.x[i], tr.y[i], tr.heading[i], tr.speed[i], d.length if d else 4.6, d.width if d else 1.9,
+                int(Role.AGENT))  # fmt: skip
             state = {c: _json_number(v[i]) for c, v in tr.columns().items()}
-            events = [c for c in ("wrong_way", "partial_off_road", "off_road", "goal_reached") if state.get(c)]
+            events = [c for c in ("wrong_way", "partial_off_road", "off_road", "goal_reached", "red_light", "left_map")
+                      if state.get(c)]  # fmt: skip
             frame["agents"][agent] = {"vehicle": agent, "action": None, "reward": None, "events": events,
                                       "neighbours": [], "waypoints": [], "log": state}  # fmt: skip
         frames.append(frame)
+    note = ("a benchmark log holds the agents' traces, the lead, the road users near them and the signals; no "
+            "actions or observations" if sc is not None else
+            "a benchmark log of version 1 holds the agents' traces only: no traffic, actions or observations")  # fmt: skip
     meta = {
         "scenario": log.scenario, "task": log.task, "episode": log.episode, "seed": log.seed, "dt": log.dt,
-        "agent_ids": log.agent_ids, "failure": log.failure, "info": log.info, "source": str(path),
-        "note": "a benchmark log holds the agents' traces only: no traffic, actions or observations",
+        "agent_ids": log.agent_ids, "failure": log.failure, "info": log.info, "source": str(path), "note": note,
+        "leads": dict(sc.leads) if sc is not None else {},
     }  # fmt: skip
     return {"kind": "log", "meta": meta, "scene": scene, "frames": frames, "metrics": metrics}
 

@@ -15,7 +15,7 @@ import re
 from pathlib import Path
 from typing import Any
 
-from smarts.viz.capture import Frame, StepCapture, frame_json
+from smarts.viz.capture import ROLE_NAMES, Frame, StepCapture, action_fields, frame_json
 from smarts.viz.live import DEFAULT_URL, LivePublisher
 from smarts.viz.recording import SUFFIX, build_recording, write_recording
 from smarts.viz.scene import map_scene
@@ -59,7 +59,8 @@ class WatchedEnv:
             "seed": int(sim.seed),
             "dt": float(sim.dt),
             "episode": self._episode,
-            "roles": ["none", "agent", "social_agent", "traffic", "replay", "pedestrian"],
+            "roles": list(ROLE_NAMES),
+            "action_fields": action_fields(self.env.scenario),
         }
         if self.publisher is not None:
             self.publisher.episode(

@@ -58,6 +58,20 @@ def benchmark_log(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def benchmark_log_with_traffic(tmp_path_factory) -> Path:
+    """One episode of adaptive a09 (a lead turning right at a signalised junction among built-in
+    traffic) of zoo:keep-lane, written by the benchmark runner: its log carries the scene."""
+    from smarts.benchmark.runner import plan_jobs, run_jobs
+    from smarts.benchmark.suites import load_suite
+
+    out = tmp_path_factory.mktemp("benchmark") / "adaptive"
+    jobs = plan_jobs(["zoo:keep-lane"], load_suite("adaptive"), 1, out, references=False)
+    (job,) = [j for j in jobs if "a09_" in j.log_path]
+    (result,) = run_jobs([job], workers=1, progress=False)
+    return Path(result["log"])
+
+
+@pytest.fixture(scope="session")
 def finished(tmp_path_factory) -> Path:
     """A recording of the README's two agents driving through their intersection to their goals
     (both reach them: events to jump to)."""

@@ -52,12 +52,14 @@ def browser():
 
 
 @pytest.fixture(scope="module")
-def served(recorded, benchmark_log, tmp_path_factory):
+def served(recorded, benchmark_log, benchmark_log_with_traffic, tmp_path_factory):
+    """Episode 0: the recording; 1: the a01 benchmark log; 2: the a09 one (lead, traffic, signals)."""
     folder = tmp_path_factory.mktemp("page")
     (folder / "a.rec.npz").write_bytes(recorded["path"].read_bytes())
-    logs = folder / "adaptive" / "logs" / "zoo_keep-lane" / "a01_straight_free"
-    logs.mkdir(parents=True)
-    (logs / "episode_000.npz").write_bytes(benchmark_log.read_bytes())
+    for log in (benchmark_log, benchmark_log_with_traffic):
+        logs = folder / "adaptive" / "001" / "logs" / "zoo_keep-lane" / log.parent.name
+        logs.mkdir(parents=True)
+        (logs / "episode_000.npz").write_bytes(log.read_bytes())
     with BackgroundServer(folder) as srv:
         yield srv
 
@@ -125,7 +127,10 @@ def test_recorded_episode_draws_vehicles_and_agent_panel(browser, served, record
     assert browser.find_element("id", "agent-id").text == agent
     speed = float(frame["vehicle_state"][frame["vehicle_ids"].index(agent), 3])
     assert field(browser, "agent-table", "speed") == f"{speed:.2f} m/s"
-    assert field(browser, "agent-table", "reward") != "–" and field(browser, "agent-table", "action") != "–"
+    assert field(browser, "agent-table", "reward") != "–"
+    action = rec.frame(step)["agents"][agent]["action"]  # the fields by name and unit
+    for name, value in zip(("dx (m)", "dy (m)", "dheading (rad)"), action):
+        assert float(field(browser, "agent-table", f"action {name}")) == pytest.approx(float(value), abs=6e-4)
     assert field(browser, "agent-table", "lane").startswith(("south_in", ":center"))
 
 
@@ -179,6 +184,60 @@ def test_benchmark_log_shows_metrics(browser, served):
     wait_for(browser, "return !document.getElementById('agent-panel').hidden")
     assert "Benchmark costs" in browser.find_element("id", "agent-metrics").text
     assert float(field(browser, "agent-table", "speed_limit")) > 0
+
+
+def test_benchmark_log_draws_the_lead_the_traffic_and_the_signals(browser, served, benchmark_log_with_traffic):
+    from smarts.benchmark.metrics import read_episode
+
+    log = read_episode(benchmark_log_with_traffic)
+    scene = log.scene
+    lead = scene.leads["agent_0"]
+    # A row where the lead and a traffic vehicle are both on the map near the agent.
+    row = next(k for k in range(scene.num_rows)
+               if (ids := [scene.ids[i] for i in scene.index[scene.at(k)]]) and lead in ids and len(ids) >= 3)  # fmt: skip
+    open_episode(browser, served.url, "2")
+    assert "the lead" in browser.find_element("id", "episode-table").text  # the note says what a log holds
+    step = browser.execute_script("return window.viz.ep.frames.findIndex((f) => Math.abs(f.t - arguments[0]) < 1e-4)",
+                                  float(scene.time[row]))  # fmt: skip
+    browser.execute_script("window.viz.goTo(arguments[0])", step)
+    frame = browser.execute_script("return window.viz.ep.frames[window.viz.cur]")
+    assert lead in frame["ids"] and frame["role"][frame["ids"].index(lead)] == 6
+    traffic = [v for v, r in zip(frame["ids"], frame["role"]) if r == 3]
+    assert traffic and len(frame["signals"]) == log.signals == 16
+    time.sleep(0.2)
+    for vehicle, colour in ((lead, [29, 233, 182]), (traffic[0], [70, 130, 230]), ("agent_0", [230, 60, 50])):
+        x, y = body_point(browser, vehicle)
+        assert pixel(browser, x, y)[:3] == colour, vehicle
+    # The agent's panel names its lead.
+    click_canvas_at(browser, *body_point(browser, "agent_0"))
+    wait_for(browser, "return !document.getElementById('agent-panel').hidden")
+    assert field(browser, "agent-table", "lead") == lead
+
+
+def test_the_camera_follows_the_selected_agent(browser, served):
+    open_episode(browser, served.url, "2")
+    browser.execute_script("window.viz.goTo(10)")
+    click_canvas_at(browser, *body_point(browser, "agent_0"))
+    wait_for(browser, "return window.viz.selectedAgent === 'agent_0'")
+
+    def centre_and_agent():
+        return browser.execute_script(
+            "const v = window.viz, f = v.ep.frames[v.cur], i = f.ids.indexOf('agent_0');"
+            "return [v.view.cx, v.view.cy, f.x[i], f.y[i], v.view.scale];")  # fmt: skip
+
+    for k in (10, 40, 80):
+        browser.execute_script("window.viz.goTo(arguments[0])", k)
+        wait_for(browser, "return !window.viz.dirty")
+        cx, cy, x, y, scale = centre_and_agent()
+        assert (cx, cy) == pytest.approx((x, y)) and scale >= 5, k
+    # Unticked, the view stays where it is.
+    browser.find_element("id", "follow-cam").click()
+    before = centre_and_agent()
+    browser.execute_script("window.viz.goTo(120)")
+    wait_for(browser, "return !window.viz.dirty")
+    after = centre_and_agent()
+    assert after[:2] == before[:2] and after[2] != before[2]
+    browser.find_element("id", "follow-cam").click()
 
 
 def test_live_env_streams_into_the_page(browser, tmp_path):

@@ -1,8 +1,10 @@
 // smarts viz: draws recorded or live episodes on a canvas; no libraries, no network beyond this server.
 "use strict";
 
-const ROLE_NAMES = ["none", "agent", "social agent", "traffic", "replay", "pedestrian"];
-const ROLE_COLOURS = ["#aaaaaa", "#e63c32", "#f0a028", "#4682e6", "#a05adc", "#fafafa"];
+// Role 6 is the page's own: a vehicle an agent follows (its lead), whatever drives it.
+const ROLE_NAMES = ["none", "agent", "social agent", "traffic", "replay", "pedestrian", "lead"];
+const ROLE_COLOURS = ["#aaaaaa", "#e63c32", "#f0a028", "#4682e6", "#a05adc", "#fafafa", "#1de9b6"];
+const FOLLOW_SCALE = 5;  // pixels per metre at least, once the camera follows an agent
 const SIGNAL_COLOURS = [null, "#e53935", "#fdd835", "#43a047"];
 const TRAIL_STEPS = 30;
 const LIVE_FRAMES = 20000;  // most steps of a live episode kept in the page
@@ -29,8 +31,9 @@ const state = {
   selectedAgent: null,
   selectedVehicle: null,  // a road user that is not an agent
   selectedLane: null,
-  roles: new Set([0, 1, 2, 3, 4, 5]),
+  roles: new Set([0, 1, 2, 3, 4, 5, 6]),
   trails: true,
+  followCam: true,    // keep the selected agent in the middle of the view
   dirty: true,
   stats: { draws: 0, drawMs: 0, lastDrawMs: 0 },
   lanes: [],          // lanes with boundary polylines
@@ -295,10 +298,20 @@ function drawVehicles(f) {
   }
 }
 
+// The follow camera: the view's centre on the selected agent's vehicle in the frame shown.
+function followSelected(f) {
+  if (!state.followCam || !state.selectedAgent || !f) return;
+  const a = f.agents[state.selectedAgent];
+  const i = a ? frameIndex(state.cur).get(a.vehicle) : undefined;
+  if (i === undefined) return;
+  state.view.cx = f.x[i]; state.view.cy = f.y[i];
+}
+
 function draw() {
   const t0 = performance.now();
   resize();
   if (!state.ep) { ctx.fillStyle = "#1d1f22"; ctx.fillRect(0, 0, canvas.width, canvas.height); return; }
+  followSelected(state.ep.frames[state.cur]);
   drawMap();
   const f = state.ep.frames[state.cur];
   if (f) {
@@ -347,8 +360,14 @@ function showPanels() {
       const i = frameIndex(state.cur).get(a.vehicle);
       const lane = f.lane[i] >= 0 ? state.ep.scene.lanes[f.lane[i]] : null;
       entries.push(["vehicle", a.vehicle], ["speed", `${fmt(f.speed[i])} m/s`], ["position", `${fmt(f.x[i], 1)}, ${fmt(f.y[i], 1)}`],
-        ["heading", `${fmt(f.h[i], 3)} rad`], ["lane", lane ? lane.id : "–"], ["action", fmt(a.action, 3)],
-        ["reward", fmt(a.reward, 4)], ["events", a.events.length ? a.events.join(", ") : "none"],
+        ["heading", `${fmt(f.h[i], 3)} rad`], ["lane", lane ? lane.id : "–"]);
+      // The action's fields by name and unit (the env says them per agent), not a bare list of numbers.
+      const fields = (state.ep.meta.action_fields || {})[id];
+      if (a.action && fields && fields.length === a.action.length) fields.forEach((name, j) => entries.push([`action ${name}`, fmt(a.action[j], 3)]));
+      else entries.push(["action", fmt(a.action, 3)]);
+      const leads = state.ep.meta.leads || {};
+      if (leads[id]) entries.push(["lead", leads[id]]);
+      entries.push(["reward", fmt(a.reward, 4)], ["events", a.events.length ? a.events.join(", ") : "none"],
         ["neighbours", String((a.neighbours || []).length)]);
       if (a.log) for (const [k, v] of Object.entries(a.log)) if (!["x", "y", "heading", "speed", "time"].includes(k)) entries.push([k, fmt(v, 3)]);
     }
@@ -438,6 +457,7 @@ function click(px, py) {
   state.selectedAgent = agent || null;
   state.selectedVehicle = vid !== null && !agent ? vid : null;
   state.selectedLane = vid === null ? pickLane(w) : null;
+  if (state.selectedAgent && state.followCam) state.view.scale = Math.max(state.view.scale, FOLLOW_SCALE);
   showPanels(); state.dirty = true;
 }
 
@@ -464,6 +484,7 @@ canvas.addEventListener("mousemove", (e) => {
   if (!drag) return;
   const dx = e.offsetX - drag.x, dy = e.offsetY - drag.y;
   if (Math.abs(dx) + Math.abs(dy) > 3 || drag.moved) {
+    if (!drag.moved && state.followCam && state.selectedAgent) { state.followCam = false; $("follow-cam").checked = false; }
     drag.moved = true;
     state.view.cx -= dx / state.view.scale; state.view.cy += dy / state.view.scale;
     drag.x = e.offsetX; drag.y = e.offsetY; state.dirty = true;
@@ -492,6 +513,16 @@ $("step").onclick = () => goTo(state.cur + 1);
 $("step-back").onclick = () => goTo(state.cur - 1);
 $("seek").oninput = (e) => goTo(Number(e.target.value));
 $("trails").onchange = (e) => { state.trails = e.target.checked; state.dirty = true; };
+$("follow-cam").onchange = (e) => {
+  state.followCam = e.target.checked;
+  if (state.followCam && state.selectedAgent) state.view.scale = Math.max(state.view.scale, FOLLOW_SCALE);
+  state.dirty = true;
+};
+state.selectAgent = (id) => {  // for tests and scripts: what clicking the agent does
+  state.selectedAgent = id; state.selectedVehicle = null; state.selectedLane = null;
+  if (state.followCam) state.view.scale = Math.max(state.view.scale, FOLLOW_SCALE);
+  showPanels(); state.dirty = true;
+};
 document.querySelectorAll("[data-role]").forEach((box) => {
   box.onchange = () => { const r = Number(box.dataset.role); if (box.checked) state.roles.add(r); else state.roles.delete(r); state.dirty = true; };
 });
