@@ -1,13 +1,21 @@
 """``python -m train enjoy``: watch a policy drive a scenario, or write it as a video.
 
     python -m train enjoy --agent zoo:keep-lane --scenario adaptive:a01_straight_free --video out.mp4
-    python -m train enjoy --agent runs/train/platoon/latest/best.pt --scenario adaptive:a01_straight_free --viz
+    python -m train enjoy --agent runs/train/platoon/latest --scenario adaptive:a08_lead_turns_left_at_junction --viz
 
-The policy is loaded as the benchmark loads it (a ``zoo:`` locator or a checkpoint) and drives
-every learning agent of the scenario in its own action space. ``--video`` encodes the top-down
-frames with the ffmpeg of the ``imageio-ffmpeg`` wheel (no system ffmpeg); ``--tensorboard``
-adds the episode as an animated image to a TensorBoard log; ``--viz`` starts the viewer in this
-process and streams the episode to it live; ``--record`` keeps viewer recordings.
+The policy is loaded as the benchmark loads it (a ``zoo:`` locator, a checkpoint, or a training
+run folder: its best.pt) and drives every learning agent of the scenario in its own action space.
+Rewards are the task's (``smarts.env.task_rewards``): the reward a training run's ``config.json``
+beside the checkpoint says, else the task of the scenario's suite (adaptive: platoon,
+collaborative: drive), else ``--task``; ``--task scenario`` keeps the scenario's default reward.
+Each episode's line says its steps, each agent's task return and how each agent's episode ended
+(its end events, or still driving at the time limit).
+
+``--video`` writes follow-camera frames (``smarts.viz.video``: the first agent, or ``--follow``,
+at 6 px/m with a HUD of step, speed, task reward and events, and a colour legend), encoded with
+the ffmpeg of the ``imageio-ffmpeg`` wheel (no system ffmpeg); ``--tensorboard`` adds the episode
+as an animated image to a TensorBoard log; ``--viz`` starts the viewer in this process and
+streams the episode to it live; ``--record`` keeps viewer recordings.
 """
 
 from __future__ import annotations
@@ -22,21 +30,28 @@ import numpy as np
 DEFAULT_FPS = 10
 
 
+def suite_entry(name: str):
+    """``(suite, entry)`` of ``suite:scenario`` (a benchmark suite's scenario); ``(None, None)``
+    for a library name or a YAML path."""
+    if ":" not in name or Path(name).exists():
+        return None, None
+    from smarts.benchmark.suites import load_suite
+
+    suite_name, scenario = name.split(":", 1)
+    suite = load_suite(suite_name)
+    for entry in suite.scenarios:
+        if entry.name == scenario:
+            return suite, entry
+    raise ValueError(f"--scenario {name}: suite {suite_name!r} has no scenario {scenario!r}; "
+                     f"it has {', '.join(s.name for s in suite.scenarios)}")  # fmt: skip
+
+
 def scenario_spec(name: str):
     """A spec from ``suite:scenario`` (a benchmark suite scenario), a library name or a YAML path."""
     from smarts.scenario import load_scenario
 
-    if ":" in name and not Path(name).exists():
-        from smarts.benchmark.suites import load_suite
-
-        suite_name, scenario = name.split(":", 1)
-        suite = load_suite(suite_name)
-        for entry in suite.scenarios:
-            if entry.name == scenario:
-                return entry.spec
-        raise ValueError(f"--scenario {name}: suite {suite_name!r} has no scenario {scenario!r}; "
-                         f"it has {', '.join(s.name for s in suite.scenarios)}")  # fmt: skip
-    return load_scenario(name)
+    _, entry = suite_entry(name)
+    return entry.spec if entry is not None else load_scenario(name)
 
 
 def even_frame(frame: np.ndarray) -> np.ndarray:
@@ -95,18 +110,50 @@ def write_tensorboard_video(writer, tag: str, frames: list[np.ndarray], step: in
     writer.flush()
 
 
-def policy_env(agent: str, scenario: str, seed: int = 0):
-    """(policy, env, spec): the policy ``agent`` names, loaded as the benchmark loads it, and a
-    rendering env of ``scenario`` whose learning agents act in the policy's action space."""
-    from smarts.benchmark.runner import load_policy, policy_setup, scenario_for
+SUITE_TASK = {"adaptive": "platoon", "collaborative": "drive"}
+"""The training task whose reward fits each benchmark task."""
+
+
+def task_reward(agent: str, scenario: str, task: str | None = None):
+    """``(name, reward function or None)``: the task reward an episode of ``agent`` on
+    ``scenario`` is told in (see the module docstring); None with ``task == "scenario"``."""
+    from smarts.env.task_rewards import TaskReward
+
+    if task == "scenario":
+        return "the scenario's default", None
+    config = Path(agent).parent / "config.json" if Path(agent).suffix == ".pt" else None
+    if task is None and config is not None and config.is_file():  # the run's own reward
+        from train.config import load_config
+
+        cfg = load_config(None, config)
+        return f"{cfg.reward_weights().task} task", TaskReward(cfg.reward_weights())
+    if task is None and ":" in scenario and not Path(scenario).exists():
+        from smarts.benchmark.suites import load_suite
+
+        task = SUITE_TASK.get(load_suite(scenario.split(":", 1)[0]).task)
+    if task is None:
+        return "the scenario's default", None
+    from train.config import load_config
+
+    weights = load_config(task).reward_weights()
+    return f"{weights.task} task", TaskReward(weights)
+
+
+def policy_env(agent: str, scenario: str, seed: int = 0, task: str | None = None):
+    """(policy, env, spec, reward name): the policy ``agent`` names, loaded as the benchmark
+    loads it, and an env of ``scenario`` whose learning agents act in the policy's action space
+    and whose rewards are :func:`task_reward`'s."""
+    from smarts.benchmark.runner import agent_locator, load_policy, policy_setup, scenario_for
     from smarts.env import DrivingParallelEnv
 
+    agent = agent_locator(agent)
     policy = load_policy(agent, seed)
     setup = policy_setup(policy, agent)
     spec = scenario_for(scenario_spec(scenario), setup)
-    env = DrivingParallelEnv(spec, observation=setup.interface, lane_relative=setup.lane_relative,
+    name, reward = task_reward(agent, scenario, task)
+    env = DrivingParallelEnv(spec, observation=setup.interface, lane_relative=setup.lane_relative, reward=reward,
                              render_mode="rgb_array")  # fmt: skip
-    return policy, env, spec
+    return policy, env, spec, name
 
 
 def act(policy, env, obs: dict) -> dict:
@@ -115,23 +162,95 @@ def act(policy, env, obs: dict) -> dict:
     return dict(zip(env.agents, np.asarray(policy.act(batch))))
 
 
-def episode_frames(agent: str, scenario: str, seed: int = 0, max_steps: int | None = None) -> list[np.ndarray]:
-    """The top-down frames of one episode of ``agent`` on ``scenario`` (for an evaluation video:
-    ``write_tensorboard_video(writer, tag, episode_frames(checkpoint, "adaptive:a01_straight_free"), step)``)."""
-    policy, env, _ = policy_env(agent, scenario, seed)
+class EpisodeFilm:
+    """Follow-camera frames of one episode with its HUD (``smarts.viz.video``), and the task
+    return and end of each agent, fed step by step."""
+
+    def __init__(self, env, spec, reward_name: str, follow: str | None = None, draw: bool = True):
+        from smarts.viz.video import FollowCamera
+
+        self.env, self.reward_name = env, reward_name
+        self.scenario = str(spec.name)
+        self.follow = follow or env.possible_agents[0]
+        if self.follow not in env.possible_agents:
+            raise ValueError(f"--follow {self.follow}: not a learning agent of {self.scenario} "
+                             f"({', '.join(env.possible_agents)})")  # fmt: skip
+        self.camera = FollowCamera(env.sim, scenario=self.scenario) if draw else None
+        self.returns = dict.fromkeys(env.possible_agents, 0.0)
+        self.ended: dict[str, str] = {}
+        self.steps = 0
+        self._last: tuple[float | None, list[str]] = (None, [])
+
+    def frame(self) -> np.ndarray:
+        from smarts.viz.video import hud_lines
+
+        reward, events = self._last
+        hud = hud_lines(self.env.sim, self.follow, scenario=self.scenario, step=self.steps, reward=reward,
+                        total=self.returns[self.follow], reward_name=self.reward_name, events=events,
+                        ended=self.ended.get(self.follow))  # fmt: skip
+        return self.camera.frame(self.follow, hud)
+
+    def after_step(self, rewards: dict, terminations: dict, truncations: dict, infos: dict) -> None:
+        self.steps += 1
+        for agent, value in rewards.items():
+            self.returns[agent] += float(value)
+        for agent in rewards:
+            if terminations.get(agent) or truncations.get(agent):
+                events = list(infos.get(agent, {}).get("events", []))
+                self.ended[agent] = ", ".join(events) or ("time limit" if truncations.get(agent) else "done")
+        me = self.follow
+        self._last = (float(rewards[me]) if me in rewards else None, list(infos.get(me, {}).get("events", [])))
+
+    def summary(self) -> str:
+        """``agent_0 +12.34 (ended: off_road); agent_1 ...`` for every agent."""
+        parts = []
+        for agent, total in self.returns.items():
+            end = self.ended.get(agent, "still driving at the end")
+            parts.append(f"{agent} {total:+.2f} ({'ended: ' + end if agent in self.ended else end})")
+        return "; ".join(parts)
+
+
+def episode_frames(agent: str, scenario: str, seed: int = 0, max_steps: int | None = None,
+                   follow: str | None = None) -> list[np.ndarray]:  # fmt: skip
+    """The follow-camera frames (with HUD and legend) of one episode of ``agent`` on
+    ``scenario``, the last after the final step (for an evaluation video:
+    ``write_tensorboard_video(writer, tag, episode_frames(checkpoint, "adaptive:a04_...", ...), step)``)."""
+    policy, env, spec, reward_name = policy_env(agent, scenario, seed)
     frames = []
     try:
         obs, _ = env.reset(seed=seed)
-        while env.agents and (max_steps is None or len(frames) < max_steps):
-            frames.append(env.render())
-            obs, *_ = env.step(act(policy, env, obs))
+        film = EpisodeFilm(env, spec, reward_name, follow)
+        while env.agents and (max_steps is None or film.steps < max_steps):
+            frames.append(film.frame())
+            obs, rewards, terminations, truncations, infos = env.step(act(policy, env, obs))
+            film.after_step(rewards, terminations, truncations, infos)
+        if max_steps is None or film.steps < max_steps:
+            frames.append(film.frame())  # how it ended
     finally:
         env.close()
     return frames
 
 
+def video_scenario(suite, chosen: str | None = None) -> str:
+    """The scenario of ``suite`` an evaluation video shows: ``chosen`` when given (refused with the
+    suite's names if it has none of that name), else the first whose map has a junction, a merge or
+    an exit (internal junction lanes: where an agent turns, merges or changes lanes for an exit,
+    which says more about a policy than an empty straight road), else the first."""
+    names = [s.name for s in suite.scenarios]
+    if chosen is not None:
+        if chosen not in names:
+            raise ValueError(f"eval video scenario {chosen!r}: suite {suite.name!r} has {', '.join(names)}")
+        return chosen
+    from smarts.env.assembly import scenario_map
+
+    for entry in suite.scenarios:
+        if scenario_map(entry.spec).lane_internal.any():
+            return entry.name
+    return names[0]
+
+
 def enjoy(args: argparse.Namespace) -> int:
-    policy, env, spec = policy_env(args.agent, args.scenario, args.seed)
+    policy, env, spec, reward_name = policy_env(args.agent, args.scenario, args.seed, args.task)
     server = None
     if args.viz or args.record:
         from smarts.viz.watch import WatchedEnv
@@ -153,30 +272,51 @@ def enjoy(args: argparse.Namespace) -> int:
         from torch.utils.tensorboard import SummaryWriter
 
         writer = SummaryWriter(log_dir=str(args.tensorboard))
+    drawing = bool(video or writer)
+    # A suite scenario is also scored as the benchmark scores it (its recorder and metrics), which
+    # also tells a vehicle that left the map at its route's end from one that left the road.
+    suite, entry = suite_entry(args.scenario)
+    recorder: dict = {}
+    if entry is not None:
+        env.add_step_listener(lambda sim: recorder["now"].record() if "now" in recorder else None)
     try:
         if args.viz and args.wait > 0:
             _wait_for_viewer(env, args.wait)
         for episode in range(args.episodes):
             obs, _ = env.reset(seed=args.seed + episode)
-            steps = 0
-            total = 0.0
-            while env.agents and (args.max_steps is None or steps < args.max_steps):
-                frame = env.render() if (video or writer) else None
+            if entry is not None:
+                from smarts.benchmark.recorder import EpisodeRecorder
+
+                recorder["now"] = EpisodeRecorder(env.sim, env.possible_agents, scenario=entry.name, task=suite.task,
+                                                  episode=episode, seed=args.seed + episode,
+                                                  time_limit=entry.time_limit, follow=entry.follow)  # fmt: skip
+            film = EpisodeFilm(env, spec, reward_name, args.follow, draw=drawing)
+            while env.agents and (args.max_steps is None or film.steps < args.max_steps):
+                frame = film.frame() if drawing else None
                 if video:
                     video.add(frame)
                 if writer:
                     tb_frames.append(frame)
-                obs, rewards, *_ = env.step(act(policy, env, obs))
-                total += sum(rewards.values())
-                steps += 1
+                obs, rewards, terminations, truncations, infos = env.step(act(policy, env, obs))
+                film.after_step(rewards, terminations, truncations, infos)
                 if args.viz and args.realtime:
                     import time
 
                     time.sleep(spec.step_length)
+            scores = _benchmark_view(recorder.pop("now").finish(), film) if entry is not None else None
+            if drawing and not env.agents:  # the last picture: how the episode ended
+                frame = film.frame()
+                if video:
+                    video.add(frame)
+                if writer:
+                    tb_frames.append(frame)
             if writer:
                 write_tensorboard_video(writer, f"enjoy/{spec.name}", tb_frames, episode, args.fps)
                 tb_frames = []
-            print(f"episode {episode}: seed {args.seed + episode}, {steps} steps, return {total:.2f}")
+            print(f"episode {episode}: seed {args.seed + episode}, {film.steps} steps; return in {reward_name} reward: "
+                  f"{film.summary()}")  # fmt: skip
+            if scores is not None:
+                print(f"  benchmark metrics of this episode: {scores}")
     finally:
         if video:
             video.close()
@@ -190,6 +330,22 @@ def enjoy(args: argparse.Namespace) -> int:
     for path in getattr(env, "recordings", []):
         print(f"recording: {path}")
     return 0
+
+
+def _benchmark_view(log, film: EpisodeFilm) -> str:
+    """The episode's benchmark metrics as one line; an agent that left the map at its route's end
+    (the end-of-map rule, ``smarts.benchmark.metrics.scores``) is said to have, whatever the
+    env's events called it."""
+    from smarts.benchmark.metrics import metric_names, score_episode
+
+    for agent, trace in log.agents.items():
+        if trace.num_steps and trace.flag("left_map").any():
+            said = film.ended.get(agent)
+            film.ended[agent] = "left the map at its route's end" + (f" (the env's events: {said})" if said else "")
+    if not log.agents:
+        return "none (no agent drove)"
+    scores = score_episode(log)
+    return ", ".join(f"{m} {scores[m]:.3f}" for m in metric_names(log.task))
 
 
 def _wait_for_viewer(env, seconds: float) -> None:
@@ -206,7 +362,7 @@ def add_parser(sub) -> None:
     """Register ``enjoy`` on the ``python -m train`` command line."""
     p = sub.add_parser("enjoy", help="watch a policy drive a scenario (browser, video or TensorBoard)",
                        description=__doc__.split("\n\n")[0])  # fmt: skip
-    p.add_argument("--agent", required=True, help="zoo:<name> or a checkpoint .pt")
+    p.add_argument("--agent", required=True, help="zoo:<name>, a checkpoint .pt or a training run folder (its best.pt)")
     p.add_argument("--scenario", required=True, help="suite:scenario (adaptive:a01_straight_free), a library name or a YAML file")
     p.add_argument("--episodes", type=int, default=1, help="episodes to run (default 1)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
@@ -220,6 +376,10 @@ def add_parser(sub) -> None:
     p.add_argument("--realtime", action=argparse.BooleanOptionalAction, default=True,
                    help="with --viz: run at the scenario's own step rate (default on)")  # fmt: skip
     p.add_argument("--record", type=Path, default=None, help="also write viewer recordings of the episodes to this folder")
+    p.add_argument("--task", choices=["platoon", "drive", "scenario"], default=None,
+                   help="the reward told: a training task's, or the scenario's default (default: the run's own from "
+                        "the config.json beside a checkpoint, else the suite's task)")  # fmt: skip
+    p.add_argument("--follow", default=None, metavar="AGENT", help="the agent the video camera follows (default: the first)")
     p.set_defaults(run=_run)
 
 

@@ -30,6 +30,7 @@ import dataclasses
 import json
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -49,8 +50,11 @@ SCALAR_TAGS = (
     "loss/critic",  # weighted by critic_coeff
     "loss/entropy",  # -entropy_coeff * entropy
     "policy/entropy",
-    "policy/kl_approx",
+    "policy/kl_approx",  # E[(r - 1) - log r] over the update's minibatches: never negative
+    "policy/clip_fraction",  # share of the samples whose probability ratio the clip cut
     "policy/action_std",  # relative to half the action range
+    "train/explained_variance",  # of the value targets by the critic (1: perfect, 0: no better than their mean)
+    "train/grad_norm",  # gradient norm before clipping to max_grad_norm, mean over the update
     "train/lr",
     "perf/env_steps_per_s",  # agent steps per second since the start, evaluations included
     "perf/update_s",  # seconds of the batch's PPO update
@@ -70,6 +74,89 @@ TensorBoard events and the held-out evaluations' logs, plots and videos."""
 
 Save = Callable[[Path], Path]
 """A trainer's ``save(path) -> path``: its checkpoint of the current step and metrics."""
+
+
+# ------------------------------------------------------------------ batches and progress
+@dataclass(frozen=True)
+class BatchPlan:
+    """How a run's steps fall into batches, the same for both libraries: every batch but the last
+    takes ``first_steps`` steps of every one of ``slots`` slots (``frames_per_batch`` rounded up to
+    whole steps of every slot), the last only what ``total_steps`` still needs, so a run ends less
+    than one step of every slot past ``total_steps`` (``whole``: the last is a full batch too,
+    for collectors whose batch size is fixed)."""
+
+    batches: int
+    first_steps: int
+    last_steps: int
+    slots: int
+
+    @classmethod
+    def of(cls, remaining: int, frames_per_batch: int, slots: int, whole: bool = False) -> "BatchPlan":
+        per = max(1, -(-frames_per_batch // slots))
+        rows = max(1, -(-remaining // slots))  # steps of every slot still to take
+        batches = -(-rows // per)
+        return cls(batches, per, per if whole else rows - (batches - 1) * per, slots)
+
+    def steps_per_batch(self):
+        """Steps of every slot in each batch, in order."""
+        for b in range(self.batches):
+            yield self.last_steps if b == self.batches - 1 else self.first_steps
+
+    @property
+    def frames(self) -> int:
+        return ((self.batches - 1) * self.first_steps + self.last_steps) * self.slots
+
+
+def _clock(seconds: float) -> str:
+    seconds = int(max(seconds, 0))
+    return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
+
+
+class Progress:
+    """A run's progress: rich's bar when stdout is a terminal, else one plain line per batch (a
+    cluster job's log reads them as they come); nothing when ``enabled`` is false (``--quiet``)."""
+
+    def __init__(self, title: str, total: int, step: int = 0, enabled: bool = True):
+        import sys
+
+        self.title, self.total, self.first = title, total, step
+        self.start = time.perf_counter()
+        self.enabled = enabled
+        self.bar = None
+        if enabled and sys.stdout.isatty():
+            from rich.progress import Progress as Bar
+
+            self.bar = Bar()
+            self.bar.start()
+            self.task = self.bar.add_task(title, total=total, completed=step)
+
+    def line(self, step: int, metrics: dict) -> str:
+        """The plain line of a batch: steps, share, rate, return, the last held-out score, time."""
+        elapsed = time.perf_counter() - self.start
+        rate = (step - self.first) / max(elapsed, 1e-9)
+        eta = (self.total - step) / rate if rate > 0 else float("nan")
+        parts = [f"{self.title}: {step:,}/{self.total:,} steps ({100.0 * min(step / self.total, 1.0):.0f}%)",
+                 f"{rate:,.0f} env-steps/s"]  # fmt: skip
+        if math.isfinite(metrics.get("episode/return", float("nan"))):
+            parts.append(f"return {metrics['episode/return']:.1f}")
+        if "eval/S_bench" in metrics:
+            parts.append(f"held-out S_bench {metrics['eval/S_bench']:.3f}")
+        parts.append(f"elapsed {_clock(elapsed)}" + (f", left {_clock(eta)}" if math.isfinite(eta) else ""))
+        return " | ".join(parts)
+
+    def update(self, step: int, metrics: dict) -> None:
+        if not self.enabled:
+            return
+        if self.bar is not None:
+            ret = metrics.get("episode/return", float("nan"))
+            self.bar.update(self.task, completed=min(step, self.total), description=f"{self.title} return {ret:.1f}")
+        else:
+            print(self.line(step, metrics), flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+            self.bar = None
 
 
 # ------------------------------------------------------------------ what a run trains on
@@ -227,8 +314,13 @@ class Run:
         out.mkdir(parents=True, exist_ok=True)
         if out.name.isdigit() and out.parent.resolve() == Path(cfg.runs_dir).resolve():
             point_latest(out.parent, out)  # a numbered run: runs_dir/latest -> this one
-        atomic_write_text(out / "config.json", json.dumps(cfg.model_dump(), indent=2))
+        config = json.dumps(cfg.model_dump(), indent=2)
+        atomic_write_text(out / "config.json", config)
         self.writer = SummaryWriter(log_dir=str(out / "tensorboard"))
+        if not continuing:  # the settings beside the curves (TensorBoard's Text tab), as config.json holds them
+            self.writer.add_text("config", "```\n" + config + "\n```", 0)
+        # Where to look, before the first batch (a job's log shows it at once).
+        print(f"run folder: {out}\nTensorBoard: tensorboard --logdir {out / 'tensorboard'}", flush=True)
         self.best_score = -np.inf
         if continuing and (out / "best.pt").is_file():  # a resumed run keeps its selection
             recorded = read_checkpoint(out / "best.pt").get("metrics", {})
@@ -324,10 +416,13 @@ def _evaluate(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int, 
     for figure in sorted((out / "plots").glob("trajectories_*.png"))[:3]:
         image = np.asarray(Image.open(figure).convert("RGB"))
         writer.add_image(f"eval_trajectories/{figure.stem[len('trajectories_'):]}", image, step, dataformats="HWC")
-    # A video of the first scenario (its first held-out seed), played by TensorBoard's Images tab.
-    from train.enjoy import episode_frames, write_tensorboard_video
+    # A follow-camera video (HUD, legend) of an informative scenario (a junction, a merge or an exit;
+    # or the config's eval_video_scenario once it has one) at its first held-out seed, played by
+    # TensorBoard's Images tab.
+    from train.enjoy import episode_frames, video_scenario, write_tensorboard_video
 
-    entry = suite.scenarios[0]
+    name = video_scenario(suite, getattr(cfg, "eval_video_scenario", None))
+    entry = next(e for e in suite.scenarios if e.name == name)
     steps = int(round(entry.time_limit / entry.spec.step_length))
     frames = episode_frames(str(frozen), f"{cfg.eval_suite or TASK_SUITE[cfg.task]}:{entry.name}", seed=cfg.eval_seed,
                             max_steps=steps)  # fmt: skip

@@ -90,6 +90,9 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, default=None, help="videos: seconds shown (default: to the end)")
     p.add_argument("--fps", type=float, default=10.0, help=f"videos: frames per second (at most {MAX_FPS:g})")
     p.add_argument("--width", type=int, default=800, help=f"image width in pixels (16 to {MAX_WIDTH})")
+    p.add_argument("--follow", default=None, metavar="ID",
+                   help="a road user to follow with a fixed-scale camera (6 px/m): its recorded id or ego; none: the "
+                        "whole recording (default: videos of a recording with an ego follow it, the rest show all)")  # fmt: skip
     p.set_defaults(run=_show)
     p = sub.add_parser(
         "suite", help="turn a folder of recordings into a benchmark suite of take-over scenarios",
@@ -228,8 +231,9 @@ def _show(args: argparse.Namespace) -> int:
             from smarts.maps import load_map
 
             road_map = load_map(args.map)
+        follow = "auto" if args.follow is None else None if args.follow == "none" else args.follow
         n = render(rec, args.out, road_map=road_map, time=options.time, fps=options.fps, width=options.width,
-                   start=options.start, duration=options.duration, max_frames=MAX_VIDEO_FRAMES)  # fmt: skip
+                   start=options.start, duration=options.duration, max_frames=MAX_VIDEO_FRAMES, follow=follow)  # fmt: skip
     except (ReplayError, MapError) as err:
         return _fail(err)
     print(f"wrote {args.out} ({n} frame{'s' if n != 1 else ''})")

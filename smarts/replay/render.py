@@ -2,7 +2,16 @@
 stop signs and the recorded signal states), recorded vehicles as boxes, cyclists and pedestrians in
 their own colours; one frame or many.
 
-Used by ``smarts replay show`` to check a dataset lines up with its map before driving in it.
+Used by ``smarts replay show`` to check a dataset lines up with its map before driving in it. A
+picture of the whole recording fits its extent into the width asked for; a video can instead follow
+one road user (the recording's ego by default) with a fixed-scale camera (:class:`FollowCanvas`):
+at the size of a whole NGSIM site a car is a few pixels, at the camera's 6 px/m it is 27 by 11.
+Every picture has a HUD band on top (time, frame, counts, the followed road user's speed), a
+colour legend band below and a scale bar.
+
+The drawing pieces (:class:`Scene` from a compiled map, :class:`FollowCanvas`, :func:`draw_hud`,
+:func:`draw_legend`, :func:`draw_scale_bar`) are also what the simulator's follow-camera videos
+(``smarts.viz.video``) draw with.
 """
 
 from __future__ import annotations
@@ -10,7 +19,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, ImageDraw
+from PIL import Image, ImageDraw, ImageFont
 
 from smarts.core.errors import ReplayError
 from smarts.core.geometry import box_corners
@@ -41,7 +50,14 @@ LINE_STYLES = {"edge": (EDGE, False), "solid_white": (WHITE, False), "dashed_whi
 SIGNAL_INSET = 3.0
 """m into its lane from the stop point at which a signal is drawn."""
 LABEL_BAND = 16
-"""Pixels above the road for the time and counts."""
+"""Pixels above the road for the time and counts (one HUD line)."""
+LINE_HEIGHT = 16
+"""Pixels per HUD or legend line."""
+FOLLOW_SCALE = 6.0
+"""Pixels per metre of the follow camera: a 4.5 m car is 27 pixels long."""
+FOLLOW_SIZE = (640, 400)
+"""Pixels of a follow-camera view (the road part; the HUD and legend bands come on top)."""
+HUD_FILL = (16, 18, 22)
 MAX_PIXELS = 16_000_000
 """Pixels of one picture at most (a tall recording is fitted into this, not drawn larger)."""
 
@@ -66,6 +82,79 @@ class Canvas:
         xy = np.asarray(xy, dtype=np.float64)
         return np.stack([(xy[..., 0] - self.x0) * self.scale, (self.y1 - xy[..., 1]) * self.scale + self.top], axis=-1)
 
+    def view_box(self) -> tuple[float, float, float, float]:
+        """xmin, ymin, xmax, ymax in metres of what the picture shows."""
+        w, h = self.size
+        return (self.x0, self.y1 - (h - self.top) / self.scale, self.x0 + w / self.scale, self.y1)
+
+
+class FollowCanvas(Canvas):
+    """A fixed-scale window of ``view`` pixels (the road part) that :meth:`centre_on` moves over
+    the map; ``top`` pixels above it for the HUD and ``bottom`` below for the legend."""
+
+    def __init__(self, view: tuple[int, int] = FOLLOW_SIZE, scale: float = FOLLOW_SCALE, top: int = 2 * LINE_HEIGHT + 4,
+                 bottom: int = LINE_HEIGHT + 8):  # fmt: skip
+        self.scale = float(scale)
+        self.top = int(top)
+        self.view = (int(view[0]), int(view[1]))
+        self.bottom = int(bottom)
+        self.size = (self.view[0], self.top + self.view[1] + self.bottom)
+        self.centre_on(0.0, 0.0)
+
+    def centre_on(self, x: float, y: float) -> None:
+        self.x0 = float(x) - 0.5 * self.view[0] / self.scale
+        self.y1 = float(y) + 0.5 * self.view[1] / self.scale
+
+    def view_box(self) -> tuple[float, float, float, float]:
+        return (self.x0, self.y1 - self.view[1] / self.scale, self.x0 + self.view[0] / self.scale, self.y1)
+
+
+def font(size: int = 13) -> ImageFont.ImageFont:
+    """The HUD's font: Pillow's own scalable one (no system fonts needed)."""
+    try:
+        return ImageFont.load_default(size=size)
+    except (TypeError, OSError):  # a Pillow without FreeType: its bitmap font
+        return ImageFont.load_default()
+
+
+def draw_hud(draw: ImageDraw.ImageDraw, width: int, lines: list[str], top: int = 0) -> None:
+    """Text lines on a dark band across the top ``len(lines) * LINE_HEIGHT + 4`` pixels."""
+    draw.rectangle([0, top, width, top + len(lines) * LINE_HEIGHT + 3], fill=HUD_FILL)
+    f = font()
+    for k, line in enumerate(lines):
+        draw.text((6, top + 2 + k * LINE_HEIGHT), line, fill=TEXT, font=f)
+
+
+def draw_legend(draw: ImageDraw.ImageDraw, width: int, y: int, items: list[tuple[str, tuple]]) -> None:
+    """A row of colour swatches with their names on a dark band from pixel row ``y`` down."""
+    draw.rectangle([0, y, width, y + LINE_HEIGHT + 8], fill=HUD_FILL)
+    f = font(12)
+    x = 6
+    for name, colour in items:
+        draw.rectangle([x, y + 6, x + 11, y + 17], fill=colour, outline=(0, 0, 0))
+        draw.text((x + 15, y + 4), name, fill=TEXT, font=f)
+        x += 15 + int(draw.textlength(name, font=f)) + 12
+        if x > width - 40:
+            break
+
+
+def draw_scale_bar(draw: ImageDraw.ImageDraw, canvas: Canvas, bottom: int) -> None:
+    """A bar of a round number of metres (about a sixth of the width) at the lower right."""
+    w = canvas.size[0]
+    metres = 1.0
+    for step in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000):
+        if step * canvas.scale <= w / 6:
+            metres = float(step)
+    length = metres * canvas.scale
+    x1, y = w - 10, bottom - 10
+    draw.rectangle([x1 - length - 8, y - 21, x1 + 6, y + 7], fill=HUD_FILL)  # readable over any road
+    draw.line([(x1 - length, y), (x1, y)], fill=WHITE, width=3)
+    draw.line([(x1 - length, y - 4), (x1 - length, y + 4)], fill=WHITE, width=2)
+    draw.line([(x1, y - 4), (x1, y + 4)], fill=WHITE, width=2)
+    label = f"{metres:g} m"
+    f = font(12)
+    draw.text((x1 - length / 2 - draw.textlength(label, font=f) / 2, y - 18), label, fill=WHITE, font=f)
+
 
 def lane_lines(road_map) -> list[np.ndarray]:
     """Centre polylines of a compiled ``RoadMap``."""
@@ -83,7 +172,8 @@ def _side(line: np.ndarray, offset: float) -> np.ndarray:
 class Scene:
     """What is drawn under the road users: built once per picture or video."""
 
-    def __init__(self, rec: Recording, road_map=None):
+    def __init__(self, rec: Recording | None, road_map=None):
+        """From ``road_map`` (a compiled map) when given, else from the recording's own map."""
         self.surfaces: list[np.ndarray] = []
         self.lines: list[tuple[np.ndarray, tuple, bool]] = []
         self.centres: list[np.ndarray] = []
@@ -101,10 +191,11 @@ class Scene:
             half = 0.5 * float(rm.lane_width[lane])
             self.surfaces.append(np.concatenate([_side(line, half), _side(line, -half)[::-1]]))
             self.centres.append(line)
+            if rm.lane_internal[lane]:  # junction lanes cross each other: their surface only
+                continue
             outer_left = rm.lane_left[lane] < 0
-            divider = not outer_left and not rm.lane_internal[lane]
-            self.lines.append((_side(line, half), EDGE if outer_left else WHITE, divider))
-            if rm.lane_right[lane] < 0 and not rm.lane_internal[lane]:
+            self.lines.append((_side(line, half), EDGE if outer_left else WHITE, not outer_left))
+            if rm.lane_right[lane] < 0:
                 self.lines.append((_side(line, -half), EDGE, False))
         self.surfaces += [np.asarray(s) for s in rm.junction_shapes if len(s) >= 3]
         off = rm.mark_offsets
@@ -148,14 +239,27 @@ class Scene:
         xy = np.concatenate(shapes)
         return (float(xy[:, 0].min()), float(xy[:, 1].min()), float(xy[:, 0].max()), float(xy[:, 1].max()))
 
+    def _visible(self, group: str, shapes: list, canvas: Canvas) -> list[bool]:
+        """Which of ``shapes`` (arrays or tuples starting with one) reach into the canvas's view
+        (their boxes are computed once: a follow camera draws a small part of a large map)."""
+        boxes = self.__dict__.setdefault("_boxes", {})
+        if group not in boxes or len(boxes[group]) != len(shapes):
+            pts = [np.asarray(s[0] if isinstance(s, tuple) else s, dtype=np.float64).reshape(-1, 2) for s in shapes]
+            boxes[group] = np.array([[p[:, 0].min(), p[:, 1].min(), p[:, 0].max(), p[:, 1].max()] if len(p) else
+                                     [np.inf, np.inf, -np.inf, -np.inf] for p in pts]).reshape(-1, 4)  # fmt: skip
+        b = boxes[group]
+        x0, y0, x1, y1 = canvas.view_box()
+        pad = 2.0
+        return ((b[:, 2] >= x0 - pad) & (b[:, 0] <= x1 + pad) & (b[:, 3] >= y0 - pad) & (b[:, 1] <= y1 + pad)).tolist()
+
     def draw(self, draw: ImageDraw.ImageDraw, canvas: Canvas) -> None:
         px = max(canvas.scale, 1e-9)
-        for poly in self.surfaces:
-            if len(poly) >= 3:
+        for poly, seen in zip(self.surfaces, self._visible("surfaces", self.surfaces, canvas)):
+            if len(poly) >= 3 and seen:
                 draw.polygon([tuple(p) for p in canvas.pixels(poly)], fill=SURFACE)
         fills = {CROSSWALK: CROSSWALK_FILL, BIKE_LANE: BIKE_FILL}
-        for poly, kind in self.marks:
-            if len(poly) < 3:
+        for (poly, kind), seen in zip(self.marks, self._visible("marks", self.marks, canvas)):
+            if len(poly) < 3 or not seen:
                 continue
             points = [tuple(p) for p in canvas.pixels(poly)]
             if kind == SPEED_BUMP:
@@ -164,12 +268,12 @@ class Scene:
                 draw.polygon(points, fill=fills.get(kind, CROSSWALK_FILL))
             if kind == CROSSWALK:  # zebra stripes across its long side
                 self._stripes(draw, canvas, np.asarray(poly))
-        for line in self.centres:
-            if len(line) >= 2:
+        for line, seen in zip(self.centres, self._visible("centres", self.centres, canvas)):
+            if len(line) >= 2 and seen:
                 draw.line([tuple(p) for p in canvas.pixels(line)], fill=LANE, width=1)
         width = max(int(round(0.15 * px)), 1)
-        for line, colour, dashed in self.lines:
-            if len(line) < 2:
+        for (line, colour, dashed), seen in zip(self.lines, self._visible("lines", self.lines, canvas)):
+            if len(line) < 2 or not seen:
                 continue
             pixels = canvas.pixels(line)
             if dashed:
@@ -235,10 +339,19 @@ def _dashes(pixels: np.ndarray, on: float, off: float) -> list[np.ndarray]:
     return out
 
 
+LEGEND = [("vehicle", VEHICLE), ("ego / followed", EGO), ("cyclist", CYCLIST), ("pedestrian", PEDESTRIAN),
+          ("signal red", SIGNAL_COLOURS[1]), ("yellow", SIGNAL_COLOURS[2]), ("green", SIGNAL_COLOURS[3])]  # fmt: skip
+
+
 def render_frame(
-    rec: Recording, frame: float, canvas: Canvas, scene: Scene | list, label: str = ""
+    rec: Recording, frame: float, canvas: Canvas, scene: Scene | list, label: str = "", follow: str | None = None
 ) -> Image.Image:
-    """One picture of the recording at (fractional) frame ``frame``."""
+    """One picture of the recording at (fractional) frame ``frame``. ``follow``: the road user the
+    canvas (a :class:`FollowCanvas`) is centred on and the HUD reports."""
+    present, st = rec.state_at(frame)
+    followed = rec.index_of.get(follow) if follow is not None else None
+    if isinstance(canvas, FollowCanvas) and followed is not None and present[followed]:
+        canvas.centre_on(st[0, followed], st[1, followed])
     image = Image.new("RGB", canvas.size, BACKGROUND)
     draw = ImageDraw.Draw(image)
     if isinstance(scene, Scene):
@@ -248,27 +361,37 @@ def render_frame(
         for line in scene:
             if len(line) >= 2:
                 draw.line([tuple(p) for p in canvas.pixels(line)], fill=LANE, width=1)
-    present, st = rec.state_at(frame)
     idx = np.flatnonzero(present)
     walkers = idx[rec.kind[idx] == ObjectKind.PEDESTRIAN]
     boxes = idx[rec.kind[idx] != ObjectKind.PEDESTRIAN]
+    highlight = followed if followed is not None else (rec.index_of.get(rec.ego) if rec.ego is not None else None)
     if boxes.size:
         corners = canvas.pixels(box_corners(st[0, boxes], st[1, boxes], st[2, boxes], rec.length[boxes], rec.width[boxes]))
         for k, poly in zip(boxes.tolist(), corners):
             colour = CYCLIST if rec.kind[k] == ObjectKind.CYCLIST else VEHICLE
-            if rec.ego is not None and rec.ids[k] == rec.ego:
+            if k == highlight:
                 colour = EGO
-            draw.polygon([tuple(p) for p in poly], fill=colour)
+            draw.polygon([tuple(p) for p in poly], fill=colour, outline=WHITE if k == highlight else None)
     if walkers.size:
         centres = canvas.pixels(np.stack([st[0, walkers], st[1, walkers]], axis=1))
         r = np.maximum(0.5 * np.maximum(rec.length[walkers], rec.width[walkers]) * canvas.scale, 2.5)
         for (x, y), radius in zip(centres, r):
             draw.ellipse([x - radius, y - radius, x + radius, y + radius], fill=PEDESTRIAN)
+    bottom = canvas.size[1] - getattr(canvas, "bottom", 0)
+    draw_scale_bar(draw, canvas, bottom)
+    lines = []
     if label:
         counts = np.bincount(rec.kind[idx].astype(np.int64), minlength=len(ObjectKind))
-        text = (f"{label}  vehicles {int(counts[:4].sum())}  cyclists {int(counts[ObjectKind.CYCLIST])}  "
-                f"pedestrians {int(counts[ObjectKind.PEDESTRIAN])}")  # fmt: skip
-        draw.text((4, 4), text, fill=TEXT)
+        lines.append(f"{label}  frame {frame:.0f}  vehicles {int(counts[:4].sum())}  cyclists "
+                     f"{int(counts[ObjectKind.CYCLIST])}  pedestrians {int(counts[ObjectKind.PEDESTRIAN])}")  # fmt: skip
+    if followed is not None and isinstance(canvas, FollowCanvas):
+        name = f"{follow} (ego)" if follow == rec.ego else str(follow)
+        lines.append(f"following {name}: " + (f"{st[3, followed]:.1f} m/s ({3.6 * st[3, followed]:.0f} km/h)"
+                                               if present[followed] else "not recorded at this time"))  # fmt: skip
+    if lines:
+        draw_hud(draw, canvas.size[0], lines[: max(1, canvas.top // LINE_HEIGHT)])
+    if getattr(canvas, "bottom", 0):
+        draw_legend(draw, canvas.size[0], bottom, LEGEND)
     return image
 
 
@@ -283,9 +406,14 @@ def render(
     start: float = 0.0,
     duration: float | None = None,
     max_frames: int = 20_000,
+    follow: str | None = "auto",
 ) -> int:
     """Write ``out``: a .png of the frame at ``time`` (s after the first frame; None: the middle),
-    or a .gif/.mp4 of the window from ``start`` for ``duration`` seconds. Returns frames written."""
+    or a .gif/.mp4 of the window from ``start`` for ``duration`` seconds. Returns frames written.
+
+    ``follow``: a road user's id to follow with a fixed-scale camera, ``"ego"`` for the
+    recording's ego, ``"auto"`` for the ego in a video of a recording that has one (a picture, or
+    a recording without an ego, shows everything), None for the whole recording."""
     out = Path(out)
     suffix = out.suffix.lower()
     if suffix not in (".png", ".gif", ".mp4"):
@@ -297,13 +425,26 @@ def render(
     under = tuple(road_map.bounds) if road_map is not None else scene.extent()
     if under is not None:
         extent = (min(extent[0], under[0]), min(extent[1], under[1]), max(extent[2], under[2]), max(extent[3], under[3]))
-    canvas = Canvas(extent, width, top=LABEL_BAND)
+    if follow == "auto":
+        follow = rec.ego if suffix != ".png" else None
+    elif follow == "ego":
+        if rec.ego is None:
+            raise ReplayError("--follow ego: this recording has no ego; give a road user's id")
+        follow = rec.ego
+    if follow is not None and follow not in rec.index_of:
+        raise ReplayError(f"--follow {follow}: no road user of that id in the recording (ego: {rec.ego or 'none'})")
+    if follow is not None:
+        canvas = FollowCanvas((width, int(width * 5 / 8) // 2 * 2))
+    else:
+        canvas = Canvas(extent, width, top=LABEL_BAND)
+        canvas.bottom = LINE_HEIGHT + 8
+        canvas.size = (canvas.size[0], canvas.size[1] + canvas.bottom)
     if suffix == ".png":
         t = rec.duration / 2 if time is None else time
         if not 0.0 <= t <= rec.duration + 1e-9:
             raise ReplayError(f"--time: the recording lasts {rec.duration:g} s, got {t:g}")
         out.parent.mkdir(parents=True, exist_ok=True)
-        render_frame(rec, rec.frame_of(t), canvas, scene, f"t = {t:.1f} s").save(out)
+        render_frame(rec, rec.frame_of(t), canvas, scene, f"t = {t:.1f} s", follow).save(out)
         return 1
     if not 0.0 <= start <= rec.duration + 1e-9:
         raise ReplayError(f"--start: the recording lasts {rec.duration:g} s, got {start:g}")
@@ -314,7 +455,7 @@ def render(
                           f"{max_frames} are written")  # fmt: skip
     times = start + np.arange(count) / fps
     out.parent.mkdir(parents=True, exist_ok=True)
-    frames = (render_frame(rec, rec.frame_of(t), canvas, scene, f"t = {t:.1f} s") for t in times)
+    frames = (render_frame(rec, rec.frame_of(t), canvas, scene, f"t = {t:.1f} s", follow) for t in times)
     if suffix == ".gif":
         first = next(frames)
         first.save(out, save_all=True, append_images=list(frames), duration=max(int(1000 / fps), 1), loop=0)

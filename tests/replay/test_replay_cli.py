@@ -127,3 +127,28 @@ def test_show_draws_argoverse2_crossings_and_ngsim_map_edges(tmp_path):
     image = np.asarray(Image.open(out).convert("RGB")).astype(int)
     rows = np.flatnonzero(_colour(image, EDGE).sum(axis=1) > 300)  # the road's two outer edges, end to end
     assert len(rows) >= 2 and rows.max() - rows.min() > 10
+
+
+def test_show_follows_the_ego_in_videos_with_a_hud_and_a_legend(tmp_path, capsys):
+    from smarts.replay.render import EGO
+    from tests.replay.files import waymo_junction, write_waymo
+
+    path = write_waymo(tmp_path / "j.tfrecord", [waymo_junction()])
+    out = tmp_path / "v.gif"
+    assert main(["replay", "show", str(path), "--format", "waymo", "--out", str(out), "--duration", "2", "--fps", "5"]) == 0
+    gif = Image.open(out)
+    assert gif.size == (800, 560) and gif.n_frames == 11  # 800 x 500 of road at 6 px/m, HUD and legend bands
+    top, view = 36, (800, 500)
+    for k in range(gif.n_frames):
+        gif.seek(k)
+        frame = np.asarray(gif.convert("RGB")).astype(int)
+        centre = frame[top + view[1] // 2 - 4 : top + view[1] // 2 + 4, view[0] // 2 - 10 : view[0] // 2 + 10]
+        assert (np.abs(centre - EGO).sum(axis=2) < 40).sum() > 40, k  # the ego stays in the middle
+        assert frame[:top].mean() < 40 and frame[:top].max() > 200  # the HUD: light text on a dark band
+    # The whole recording instead, and a road user that is not there.
+    assert main(["replay", "show", str(path), "--format", "waymo", "--out", str(tmp_path / "w.gif"), "--duration", "1",
+                 "--follow", "none"]) == 0  # fmt: skip
+    assert Image.open(tmp_path / "w.gif").size != (800, 560)
+    capsys.readouterr()
+    assert main(["replay", "show", str(path), "--format", "waymo", "--out", str(tmp_path / "x.gif"), "--follow", "99"]) == 2
+    assert "--follow 99: no road user of that id in the recording (ego: 1)" in capsys.readouterr().err
