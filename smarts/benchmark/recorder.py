@@ -20,9 +20,9 @@ project. The lead is "in lane and visible" when it is ahead on the follower's la
 reached from it through successor lanes (lane continuity: a lead straight ahead stays in lane
 across road-segment boundaries), within sight; the gap is bumper to bumper along those lanes.
 
-Rule columns. ``red_light``: on this row the agent's vehicle entered a junction lane (the first
-lane of a signal-controlled connection, ``SignalState.via_colour``) whose colour was red at that
-moment. ``left_map``: the end-of-map rule (see ``smarts.benchmark.metrics.scores``): once the
+Rule columns. ``red_light``: on this row the agent's vehicle entered, from a road lane (across
+the stop line), a junction lane (the first lane of a signal-controlled connection,
+``SignalState.via_colour``) whose colour was red at that moment. ``left_map``: the end-of-map rule (see ``smarts.benchmark.metrics.scores``): once the
 front of an agent's vehicle passes the end of a lane of its route that has no successor (the
 map's edge), within the lane's width, the vehicle has left the map; its trace ends on the row
 before, which is marked ``left_map``, and what the events say from then on (partial off road,
@@ -180,10 +180,15 @@ class EpisodeRecorder:
         return out
 
     def _red_light(self, agents: np.ndarray, lanes: np.ndarray) -> np.ndarray:
-        """Per agent: entered, on this step, a junction lane whose signal is red now."""
-        entered = (lanes >= 0) & (lanes != self._prev_lane[agents])
+        """Per agent: entered, on this step, from a road lane (across the stop line), a junction
+        lane whose signal is red now. Moving on from one junction lane to the next is not
+        entering the junction (a left turn's second junction lane can be another connection's
+        first)."""
         if self._signals is None:
             return np.zeros(len(agents), dtype=bool)
+        prev = self._prev_lane[agents]
+        from_road = (prev < 0) | ~self.sim.road_map.lane_internal[np.maximum(prev, 0)]
+        entered = (lanes >= 0) & (lanes != prev) & from_road
         colour = self._signals.via_colour[np.maximum(lanes, 0)]
         return entered & (colour == RED)
 
