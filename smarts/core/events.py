@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import math
 from enum import IntEnum
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
-from smarts.core.records import view
 from smarts.core.vehicle_table import COLUMN
 from smarts.maps.drivable import on_road_at
 
@@ -136,11 +136,71 @@ def not_moving_step(anchor, anchor_time, row, x, y, time, seconds, distance):  #
     return anchor_time[row] <= time - seconds + 1e-9
 
 
+class EventTables(NamedTuple):
+    """What ``episode_events`` reads and writes: the simulation's arrays under ``SimTables``'s names
+    (``smarts.core.sim_records``), gathered once per call by ``event_tables``."""
+
+    data: np.ndarray
+    lane: np.ndarray
+    anchor: np.ndarray
+    anchor_time: np.ndarray
+    lane_road: np.ndarray
+    lane_internal: np.ndarray
+    raster_flat: np.ndarray
+    raster_base: np.ndarray
+    raster_width: np.ndarray
+    raster_origin: np.ndarray
+    raster_inv_res: np.ndarray
+    raster_cell_max: np.ndarray
+    on_route_road: np.ndarray
+    goal_kind: np.ndarray
+    goal_xy: np.ndarray
+    goal_radius: np.ndarray
+    goal_road: np.ndarray
+    goal_lane: np.ndarray
+    goal_s: np.ndarray
+    goal_gate: np.ndarray
+    agent_events: np.ndarray
+    agent_done: np.ndarray
+    prev_xy: np.ndarray
+    prev_row: np.ndarray
+    episode_map: np.ndarray
+    episode_step: np.ndarray
+    episode_limit: np.ndarray
+    terminate_on: np.ndarray
+    not_moving_seconds: np.ndarray
+    not_moving_distance: np.ndarray
+
+
+@numba.njit(cache=True, nogil=True)
+def event_tables(tables):  # pragma: no cover - compiled
+    """The ``EventTables`` of a frozen ``SimTables`` (read once per kernel call: the per-episode
+    calls then pass values, not the record)."""
+    t = tables
+    return EventTables(
+        data=t.data, lane=t.lane, anchor=t.anchor, anchor_time=t.anchor_time, lane_road=t.lane_road,
+        lane_internal=t.lane_internal, raster_flat=t.raster_flat, raster_base=t.raster_base,
+        raster_width=t.raster_width, raster_origin=t.raster_origin, raster_inv_res=t.raster_inv_res,
+        raster_cell_max=t.raster_cell_max, on_route_road=t.on_route_road, goal_kind=t.goal_kind,
+        goal_xy=t.goal_xy, goal_radius=t.goal_radius, goal_road=t.goal_road, goal_lane=t.goal_lane,
+        goal_s=t.goal_s, goal_gate=t.goal_gate, agent_events=t.agent_events, agent_done=t.agent_done,
+        prev_xy=t.prev_xy, prev_row=t.prev_row, episode_map=t.episode_map, episode_step=t.episode_step,
+        episode_limit=t.episode_limit, terminate_on=t.terminate_on, not_moving_seconds=t.not_moving_seconds,
+        not_moving_distance=t.not_moving_distance,
+    )
+
+
 @numba.njit(cache=True, nogil=True)
 def agent_events(tables, alive, agents, rows, b, time):  # pragma: no cover - compiled
+    """``episode_events`` from a frozen ``SimTables`` (the entry from Python)."""
+    episode_events(event_tables(tables), alive, agents, rows, b, time)
+
+
+@numba.njit(cache=True, nogil=True)
+def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - compiled
     """Every event of ``Event`` for the agents ``agents`` (rows ``rows``) of episode ``b`` at its
-    clock ``time``, from and into ``tables`` (a frozen ``smarts.core.sim_records.SimTables``): its
-    ``agents.events`` and ``agents.done`` rows of these agents are written here.
+    clock ``time``, from and into ``et`` (``EventTables``): its ``agent_events`` and
+    ``agent_done`` rows of these agents are written here.
 
     Collisions are tested against all ``alive`` rows (circle pre-test, then separating axes).
     Off road is read from the drivable raster of the episode's map. Goal kinds: 1 = within
@@ -154,17 +214,19 @@ def agent_events(tables, alive, agents, rows, b, time):  # pragma: no cover - co
     and its goal never seen. Off route is not flagged on the step the goal is reached (the route
     ends at the goal; what lies beyond it is off the route).
     """
-    t = view(tables)
-    data, lane = t.table.data, t.table.lane
-    ms, ag, ep, sf = t.missions, t.agents, t.episodes, t.surfaces
-    m = ep.map[b]
-    flat_raster = sf.flat[sf.base[m]:sf.base[m + 1]]
-    raster_width, raster_origin, inv_res, cell_max = sf.width[m], sf.origin[m], sf.inv_res[m], sf.cell_max[m]
-    lane_internal, lane_road = t.lanes.internal, t.lanes.road
-    terminate_on = ep.terminate_on[b]
-    at_step_limit = ep.step[b] >= ep.limit[b]
-    not_moving_seconds, not_moving_distance = ep.not_moving_seconds[b], ep.not_moving_distance[b]
-    prev_xy, prev_row, events, done = ag.prev_xy, ag.prev_row, ag.events, ag.done
+    data, lane = et.data, et.lane
+    m = et.episode_map[b]
+    flat_raster = et.raster_flat[et.raster_base[m]:et.raster_base[m + 1]]
+    raster_width, raster_origin = et.raster_width[m], et.raster_origin[m]
+    inv_res, cell_max = et.raster_inv_res[m], et.raster_cell_max[m]
+    lane_internal, lane_road, on_route_road = et.lane_internal, et.lane_road, et.on_route_road
+    goal_kind, goal_xy, goal_radius, goal_road = et.goal_kind, et.goal_xy, et.goal_radius, et.goal_road
+    goal_lane, goal_s, goal_gate = et.goal_lane, et.goal_s, et.goal_gate
+    terminate_on = et.terminate_on[b]
+    at_step_limit = et.episode_step[b] >= et.episode_limit[b]
+    not_moving_seconds, not_moving_distance = et.not_moving_seconds[b], et.not_moving_distance[b]
+    prev_xy, prev_row, events, done = et.prev_xy, et.prev_row, et.agent_events, et.agent_done
+    anchor, anchor_time = et.anchor, et.anchor_time
     own = np.empty((4, 2))
     other = np.empty((4, 2))
     for i in range(agents.shape[0]):
@@ -194,24 +256,24 @@ def agent_events(tables, alive, agents, rows, b, time):  # pragma: no cover - co
         road = lane_road[ln] if ln >= 0 else -1
         if ln >= 0 and not lane_internal[ln]:  # junction lanes cross each other: no direction
             ev[WRONG_WAY] = math.cos(h - data[_LANE_HEADING, r]) < 0.0
-            ev[OFF_ROUTE] = not ms.on_route_road[a, road]
+            ev[OFF_ROUTE] = not on_route_road[a, road]
         px, py = (prev_xy[a, 0], prev_xy[a, 1]) if prev_row[a] == r else (x, y)
         prev_xy[a, 0], prev_xy[a, 1], prev_row[a] = x, y, r
-        if ms.goal_kind[a] == 1:
+        if goal_kind[a] == 1:
             ev[REACHED_GOAL] = segment_point_distance2(
-                px, py, x, y, ms.goal_xy[a, 0], ms.goal_xy[a, 1]
-            ) <= ms.goal_radius[a] * ms.goal_radius[a]
-        elif ms.goal_kind[a] == 2:
+                px, py, x, y, goal_xy[a, 0], goal_xy[a, 1]
+            ) <= goal_radius[a] * goal_radius[a]
+        elif goal_kind[a] == 2:
             ev[REACHED_GOAL] = (
                 ln >= 0
-                and road == ms.goal_road[a]
-                and (ms.goal_lane[a] < 0 or ln == ms.goal_lane[a])
-                and data[_S, r] >= ms.goal_s[a]
-            ) or crosses_gate(px, py, x, y, ms.goal_gate[a])
+                and road == goal_road[a]
+                and (goal_lane[a] < 0 or ln == goal_lane[a])
+                and data[_S, r] >= goal_s[a]
+            ) or crosses_gate(px, py, x, y, goal_gate[a])
         if ev[REACHED_GOAL]:
             ev[OFF_ROUTE] = False
         ev[NOT_MOVING] = not_moving_step(
-            t.table.anchor, t.table.anchor_time, r, x, y, time, not_moving_seconds, not_moving_distance
+            anchor, anchor_time, r, x, y, time, not_moving_seconds, not_moving_distance
         )
         ev[MAX_STEPS] = at_step_limit
         finished = at_step_limit

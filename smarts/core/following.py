@@ -21,7 +21,6 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from smarts.core.records import view
 from smarts.core.sim_records import lanes_record
 from smarts.core.vehicle_table import COLUMN
 
@@ -32,9 +31,15 @@ LEAD_SIGHT = 50.0
 """Metres between the centres (along the lane, or straight) within which the lead is visible."""
 
 
+# The lead kernel writes two blocks, one row per field (``LeadState``'s arrays are these rows):
+# a call from Python types each argument, and a tuple of eleven arrays costs about 3 us more to
+# type than two arrays (measured with numba 0.68), several times the kernel's work at one agent.
+_PRESENT, _VISIBLE, _IN_LANE = range(3)  # rows of the flags block (bool)
+_GAP, _DX, _DY, _REL_HEADING, _REL_VX, _REL_VY, _LEAD_SPEED, _LEAD_ACCEL = range(8)  # rows of the values block
+
+
 class LeadState(NamedTuple):
-    """Per agent (in the order asked for): the lead's state relative to the agent (the kernel's
-    output record: it fills these arrays)."""
+    """Per agent (in the order asked for): the lead's state relative to the agent."""
 
     present: np.ndarray  # bool[n] the agent follows a vehicle that is in the simulation now
     visible: np.ndarray  # bool[n] present and within sight (centre distance <= sight)
@@ -51,14 +56,24 @@ class LeadState(NamedTuple):
 
     @classmethod
     def empty(cls, n: int) -> "LeadState":
-        def z():
-            return np.zeros(n)
+        return cls.of_blocks(*_lead_blocks(n))
 
-        def f():
-            return np.zeros(n, dtype=bool)
+    @classmethod
+    def of_blocks(cls, flags: np.ndarray, values: np.ndarray) -> "LeadState":
+        """The state whose arrays are the rows of the lead kernel's blocks."""
+        return cls(
+            present=flags[_PRESENT], visible=flags[_VISIBLE], in_lane=flags[_IN_LANE], gap=values[_GAP],
+            dx=values[_DX], dy=values[_DY], rel_heading=values[_REL_HEADING], rel_vx=values[_REL_VX],
+            rel_vy=values[_REL_VY], lead_speed=values[_LEAD_SPEED], lead_accel=values[_LEAD_ACCEL],
+        )  # fmt: skip
 
-        return cls(present=f(), visible=f(), in_lane=f(), gap=np.full(n, np.nan), dx=z(), dy=z(), rel_heading=z(),
-                   rel_vx=z(), rel_vy=z(), lead_speed=z(), lead_accel=z())  # fmt: skip
+
+def _lead_blocks(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The lead kernel's empty output: nothing present, gap NaN."""
+    flags = np.zeros((3, n), dtype=bool)
+    values = np.zeros((8, n))
+    values[_GAP] = np.nan
+    return flags, values
 
 
 def _lead_cache(sim) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -104,17 +119,25 @@ def lead_state(sim, agents: np.ndarray, sight: float = LEAD_SIGHT) -> LeadState:
         return LeadState.empty(n)
     leads = lead_rows(sim, agents)
     rows = sim.agent_row[agents]
-    out = LeadState.empty(n)
-    _lead_kernel(lanes_record(sim.road_map), sim.table.data, sim.table.lane, rows, leads, float(sight), out)
-    return out
+    flags, values = _lead_blocks(n)
+    _lead_kernel(lanes_record(sim.road_map), sim.table.data, sim.table.lane, rows, leads, float(sight), flags, values)
+    return LeadState.of_blocks(flags, values)
+
+
+class Successors(NamedTuple):
+    """The lane graph forward: a ``Lanes`` record's successors (CSR) and lane lengths."""
+
+    offsets: np.ndarray  # int64[L + 1]
+    succ: np.ndarray  # int32[E]
+    length: np.ndarray  # float64[L]
 
 
 @numba.njit(cache=True, nogil=True)
-def lane_distance_ahead(lanes, from_lane, from_s, to_lane, to_s, limit):  # pragma: no cover - compiled
-    """Metres along the lane graph (``lanes``, a ``Lanes`` tuple) from (from_lane, from_s) forward
+def lane_distance_ahead(graph, from_lane, from_s, to_lane, to_s, limit):  # pragma: no cover - compiled
+    """Metres along the lane graph (``graph``, ``Successors``) from (from_lane, from_s) forward
     to (to_lane, to_s); inf when ``to_lane`` is not reached within ``limit`` metres (or lies
     behind on the same lane)."""
-    succ_offsets, succ, lane_length = lanes.succ_offsets, lanes.succ, lanes.length
+    succ_offsets, succ, lane_length = graph.offsets, graph.succ, graph.length
     if from_lane == to_lane:
         return to_s - from_s if to_s >= from_s else np.inf
     stack_lane = np.empty(128, dtype=np.int64)
@@ -143,12 +166,16 @@ def lane_distance_ahead(lanes, from_lane, from_s, to_lane, to_s, limit):  # prag
 
 
 @numba.njit(cache=True, nogil=True)
-def _lead_kernel(frozen_lanes, data, lane, rows, leads, sight, out):  # pragma: no cover - compiled
-    """``lead_state`` of the agents on ``rows`` (their leads on ``leads``) into ``out``, a
-    ``LeadState``; ``frozen_lanes`` is the map's frozen ``Lanes``."""
-    lanes = view(frozen_lanes)
-    present, visible, in_lane, gap, dx_out, dy_out = out.present, out.visible, out.in_lane, out.gap, out.dx, out.dy
-    rel_h, rel_vx, rel_vy, lead_speed, lead_accel = out.rel_heading, out.rel_vx, out.rel_vy, out.lead_speed, out.lead_accel
+def _lead_kernel(frozen_lanes, data, lane, rows, leads, sight, flags, values):  # pragma: no cover - compiled
+    """``lead_state`` of the agents on ``rows`` (their leads on ``leads``) into the rows of
+    ``flags`` and ``values`` (``_PRESENT``..., ``_GAP``...); ``frozen_lanes`` is the map's frozen
+    ``Lanes``."""
+    lanes = frozen_lanes
+    graph = Successors(offsets=lanes.succ_offsets, succ=lanes.succ, length=lanes.length)
+    lane_internal, lane_width = lanes.internal, lanes.width
+    present, visible, in_lane = flags[_PRESENT], flags[_VISIBLE], flags[_IN_LANE]
+    gap, dx_out, dy_out, rel_h = values[_GAP], values[_DX], values[_DY], values[_REL_HEADING]
+    rel_vx, rel_vy, lead_speed, lead_accel = values[_REL_VX], values[_REL_VY], values[_LEAD_SPEED], values[_LEAD_ACCEL]
     for i in range(rows.shape[0]):
         r, j = rows[i], leads[i]
         if j < 0 or r < 0:
@@ -173,17 +200,19 @@ def _lead_kernel(frozen_lanes, data, lane, rows, leads, sight, out):  # pragma: 
         lf, lj = lane[r], lane[j]
         if lf < 0 or lj < 0:
             continue
-        along = lane_distance_ahead(lanes, lf, data[_S, r], lj, data[_S, j], sight)
+        along = lane_distance_ahead(graph, lf, data[_S, r], lj, data[_S, j], sight)
         if along <= sight and along > 0.0:
             in_lane[i] = True
             gap[i] = along - half_lengths
-        elif (lanes.internal[lf] or lanes.internal[lj]) and fx > 0.0 and abs(fy) < 0.5 * lanes.width[lf]:
+        elif (lane_internal[lf] or lane_internal[lj]) and fx > 0.0 and abs(fy) < 0.5 * lane_width[lf]:
             in_lane[i] = True
 
 
+_A_GAP, _A_REL_SPEED, _A_SPEED, _A_ACCEL = range(4)  # rows of the ahead kernel's values block (see _PRESENT)
+
+
 class AheadState(NamedTuple):
-    """Per agent: the nearest road user ahead on the agent's lane (lane continuity, any vehicle);
-    the kernel's output record."""
+    """Per agent: the nearest road user ahead on the agent's lane (lane continuity, any vehicle)."""
 
     present: np.ndarray  # bool[n] one is within ``sight`` metres of lane ahead
     gap: np.ndarray  # float64[n] bumper-to-bumper metres along the lanes (sight when none)
@@ -197,24 +226,26 @@ def ahead_state(sim, agents: np.ndarray, sight: float = LEAD_SIGHT) -> AheadStat
     metres along the lanes (the vehicle a driver keeps a gap to, whoever it is)."""
     agents = np.asarray(agents, dtype=np.int64)
     n = len(agents)
-    out = AheadState(present=np.zeros(n, bool), gap=np.full(n, float(sight)), rel_speed=np.zeros(n), speed=np.zeros(n),
-                     accel=np.zeros(n))  # fmt: skip
-    if n == 0:
-        return out
-    scope = sim.scope(agents)  # each agent among its own episode's road users
-    _ahead_kernel(
-        lanes_record(sim.road_map), sim.table.data, sim.table.lane, sim.agent_row[agents], scope.alive, scope.lo,
-        scope.hi, float(sight), out,
-    )  # fmt: skip
-    return out
+    present = np.zeros(n, bool)
+    values = np.zeros((4, n))
+    values[_A_GAP] = float(sight)
+    if n:
+        scope = sim.scope(agents)  # each agent among its own episode's road users
+        _ahead_kernel(
+            lanes_record(sim.road_map), sim.table.data, sim.table.lane, sim.agent_row[agents], scope.alive, scope.lo,
+            scope.hi, float(sight), present, values,
+        )  # fmt: skip
+    return AheadState(present=present, gap=values[_A_GAP], rel_speed=values[_A_REL_SPEED], speed=values[_A_SPEED],
+                      accel=values[_A_ACCEL])  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
-def _ahead_kernel(frozen_lanes, data, lane, rows, alive, alive_lo, alive_hi, sight, out):  # pragma: no cover - compiled
+def _ahead_kernel(frozen_lanes, data, lane, rows, alive, alive_lo, alive_hi, sight, present, values):  # pragma: no cover - compiled
     """``ahead_state`` of the agents on ``rows`` among the live rows of their episodes
-    (``alive[alive_lo[i]:alive_hi[i]]``) into ``out``, an ``AheadState``."""
-    lanes = view(frozen_lanes)
-    present, gap, rel_speed, speed, accel = out.present, out.gap, out.rel_speed, out.speed, out.accel
+    (``alive[alive_lo[i]:alive_hi[i]]``) into ``present`` and the rows of ``values``
+    (``_A_GAP``...)."""
+    graph = Successors(offsets=frozen_lanes.succ_offsets, succ=frozen_lanes.succ, length=frozen_lanes.length)
+    gap, rel_speed, speed, accel = values[_A_GAP], values[_A_REL_SPEED], values[_A_SPEED], values[_A_ACCEL]
     for i in range(rows.shape[0]):
         r = rows[i]
         if r < 0 or lane[r] < 0:
@@ -227,7 +258,7 @@ def _ahead_kernel(frozen_lanes, data, lane, rows, alive, alive_lo, alive_hi, sig
             dx, dy = data[_X, j] - x, data[_Y, j] - y
             if dx * dx + dy * dy > (sight + 15.0) ** 2:
                 continue
-            along = lane_distance_ahead(lanes, lane[r], data[_S, r], lane[j], data[_S, j], sight)
+            along = lane_distance_ahead(graph, lane[r], data[_S, r], lane[j], data[_S, j], sight)
             if along <= 0.0 or along > sight:
                 continue
             g = along - 0.5 * (data[_LENGTH, r] + data[_LENGTH, j])

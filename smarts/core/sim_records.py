@@ -3,7 +3,7 @@
 read, named.
 
 Everything here is built once per simulation (``sim_tables``) and holds the simulation's own
-arrays, not copies: a kernel that writes ``agents.events`` writes ``Simulation.agent_events``.
+arrays, not copies: a kernel that writes ``tables.agent_events`` writes ``Simulation.agent_events``.
 What changes from step to step (the live rows, the clock, the agents asked about) is passed to each
 kernel beside it. The simulation allocates these arrays once, in its constructor; should it ever
 replace one, ``tests/core/test_sim_records.py`` fails (a record would go on holding the old one).
@@ -38,22 +38,37 @@ class Lanes(NamedTuple):
     point_heading: np.ndarray  # float64[Q]
 
 
-class Surfaces(NamedTuple):
-    """Every map's drivable raster, concatenated as ``MapStack`` stacks them: map ``m``'s cells
-    are ``flat[base[m]:base[m + 1]]``, ``width[m]`` cells a row, with its origin, inverse
-    resolution and largest cell index (x, y)."""
+class SimTables(NamedTuple):
+    """Everything of a simulation that its per-step kernels read and that stays in place, under
+    the simulation's own names where it has one.
 
-    flat: np.ndarray  # bool[cells of every map]
-    base: np.ndarray  # int64[M + 1]
-    width: np.ndarray  # int64[M]
-    origin: np.ndarray  # float64[M, 2]
-    inv_res: np.ndarray  # float64[M]
-    cell_max: np.ndarray  # float64[M, 2]
+    One level, no nested tuples: a kernel reads the few fields it uses (``tables.goal_s``), each
+    one load; a nested tuple would be read whole (every array in it counted as a new reference)
+    to get at one of its arrays."""
 
-
-class Missions(NamedTuple):
-    """Every agent's mission (``MissionArrays``): route paths, goal, route roads, signals."""
-
+    # the vehicle table (``VehicleTable``) and its rows' not-moving anchors
+    data: np.ndarray  # float64[columns, rows]
+    lane: np.ndarray  # int32[rows] projected lane, -1 off every lane
+    role: np.ndarray  # int8[rows]
+    vtype: np.ndarray  # int8[rows]
+    anchor: np.ndarray  # float64[rows, 2] where the row last moved more than the distance
+    anchor_time: np.ndarray  # float64[rows] when
+    # the lanes (``RoadMap``; for a stack of maps, the combined map's)
+    lane_length: np.ndarray  # float64[L]
+    lane_width: np.ndarray  # float64[L]
+    lane_speed_limit: np.ndarray  # float64[L] m/s
+    lane_road: np.ndarray  # int32[L]
+    lane_index: np.ndarray  # int16[L] position on its road, 0 = rightmost
+    lane_internal: np.ndarray  # bool[L] inside a junction
+    # every map's drivable raster, concatenated as ``MapStack`` stacks them: map m's cells are
+    # raster_flat[raster_base[m]:raster_base[m + 1]], raster_width[m] a row
+    raster_flat: np.ndarray  # bool[cells of every map]
+    raster_base: np.ndarray  # int64[M + 1]
+    raster_width: np.ndarray  # int64[M]
+    raster_origin: np.ndarray  # float64[M, 2]
+    raster_inv_res: np.ndarray  # float64[M]
+    raster_cell_max: np.ndarray  # float64[M, 2] largest cell index (x, y)
+    # every agent's mission (``MissionArrays``)
     flat_paths: np.ndarray  # float64[A * stride, 3, 3] point i of agent a at row a * stride + i
     flat_valid: np.ndarray  # bool[A * stride, 3]
     stride: int  # route points per agent (padded)
@@ -70,57 +85,27 @@ class Missions(NamedTuple):
     goal_gate: np.ndarray  # float64[A, 6] goal line (see ``crosses_gate``)
     signal_via: np.ndarray  # int32[A * stride] next signal-controlled lane from each route point
     signal_s: np.ndarray  # float64[A * stride] route arc length of its stop line
-
-
-class Agents(NamedTuple):
-    """What the simulation keeps per agent between steps."""
-
-    episode: np.ndarray  # int64[A] each agent's episode
-    events: np.ndarray  # bool[A, NUM_EVENTS] this step's events
-    done: np.ndarray  # bool[A]
+    # what the simulation keeps per agent between steps
+    agent_episode: np.ndarray  # int64[A]
+    agent_events: np.ndarray  # bool[A, NUM_EVENTS] this step's events
+    agent_done: np.ndarray  # bool[A]
     prev_xy: np.ndarray  # float64[A, 2] position at the last event test
     prev_row: np.ndarray  # int64[A] the row it was tested on (-1: none yet)
     route_index: np.ndarray  # int64[A] nearest route point
     route_progress: np.ndarray  # float64[A] arc length reached along the route
     progress_delta: np.ndarray  # float64[A] progress of the last step
-
-
-class Episodes(NamedTuple):
-    """Per episode: its map, step count and limit, event rules and signal colours."""
-
-    map: np.ndarray  # int64[B] map of each episode in the stack
-    step: np.ndarray  # int64[B] steps taken
-    limit: np.ndarray  # int64[B] steps allowed
+    # per episode
+    episode_map: np.ndarray  # int64[B] map of each episode in the stack
+    episode_step: np.ndarray  # int64[B] steps taken
+    episode_limit: np.ndarray  # int64[B] steps allowed
     terminate_on: np.ndarray  # bool[B, NUM_EVENTS] events that end an agent's episode
     not_moving_seconds: np.ndarray  # float64[B]
     not_moving_distance: np.ndarray  # float64[B]
     via_colour: np.ndarray  # int8[B, L] signal colour of each junction lane
-
-
-class Table(NamedTuple):
-    """The vehicle table's columns the kernels read, and the rows' not-moving anchors."""
-
-    data: np.ndarray  # float64[columns, rows] (``VehicleTable.data``)
-    lane: np.ndarray  # int32[rows] projected lane, -1 off every lane
-    role: np.ndarray  # int8[rows]
-    vtype: np.ndarray  # int8[rows]
-    anchor: np.ndarray  # float64[rows, 2] where the row last moved more than the distance
-    anchor_time: np.ndarray  # float64[rows] when
-
-
-class SimTables(NamedTuple):
-    """Everything of a simulation that its per-step kernels read and that stays in place."""
-
-    table: Table
-    lanes: Lanes
-    surfaces: Surfaces
-    missions: Missions
-    agents: Agents
-    episodes: Episodes
     dt: float
 
 
-for _record in (Lanes, Surfaces, Missions, Agents, Episodes, Table, SimTables):
+for _record in (Lanes, SimTables):
     declare(_record)
 
 
@@ -162,29 +147,24 @@ def sim_tables(sim):
 
 def tables_of(sim) -> SimTables:
     """``sim``'s ``SimTables`` (its own arrays)."""
-    ma, st, t = sim.mission_arrays, sim.map_stack, sim.table
+    ma, st, t, rm = sim.mission_arrays, sim.map_stack, sim.table, sim.road_map
     return SimTables(
-        table=Table(data=t.data, lane=t.lane, role=t.role, vtype=t.vtype, anchor=sim.not_moving.anchor,
-                    anchor_time=sim.not_moving.anchor_time),
-        lanes=lanes_of(sim.road_map),
-        surfaces=Surfaces(flat=st.raster_flat, base=st.raster_base, width=st.raster_width,
-                          origin=st.raster_origin, inv_res=st.raster_inv_res, cell_max=st.raster_cell_max),
-        missions=Missions(
-            flat_paths=ma.flat_paths, flat_valid=ma.flat_valid, stride=int(ma.stride), path_len=ma.path_len,
-            path_s=ma.path_s, route_length=ma.route_length, on_route_road=ma.on_route_road,
-            goal_kind=ma.goal_kind, goal_xy=ma.goal_xy, goal_radius=ma.goal_radius, goal_road=ma.goal_road,
-            goal_lane=ma.goal_lane, goal_s=ma.goal_s, goal_gate=ma.goal_gate,
-            signal_via=ma.signal_via.reshape(-1), signal_s=ma.signal_s.reshape(-1),
-        ),
-        agents=Agents(
-            episode=sim.agent_episode, events=sim.agent_events, done=sim.agent_done, prev_xy=sim.agent_prev_xy,
-            prev_row=sim.agent_prev_row, route_index=sim.route_index, route_progress=sim.route_progress,
-            progress_delta=sim.route_progress_delta,
-        ),
-        episodes=Episodes(
-            map=sim.episode_map, step=sim.episode_step, limit=sim.episode_limit, terminate_on=sim.terminate_on,
-            not_moving_seconds=sim.not_moving_seconds, not_moving_distance=sim.not_moving_distance,
-            via_colour=sim.via_colour,
-        ),
+        data=t.data, lane=t.lane, role=t.role, vtype=t.vtype, anchor=sim.not_moving.anchor,
+        anchor_time=sim.not_moving.anchor_time,
+        lane_length=rm.lane_length, lane_width=rm.lane_width, lane_speed_limit=rm.lane_speed_limit,
+        lane_road=rm.lane_road, lane_index=rm.lane_index, lane_internal=rm.lane_internal,
+        raster_flat=st.raster_flat, raster_base=st.raster_base, raster_width=st.raster_width,
+        raster_origin=st.raster_origin, raster_inv_res=st.raster_inv_res, raster_cell_max=st.raster_cell_max,
+        flat_paths=ma.flat_paths, flat_valid=ma.flat_valid, stride=int(ma.stride), path_len=ma.path_len,
+        path_s=ma.path_s, route_length=ma.route_length, on_route_road=ma.on_route_road, goal_kind=ma.goal_kind,
+        goal_xy=ma.goal_xy, goal_radius=ma.goal_radius, goal_road=ma.goal_road, goal_lane=ma.goal_lane,
+        goal_s=ma.goal_s, goal_gate=ma.goal_gate, signal_via=ma.signal_via.reshape(-1),
+        signal_s=ma.signal_s.reshape(-1),
+        agent_episode=sim.agent_episode, agent_events=sim.agent_events, agent_done=sim.agent_done,
+        prev_xy=sim.agent_prev_xy, prev_row=sim.agent_prev_row, route_index=sim.route_index,
+        route_progress=sim.route_progress, progress_delta=sim.route_progress_delta,
+        episode_map=sim.episode_map, episode_step=sim.episode_step, episode_limit=sim.episode_limit,
+        terminate_on=sim.terminate_on, not_moving_seconds=sim.not_moving_seconds,
+        not_moving_distance=sim.not_moving_distance, via_colour=sim.via_colour,
         dt=float(sim.dt),
     )  # fmt: skip

@@ -38,10 +38,9 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from smarts.core.events import NUM_EVENTS, Event, NotMovingTracker, agent_events
+from smarts.core.events import NUM_EVENTS, Event, NotMovingTracker, agent_events, episode_events, event_tables
 from smarts.core.missions import MissionArrays, ResolvedMission, stack_missions
 from smarts.core.provider import Provider, ProviderBase
-from smarts.core.records import view
 from smarts.core.sim_records import sim_tables
 from smarts.core.vehicle_table import COLUMN, Role, VehicleTable
 from smarts.maps import RoadMap, project
@@ -728,12 +727,11 @@ class Simulation:
 
 @numba.njit(cache=True, nogil=True)
 def _route_progress(tables, agents, rows, first):  # pragma: no cover - compiled
-    """Nearest route point in a window around the last one, and the arc length reached (into the
-    ``agents`` part of ``tables``, a frozen ``SimTables``)."""
-    t = view(tables)
-    data, ms, ag = t.table.data, t.missions, t.agents
-    flat_paths, stride, path_len, path_s, route_length = ms.flat_paths, ms.stride, ms.path_len, ms.path_s, ms.route_length
-    route_index, route_progress, delta = ag.route_index, ag.route_progress, ag.progress_delta
+    """Nearest route point in a window around the last one, and the arc length reached (into
+    ``tables``, the simulation's frozen ``SimTables``)."""
+    data, flat_paths, stride, path_len = tables.data, tables.flat_paths, tables.stride, tables.path_len
+    path_s, route_length = tables.path_s, tables.route_length
+    route_index, route_progress, delta = tables.route_index, tables.route_progress, tables.progress_delta
     for i in range(agents.shape[0]):
         a, r = agents[i], rows[i]
         x, y = data[_X, r], data[_Y, r]
@@ -762,15 +760,17 @@ def _route_progress(tables, agents, rows, first):  # pragma: no cover - compiled
 def _episode_events(
     tables, alive, agents, rows, episodes, alive_lo, alive_hi, agent_lo, agent_hi, episode_time,
 ):  # pragma: no cover - compiled
-    """``agent_events`` of each episode in ``episodes`` with only that episode's rows as others
+    """``episode_events`` of each episode in ``episodes`` with only that episode's rows as others
     (``alive[alive_lo[b]:alive_hi[b]]``), its agents ``agents[agent_lo[b]:agent_hi[b]]`` and its
-    clock; ``agent_events`` reads the episode's map, raster and event rules from ``tables``."""
+    clock; it reads the episode's map, raster and event rules from ``tables`` (the simulation's
+    frozen ``SimTables``, gathered once here)."""
+    et = event_tables(tables)
     for k in range(episodes.shape[0]):
         b = episodes[k]
         lo, hi = agent_lo[b], agent_hi[b]
         if lo == hi:
             continue
-        agent_events(tables, alive[alive_lo[b]:alive_hi[b]], agents[lo:hi], rows[lo:hi], b, episode_time[b])
+        episode_events(et, alive[alive_lo[b]:alive_hi[b]], agents[lo:hi], rows[lo:hi], b, episode_time[b])
 
 
 _X, _Y = COLUMN["x"], COLUMN["y"]

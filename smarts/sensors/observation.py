@@ -53,7 +53,7 @@ import numpy as np
 from smarts.core.events import NUM_EVENTS
 from smarts.core.following import ahead_state, lead_state
 from smarts.core.geometry import wrap_scalar
-from smarts.core.records import declare, freeze_fields, view
+from smarts.core.records import declare, freeze_fields
 from smarts.core.sim_records import sim_tables
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import COLUMN, Role, VehicleType
@@ -307,13 +307,13 @@ def _observe(tables, setup, alive, alive_lo, alive_hi, row_base, agents, rows, v
     the episode, ``row - row_base[i]``), with its episode's signal colours and step: from
     ``tables`` (a frozen ``SimTables``) and ``setup`` (a frozen ``ObserveSetup``) into ``out``
     (a ``BasicObservation``)."""
-    t, c = view(tables), view(setup)
-    data, lane, role, vtype = t.table.data, t.table.lane, t.table.role, t.table.vtype
-    lanes, ms, ag = t.lanes, t.missions, t.agents
-    flat_paths, flat_valid, stride, route_index = ms.flat_paths, ms.flat_valid, ms.stride, ag.route_index
-    goal_kind, goal_xy, route_length, route_progress = ms.goal_kind, ms.goal_xy, ms.route_length, ag.route_progress
-    signal_via, signal_s, via_colours = ms.signal_via, ms.signal_s, t.episodes.via_colour
-    agent_episode, events, episode_step, dt = ag.episode, ag.events, t.episodes.step, t.dt
+    t, c = tables, setup
+    data, lane, role, vtype = t.data, t.lane, t.role, t.vtype
+    lane_width, lane_speed_limit, lane_road, lane_index = t.lane_width, t.lane_speed_limit, t.lane_road, t.lane_index
+    flat_paths, flat_valid, stride, route_index = t.flat_paths, t.flat_valid, t.stride, t.route_index
+    goal_kind, goal_xy, route_length, route_progress = t.goal_kind, t.goal_xy, t.route_length, t.route_progress
+    signal_via, signal_s, via_colours = t.signal_via, t.signal_s, t.via_colour
+    agent_episode, events, episode_step, dt = t.agent_episode, t.agent_events, t.episode_step, t.dt
     offsets, radius2, extended, vis_mode, ego_extended, yaw = (
         c.offsets, c.radius2, c.extended, c.vis_mode, c.ego_extended, c.yaw
     )
@@ -342,8 +342,8 @@ def _observe(tables, setup, alive, alive_lo, alive_hi, row_base, agents, rows, v
         ego[i, 6] = wrap_scalar(h - data[_LANE_HEADING, r])
         ego[i, 7] = data[_T, r]
         ln = lane[r]
-        ego[i, 8] = lanes.width[ln] if ln >= 0 else 0.0
-        ego[i, 9] = lanes.speed_limit[ln] if ln >= 0 else 0.0
+        ego[i, 8] = lane_width[ln] if ln >= 0 else 0.0
+        ego[i, 9] = lane_speed_limit[ln] if ln >= 0 else 0.0
         ego[i, 10] = data[_LENGTH, r]
         ego[i, 11] = data[_WIDTH, r]
         if ego_extended:
@@ -393,8 +393,8 @@ def _observe(tables, setup, alive, alive_lo, alive_hi, row_base, agents, rows, v
                 neighbours[i, q, 10] = data[_ACCEL, j]
                 neighbours[i, q, 11] = data[_YAW_RATE, j]
                 lj = lane[j]
-                neighbours[i, q, 12] = float(lanes.index[lj]) if lj >= 0 else -1.0
-                neighbours[i, q, 13] = 1.0 if lj >= 0 and ln >= 0 and lanes.road[lj] == lanes.road[ln] else 0.0
+                neighbours[i, q, 12] = float(lane_index[lj]) if lj >= 0 else -1.0
+                neighbours[i, q, 13] = 1.0 if lj >= 0 and ln >= 0 and lane_road[lj] == lane_road[ln] else 0.0
                 if 0 <= vtype[j] < _NUM_TYPES:
                     neighbours[i, q, 14 + vtype[j]] = 1.0
             if vis_mode != _VIS_OFF:

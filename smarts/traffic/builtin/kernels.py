@@ -1066,8 +1066,7 @@ def clearance(
     of the road user ahead, gap behind, speed of the one behind (INF: none). Scans every road
     user on each spot's lane and on the lane after it: own vehicles ``own`` (frozen ``RowState``)
     and other rows ``f_rows`` on ``f_lane`` at ``f_s``."""
-    lane_f, slot_int, state = view(frozen_lanes).lane_f, view(frozen_routes).slot_int, view(frozen_state)
-    si, st = state.si, state.st
+    lane_f, slot_int, si, st = frozen_lanes.lane_f, frozen_routes.slot_int, frozen_state.si, frozen_state.st
     n = lanes.shape[0]
     out = np.empty((4, n))
     for c in range(n):

@@ -1,0 +1,59 @@
+"""Kernel records (``smarts.core.records``): fields found by name, the same arrays, and numba's
+cache surviving a record class that disappeared."""
+
+import pickle
+import sys
+import types
+
+import numba
+import numpy as np
+import pytest
+from numba.core.caching import IndexDataCacheFile
+
+from smarts.core.records import declare
+from smarts.core.sim_records import Lanes, freeze, lanes_of
+from smarts.maps import load_map
+from smarts.scenario import builtin_map_path
+
+
+@numba.njit(cache=True)
+def _lane_sums(frozen):  # pragma: no cover - compiled
+    return frozen.length.sum(), frozen.width.sum(), frozen.succ_offsets[-1]
+
+
+@numba.njit(cache=True)
+def _widen(frozen, by):  # pragma: no cover - compiled
+    frozen.width[0] += by
+
+
+def test_a_frozen_record_reads_each_field_by_its_name_and_holds_the_same_arrays():
+    rm = load_map(builtin_map_path("straight_3lane"))
+    fields = lanes_of(rm)
+    # built with the keywords in another order: the names decide, not the positions
+    shuffled = Lanes(**dict(reversed(list(fields._asdict().items()))))
+    for record in (freeze(fields), freeze(shuffled)):
+        length, width, succ = _lane_sums(record)
+        assert length == rm.lane_length.sum() and width == rm.lane_width.sum() and succ == rm.succ_offsets[-1]
+    width = rm.lane_width.copy()
+    _widen(freeze(lanes_of(rm)), 1.0)  # a kernel writing through a record writes the map's array
+    assert rm.lane_width[0] == width[0] + 1.0
+    rm.lane_width[0] = width[0]
+
+
+def test_only_named_tuple_classes_become_records():
+    with pytest.raises(TypeError, match="NamedTuple"):
+        declare(dict)
+
+
+def test_a_cache_index_naming_a_record_class_that_is_gone_reads_as_stale(tmp_path):
+    module = types.ModuleType("gone_records")
+    exec("from typing import NamedTuple\nclass Old(NamedTuple):\n    a: int\n", module.__dict__)
+    sys.modules["gone_records"] = module
+    try:
+        index = IndexDataCacheFile(str(tmp_path), "kernel", ("stamp", 1))
+        with open(index._index_path, "wb") as f:
+            pickle.dump(numba.__version__, f)
+            f.write(pickle.dumps((("stamp", 1), {(module.Old(1),): "kernel.1.nbc"})))
+    finally:
+        del sys.modules["gone_records"]
+    assert index._load_index() == {}  # numba compiles again and overwrites it, rather than failing
