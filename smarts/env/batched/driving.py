@@ -119,7 +119,10 @@ class BatchedDriving:
         if workers < 0:
             raise ValueError(f"workers: expected 0 (every copy in this process) or more, got {workers}")
         local = [] if workers else rest
-        shard_copies = [rest[w::workers] for w in range(workers) if rest[w::workers]] if workers else []
+        shard_copies = [share.tolist() for share in np.array_split(np.array(rest, dtype=np.int64), workers)
+                         if len(share)] if workers else []  # fmt: skip
+        # Contiguous shares: a worker's slots are one block of rows of the shared buffer (the copies
+        # cycle through the scenarios, so blocks mix them as an interleaved split would).
         shard_copies += [[i] for i in sumo]  # libsumo holds one simulation per process
         options = dict(observation=observation, limits=self.limits, lane_relative=lane_relative,
                        reward_factory=reward_factory, sim_device=sim_device, policy_resolver=policy_resolver)  # fmt: skip
@@ -146,8 +149,16 @@ class BatchedDriving:
             shard.started()
         self.action_space, self.observation_space = self._shared_spaces()
         n = len(self.slots)
-        self._obs = {k: np.zeros((n, *s.shape), dtype=s.dtype) for k, s in self.observation_space.spaces.items()}
-        self._first = {k: np.zeros_like(v) for k, v in self._obs.items()}
+        self._buffer: SharedArrays | None = None
+        if self.shards:  # one block every worker writes its rows into and this process reads
+            self._buffer = SharedArrays(step_layout(self.observation_space, n, self.action_width))
+            for shard in self.shards:
+                shard.attach(self._buffer)
+            self._obs = self._buffer.group("obs")
+            self._first = self._buffer.group("first")
+        else:
+            self._obs = {k: np.zeros((n, *s.shape), dtype=s.dtype) for k, s in self.observation_space.spaces.items()}
+            self._first = {k: np.zeros_like(v) for k, v in self._obs.items()}
         self._next_seed: list[int | None] = [None] * len(self.specs)
         self._listeners: list[Callable[[], Any]] = []
         self._arange: np.ndarray | None = None
@@ -239,9 +250,7 @@ class BatchedDriving:
             episodes = np.arange(group.sim.episodes, dtype=np.int64)
             self._restart(group, episodes, self._obs)
         for shard in self.shards:
-            obs = shard.receive()
-            for key, value in obs.items():
-                self._obs[key][shard.slots] = value
+            shard.receive()  # its first observations are in the shared rows
         self._started = True
         return self._obs
 
@@ -280,8 +289,9 @@ class BatchedDriving:
         if self.shards:  # the workers step while this process steps its own copies
             for shard in self.shards:
                 shard.check(actions)  # a worker's refusal must come before anything moves
+            self._buffer.arrays["actions"][:, :k] = actions
             for shard in self.shards:
-                shard.send("step", actions[shard.slots])
+                shard.send("step", None)
         full = []
         for group in self.groups:
             arr = np.zeros((len(group.agent_slot), k), dtype=np.float64)
@@ -311,13 +321,14 @@ class BatchedDriving:
             over = sim.episodes_over()
             if over.size:
                 restarted[self._restart(group, over, self._first)] = True
-        for shard in self.shards:
-            obs, r, term, trunc, did, again, first = shard.receive()
-            j = shard.slots
-            reward[j], terminated[j], truncated[j], acted[j], restarted[j] = r, term, trunc, did, again
-            for key in out:
-                out[key][j] = obs[key]
-                self._first[key][j[again]] = first[key][again]
+        if self.shards:
+            for shard in self.shards:
+                shard.receive()  # its rows of the shared buffer now hold its step
+            flags = self._buffer.arrays
+            for shard in self.shards:
+                j = shard.rows
+                reward[j], terminated[j], truncated[j] = flags["reward"][j], flags["terminated"][j], flags["truncated"][j]
+                acted[j], restarted[j] = flags["acted"][j], flags["restarted"][j]
         if out is self._obs and not acted.all():
             for v in out.values():
                 v[~acted] = 0
@@ -334,16 +345,97 @@ class BatchedDriving:
         self.shards = []
         for group in self.groups:
             group.driving.close()
+        if self._buffer is not None:
+            self._obs = {k: v.copy() for k, v in self._obs.items()}  # readers may hold the last step
+            self._first = {k: v.copy() for k, v in self._first.items()}
+            self._buffer.release(unlink=True)
+            self._buffer = None
 
 
 def is_sumo(spec: ScenarioSpec) -> bool:
     return spec.traffic is not None and spec.traffic.engine == "sumo"
 
 
+STEP_FLAGS = {"reward": np.float32, "terminated": np.bool_, "truncated": np.bool_, "acted": np.bool_,
+              "restarted": np.bool_}
+"""The per-slot results of a step besides the observations, as they lie in the shared buffer."""
+
+
+def step_layout(space: gym.spaces.Dict, slots: int, action_width: int) -> dict[str, tuple[tuple[int, ...], str]]:
+    """Name -> (shape, dtype) of every array a step moves between this process and its workers:
+    the observations and first observations (``obs/<key>``, ``first/<key>``), the flags of
+    ``STEP_FLAGS`` and the actions, each over all ``slots``."""
+    layout: dict[str, tuple[tuple[int, ...], str]] = {}
+    for group in ("obs", "first"):
+        for key, sub in space.spaces.items():
+            layout[f"{group}/{key}"] = ((slots, *sub.shape), np.dtype(sub.dtype).str)
+    for name, dtype in STEP_FLAGS.items():
+        layout[name] = ((slots,), np.dtype(dtype).str)
+    layout["actions"] = ((slots, action_width), np.dtype(np.float64).str)
+    return layout
+
+
+class SharedArrays:
+    """Named arrays in one block of shared memory (``multiprocessing.shared_memory``): the buffer
+    the workers write their slots' observations and flags into and this process reads in place,
+    as a pool of environments does it (only a few bytes travel over the pipes). ``name`` attaches
+    to a block another process made (the layout must be the same)."""
+
+    ALIGN = 64  # every array starts on a cache line
+
+    def __init__(self, layout: dict[str, tuple[tuple[int, ...], str]], name: str | None = None):
+        from multiprocessing import shared_memory
+
+        self.layout = layout
+        offsets, size = {}, 0
+        for key, (shape, dtype) in layout.items():
+            offsets[key] = size
+            nbytes = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+            size += -(-max(nbytes, 1) // self.ALIGN) * self.ALIGN
+        self.owner = name is None
+        self.shm = shared_memory.SharedMemory(create=True, size=max(size, 1)) if self.owner else shared_memory.SharedMemory(name=name)
+        self.arrays = {key: np.ndarray(shape, dtype=np.dtype(dtype), buffer=self.shm.buf, offset=offsets[key])
+                       for key, (shape, dtype) in layout.items()}  # fmt: skip
+        if self.owner:
+            for value in self.arrays.values():
+                value[...] = 0
+
+    @property
+    def name(self) -> str:
+        return self.shm.name
+
+    def group(self, prefix: str) -> dict[str, np.ndarray]:
+        """The arrays ``prefix/<key>`` by key (the observations, or the first observations)."""
+        return {k.split("/", 1)[1]: v for k, v in self.arrays.items() if k.startswith(prefix + "/")}
+
+    def release(self, unlink: bool = False) -> None:
+        """Drop the views and unmap the block; the owner also frees it (``unlink``)."""
+        self.arrays = {}
+        try:
+            self.shm.close()
+        except BufferError:  # a view still held elsewhere: the mapping goes with the process
+            pass
+        if unlink:
+            try:
+                self.shm.unlink()
+            except FileNotFoundError:
+                pass
+
+
+def _rows(slots: np.ndarray) -> slice | np.ndarray:
+    """A worker's rows of the shared buffer: a slice when its slots are one block (copies are
+    shared out in contiguous blocks), else the index array (a SUMO copy among others)."""
+    if len(slots) and np.array_equal(slots, np.arange(slots[0], slots[0] + len(slots))):
+        return slice(int(slots[0]), int(slots[0]) + len(slots))
+    return slots
+
+
 class _Shard:
     """Some copies of a ``BatchedDriving`` stepped as a ``BatchedDriving`` of their own in a worker
-    process (``slots``: their slots in the parent's numbering). Messages are small tuples over a
-    pipe; the worker answers every command, with ``("error", message, exception)`` on failure."""
+    process (``slots``: their slots in the parent's numbering). Commands and acknowledgements are
+    small tuples over a pipe; actions, observations and flags go through the parent's shared
+    buffer (``SharedArrays``), each worker reading and writing its own rows (``rows``). The worker
+    answers every command, with ``("error", message, exception)`` on failure."""
 
     def __init__(self, parent: BatchedDriving, copies: list[int], options: dict, slots: list[int]):
         import multiprocessing as mp
@@ -354,6 +446,7 @@ class _Shard:
             ctx.set_forkserver_preload([__name__])
         self.copies = copies
         self.slots = np.array(slots, dtype=np.int64)
+        self.rows = _rows(self.slots)
         self.sources = [parent.specs[i].source for i in copies]
         self.conn, child = ctx.Pipe()
         specs = [parent.specs[i] for i in copies]
@@ -367,6 +460,10 @@ class _Shard:
     def started(self) -> None:
         """Wait for the worker's simulation: its slots' action and observation spaces."""
         self.boxes, self.spaces = self.receive()
+
+    def attach(self, buffer: SharedArrays) -> None:
+        """Give the worker the shared buffer and its rows in it."""
+        self.call("attach", (buffer.name, buffer.layout, self.slots))
 
     def send(self, command: str, payload) -> None:
         self.conn.send((command, payload))
@@ -408,8 +505,36 @@ class _Shard:
             self.process.kill()
 
 
+class _Rows:
+    """A worker's view of its rows in the parent's shared buffer."""
+
+    def __init__(self, name: str, layout: dict, slots: np.ndarray):
+        self.buffer = SharedArrays(layout, name)
+        slots = np.asarray(slots, dtype=np.int64)
+        self.rows, self.slots = _rows(slots), slots
+        self.obs, self.first = self.buffer.group("obs"), self.buffer.group("first")
+
+    def write_obs(self, obs: dict[str, np.ndarray]) -> None:
+        for key, value in obs.items():
+            self.obs[key][self.rows] = value
+
+    def write_step(self, res: StepResult) -> None:
+        self.write_obs(res.obs)
+        arrays = self.buffer.arrays
+        for name in STEP_FLAGS:
+            arrays[name][self.rows] = getattr(res, name)
+        again = np.flatnonzero(res.restarted)
+        if len(again):
+            for key, value in res.first.items():
+                self.first[key][self.slots[again]] = value[again]
+
+    def actions(self, width: int) -> np.ndarray:
+        return self.buffer.arrays["actions"][self.rows, :width]
+
+
 def _serve(conn, specs: list, copy_ids: list[int], options: dict) -> None:
-    """A worker: one ``BatchedDriving`` of ``specs`` answering the parent's commands."""
+    """A worker: one ``BatchedDriving`` of ``specs`` answering the parent's commands, its inputs and
+    outputs in its rows of the parent's shared buffer."""
     import traceback
 
     try:
@@ -418,21 +543,28 @@ def _serve(conn, specs: list, copy_ids: list[int], options: dict) -> None:
     except BaseException as exc:  # noqa: BLE001 - reported to the parent
         conn.send(("error", traceback.format_exc(), exc if isinstance(exc, Exception) else None))
         return
+    rows: _Rows | None = None
     while True:
         command, payload = conn.recv()
         try:
             if command == "close":
                 env.close()
+                if rows is not None:
+                    rows.obs = rows.first = {}
+                    rows.buffer.release()
                 conn.send(("ok", None))
                 return
-            if command == "seed":
+            if command == "attach":
+                rows = _Rows(*payload)
+                conn.send(("ok", None))
+            elif command == "seed":
                 env.set_seed(payload)
                 conn.send(("ok", None))
             elif command == "reset":
-                conn.send(("ok", {k: v.copy() for k, v in env.reset(payload).items()}))
+                rows.write_obs(env.reset(payload))
+                conn.send(("ok", None))
             elif command == "step":
-                res = env.step(payload)
-                conn.send(("ok", ({k: v.copy() for k, v in res.obs.items()}, res.reward, res.terminated, res.truncated,
-                                  res.acted, res.restarted, {k: v.copy() for k, v in res.first.items()})))  # fmt: skip
+                rows.write_step(env.step(rows.actions(env.action_width)))
+                conn.send(("ok", None))
         except Exception as exc:  # noqa: BLE001 - reported to the parent
             conn.send(("error", traceback.format_exc(), exc))

@@ -1,0 +1,66 @@
+"""The worker pool of the batched env: workers write their slots' observations and flags into one
+shared-memory buffer that this process reads in place, and the buffer goes with the env."""
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from smarts.benchmark.suites import load_suite
+from smarts.env.batched import BatchedDriving
+from smarts.env.batched.driving import SharedArrays
+
+
+def _specs(*names: str) -> list:
+    suite = {s.name: s.spec for s in load_suite("adaptive").scenarios}
+    return [suite[n] for n in names]
+
+
+def _segments() -> set[str]:
+    shm = Path("/dev/shm")
+    return {p.name for p in shm.iterdir()} if shm.is_dir() else set()
+
+
+def test_workers_write_into_one_shared_buffer_read_in_place_and_freed_on_close():
+    before = _segments()
+    specs = _specs("a01_straight_free", "a02_straight_two_followers_low", "a01_straight_free")
+    env = BatchedDriving(specs, workers=2)
+    here = BatchedDriving(specs)
+    try:
+        assert [shard.rows for shard in env.shards] == [slice(0, 3), slice(3, 4)]  # contiguous blocks of rows
+        name = env._buffer.name
+        if os.path.isdir("/dev/shm"):
+            assert name.lstrip("/") in _segments()
+        env.set_seed(5)
+        here.set_seed(5)
+        obs, mine = env.reset(), here.reset()
+        for key in obs:
+            assert obs[key] is env._buffer.arrays[f"obs/{key}"]  # the shared rows themselves, no copy
+            np.testing.assert_array_equal(obs[key], mine[key])
+        rng = np.random.default_rng(0)
+        for _ in range(60):
+            actions = rng.uniform(-1.0, 1.0, size=(env.num_slots, env.action_width))
+            a, b = env.step(actions), here.step(actions)
+            for key in a.obs:
+                np.testing.assert_array_equal(a.obs[key], b.obs[key])
+            for field in ("reward", "terminated", "truncated", "acted", "restarted"):
+                np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    finally:
+        env.close()
+        here.close()
+    assert _segments() <= before  # the block is unlinked with the env
+
+
+def test_shared_arrays_attach_by_name_to_the_same_memory():
+    layout = {"obs/x": ((4, 3), "<f4"), "reward": ((4,), "<f4"), "acted": ((4,), "|b1")}
+    owner = SharedArrays(layout)
+    other = SharedArrays(layout, owner.name)
+    try:
+        other.arrays["obs/x"][2] = [1.0, 2.0, 3.0]
+        other.arrays["acted"][1] = True
+        np.testing.assert_array_equal(owner.group("obs")["x"][2], [1.0, 2.0, 3.0])
+        assert owner.arrays["acted"].tolist() == [False, True, False, False]
+        assert all(v.ctypes.data % SharedArrays.ALIGN == 0 for v in owner.arrays.values())
+    finally:
+        other.release()
+        owner.release(unlink=True)
