@@ -102,7 +102,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "python -m train vcr-classifier": (
         NOT_RUN, "about 15 minutes; tests/planners/test_training.py runs it on a two-scenario suite",
     ),
-    "python -m smarts.benchmark.metrics runs/benchmark/collaborative/logs": (
+    "python -m smarts.benchmark.metrics runs/benchmark/collaborative/latest/logs": (
         RUN, "on the logs of a one-scenario, one-episode collaborative benchmark of the reference agents",
     ),
     "python -m train benchmark --suite collaborative --ray-address local": (
@@ -118,14 +118,14 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "python -m train benchmark --suite adaptive --agent zoo:keep-lane --episodes 1": (
         PARSE, "11 scenarios x 4 agents, minutes",
     ),
-    "smarts viz runs/benchmark/adaptive/logs": (
+    "smarts viz runs/benchmark/adaptive/latest/logs": (
         NOT_RUN, "serves until Ctrl-C; tests/viz/test_server.py and test_browser.py serve such a folder",
     ),
     "python -m train enjoy --agent zoo:platoon-rtp --scenario adaptive:a08_lead_turns_left_at_junction --viz": (
         NOT_RUN, "waits for a browser; tests/viz/test_browser.py streams a live env into chromium",
     ),
-    "python -m train enjoy --agent zoo:keep-lane --scenario adaptive:a01_straight_free --video drive.mp4": (
-        NOT_RUN, "tests/viz/test_enjoy.py runs it with --max-steps 40 and reads the video back",
+    "python -m train enjoy --agent zoo:keep-lane --scenario adaptive:a08_lead_turns_left_at_junction --video drive.mp4": (
+        NOT_RUN, "tests/viz/test_enjoy.py runs it on a01 with --max-steps 40 and reads the video back",
     ),
     "smarts replay info trajectories.csv --format ngsim --json": (
         NOT_RUN, "needs the user's NGSIM file; tests/replay/test_replay_cli.py runs it on a CSV it writes",
@@ -187,8 +187,9 @@ def test_long_commands_parse_and_name_valid_settings(command):
 
 
 def test_metrics_command_scores_a_benchmark_logs_folder(tmp_path, monkeypatch):
-    # A real benchmark run in the layout of the README's (runs/benchmark/collaborative/logs/<agent>/
-    # <scenario>/episode_000.npz, one folder per agent), cut down to one short scenario and episode.
+    # A real benchmark run in the layout of the README's (runs/benchmark/collaborative/001/logs/<agent>/
+    # <scenario>/episode_000.npz, one folder per agent; latest -> 001), cut down to one short scenario
+    # and episode.
     import yaml
 
     from train.__main__ import main as train_main

@@ -9,7 +9,7 @@ from smarts import exit_codes
 from smarts.viz.live import DEFAULT_HOST, DEFAULT_PORT
 
 DESCRIPTION = """Serve the diagnostic viewer: recorded episodes under PATH (episode recordings and
-benchmark logs, e.g. runs/benchmark/adaptive/logs) and live envs (smarts.viz.WatchedEnv(env,
+benchmark logs, e.g. runs/benchmark/adaptive/latest/logs) and live envs (smarts.viz.WatchedEnv(env,
 live=True)). Open the printed address in a browser."""
 
 
