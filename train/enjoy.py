@@ -178,6 +178,7 @@ class EpisodeFilm:
         self.camera = FollowCamera(env.sim, scenario=self.scenario) if draw else None
         self.returns = dict.fromkeys(env.possible_agents, 0.0)
         self.ended: dict[str, str] = {}
+        self.env_said: dict[str, str] = {}  # what the env's events called an end the benchmark reads otherwise
         self.steps = 0
         self._last: tuple[float | None, list[str]] = (None, [])
 
@@ -206,7 +207,8 @@ class EpisodeFilm:
         parts = []
         for agent, total in self.returns.items():
             end = self.ended.get(agent, "still driving at the end")
-            parts.append(f"{agent} {total:+.2f} ({'ended: ' + end if agent in self.ended else end})")
+            said = f" (the env's events: {self.env_said[agent]})" if self.env_said.get(agent) else ""
+            parts.append(f"{agent} {total:+.2f} ({'ended: ' + end if agent in self.ended else end}{said})")
         return "; ".join(parts)
 
 
@@ -340,8 +342,8 @@ def _benchmark_view(log, film: EpisodeFilm) -> str:
 
     for agent, trace in log.agents.items():
         if trace.num_steps and trace.flag("left_map").any():
-            said = film.ended.get(agent)
-            film.ended[agent] = "left the map at its route's end" + (f" (the env's events: {said})" if said else "")
+            film.env_said[agent] = film.ended.get(agent, "")
+            film.ended[agent] = "left the map at its route's end"
     if not log.agents:
         return "none (no agent drove)"
     scores = score_episode(log)
