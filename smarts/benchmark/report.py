@@ -455,9 +455,11 @@ def _trajectory_plots(plots: Path, suite: Suite, agents: list[str], results: lis
                     label=f"other road users ({len(tracks)}; square: last seen)" if k == 0 else None)  # fmt: skip
             ax.plot(xy[-1:, 0], xy[-1:, 1], "s", color=TRAFFIC_COLOUR, markersize=3, zorder=2)
         for k, xy in enumerate(lead_tracks.values()):
-            ax.plot(xy[:, 0], xy[:, 1], color="black", linewidth=2.2, linestyle=(0, (5, 2)), zorder=3,
+            # Above the agents (who drive where it drove), dashed so their colours show between.
+            ax.plot(xy[:, 0], xy[:, 1], color="black", linewidth=1.6, linestyle=(0, (5, 3)), zorder=6,
                     label="lead vehicle" if k == 0 else None)  # fmt: skip
-            ax.plot(xy[:1, 0], xy[:1, 1], "o", color="black", markersize=5, zorder=3)
+            ax.plot(xy[:1, 0], xy[:1, 1], "o", color="black", markersize=5, zorder=6)
+            ax.plot(xy[-1:, 0], xy[-1:, 1], "x", color="black", markersize=6, mew=1.5, zorder=6)
         for agent, log in logs.items():
             several = len(log.agents) > 1
             for j, (agent_id, t) in enumerate(log.agents.items()):
