@@ -70,16 +70,17 @@ class ObservationLayout:
 
 
 def mlp(sizes: list[int], out: int, final_gain: float = 1.0) -> nn.Sequential:
-    layers: list[nn.Module] = []
-    for a, b in zip(sizes[:-1], sizes[1:]):
-        layer = nn.Linear(a, b)
-        nn.init.orthogonal_(layer.weight, np.sqrt(2))
+    """torchrl's ``MLP`` (tanh between layers; its layers are named as ``nn.Sequential``'s, so
+    checkpoints keep their keys), initialised orthogonally as PPO implementations do: gain
+    sqrt(2) for hidden layers, ``final_gain`` for the output (small for the actor's mean)."""
+    from torchrl.modules import MLP
+
+    net = MLP(in_features=sizes[0], out_features=out, num_cells=list(sizes[1:]), activation_class=nn.Tanh)
+    linears = [m for m in net if isinstance(m, nn.Linear)]
+    for layer in linears:
+        nn.init.orthogonal_(layer.weight, final_gain if layer is linears[-1] else np.sqrt(2))
         nn.init.zeros_(layer.bias)
-        layers += [layer, nn.Tanh()]
-    head = nn.Linear(sizes[-1], out)
-    nn.init.orthogonal_(head.weight, final_gain)
-    nn.init.zeros_(head.bias)
-    return nn.Sequential(*layers, head)
+    return net
 
 
 class Actor(nn.Module):
@@ -93,6 +94,7 @@ class Actor(nn.Module):
         init_log_std: float | list[float] = -0.5,
     ):
         super().__init__()
+        self.hidden = tuple(hidden)
         self.net = mlp([obs_size, *hidden], action_size, final_gain=0.01)
         start = torch.as_tensor(init_log_std, dtype=torch.float32).expand(action_size).clone()
         self.log_std = nn.Parameter(start)
@@ -149,10 +151,13 @@ class ObsNormalizer(nn.Module):
         scaled = ((x - self.mean) / std).clamp(-float(self.clip_value), float(self.clip_value))
         return torch.where(self.raw > 0, x, scaled)
 
-    def clipped_fraction(self, x: torch.Tensor) -> float:
-        """Share of the (non-raw) normalised inputs that sit at the clip: a health check."""
-        std = torch.sqrt(self.var + 1e-8).clamp(min=float(self.std_floor))
-        at_clip = ((x - self.mean) / std).abs() >= float(self.clip_value)
+    def clipped_fraction(self, x: torch.Tensor, normalised: torch.Tensor | None = None) -> float:
+        """Share of the (non-raw) normalised inputs that sit at the clip: a health check
+        (``normalised``: ``self(x)`` when the caller has it already)."""
+        if normalised is None:
+            std = torch.sqrt(self.var + 1e-8).clamp(min=float(self.std_floor))
+            normalised = (x - self.mean) / std
+        at_clip = normalised.abs() >= float(self.clip_value)
         keep = self.raw <= 0
         return float(at_clip[..., keep].float().mean()) if bool(keep.any()) else 0.0
 
@@ -264,9 +269,10 @@ def save_checkpoint(path: Path, *, actor: Actor, critic: Critic, normalizer: Obs
     the interface and ``lane_relative`` settings there)."""
     blob = {
         "format": CHECKPOINT_FORMAT,
-        "actor": actor.state_dict(),
-        "critic": critic.state_dict(),
-        "normalizer": normalizer.state_dict(),
+        # CPU tensors whatever device trained them: evaluation loads them anywhere.
+        "actor": {k: v.cpu() for k, v in actor.state_dict().items()},
+        "critic": {k: v.cpu() for k, v in critic.state_dict().items()},
+        "normalizer": {k: v.cpu() for k, v in normalizer.state_dict().items()},
         "layout": {"keys": list(layout.keys), "shapes": [list(s) for s in layout.shapes]},
         "action": {"space": action_space, "controller": controller, "mean": "linear",
                    "low": [float(v) for v in low], "high": [float(v) for v in high]},

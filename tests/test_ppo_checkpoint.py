@@ -65,12 +65,13 @@ def test_normaliser_passes_flags_raw_and_never_pins_a_feature_to_the_clip():
     almost always 1, a lane width) is divided by at least the floor, so when it does change it
     does not jump to the clip."""
     from train.config import load_config
-    from train.ppo import build_modules, make_env
+    from train.ppo import env_parts, make_env
 
-    cfg = load_config("platoon", overrides={"envs": 4})
+    cfg = load_config("platoon", overrides={"envs": 4, "workers": 0})
     env = make_env(cfg)
     try:
-        layout, normalizer, *_ = build_modules(env, cfg)
+        parts = env_parts(env, cfg)
+        layout, normalizer = parts.layout, parts.normalizer
         rollout = env.rollout(60, break_when_any_done=False)
     finally:
         env.close()

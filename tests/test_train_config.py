@@ -92,10 +92,13 @@ def test_sections_have_the_fields_and_defaults_of_the_settings_they_build():
             assert name == "task" or info.default == own[name], name
 
 
-def test_device_names_a_place_for_the_batched_backends_torch_stages(tmp_path, capsys):
+def test_device_and_sim_device_name_where_the_learner_and_the_torch_stages_run(tmp_path, capsys):
     import torch
 
-    assert load_config("platoon").device == "cpu"
+    assert load_config("platoon").device == load_config("platoon").sim_device == "cpu"
+    assert load_config("platoon", overrides={"sim_device": "torch-cpu"}).sim_device == "torch-cpu"
+    with pytest.raises(ConfigError, match=r"--sim-device: sim_device: unknown device 'gpu'"):
+        load_config("platoon", overrides={"sim_device": "gpu"})
     cfg = load_config("platoon", overrides={"backend": "batched", "device": "torch-cpu"})
     assert cfg.device == "torch-cpu"
     # A config naming a GPU stays readable without one (a run's config.json on another machine)...
@@ -113,12 +116,16 @@ def test_device_names_a_place_for_the_batched_backends_torch_stages(tmp_path, ca
         assert main(["ppo", "--task", "platoon", "--backend", "batched", "--device", "cuda", "--out-dir", str(out)]) == 2
         assert "device: 'cuda' asks for a GPU but no CUDA GPU is visible" in capsys.readouterr().err
         assert not out.exists()
+        for lib in ("torchrl", "sb3"):
+            args = ["ppo", "--task", "platoon", "--lib", lib, "--sim-device", "cuda", "--out-dir", str(out)]
+            assert main(args) == 2 and not out.exists()
 
 
-def test_both_trainers_hand_the_device_to_the_batched_backend():
+def test_both_trainers_hand_the_sim_device_to_the_batched_backend():
+    """``sim_device`` places the simulation's torch stages (``device`` is the learner's)."""
     import torch
 
-    from train.ppo import make_env
+    from train.ppo import make_driving, make_env
     from train.sb3_ppo import make_vec_env
 
     from smarts.dynamics.agent_provider import AgentProvider
@@ -128,7 +135,13 @@ def test_both_trainers_hand_the_device_to_the_batched_backend():
 
     for backend, device, expected in (("batched", "torch-cpu", torch.device("cpu")), ("per_env", "torch-cpu", torch.device("cpu")),
                                       ("batched", "cpu", None)):  # fmt: skip
-        cfg = load_config("platoon", overrides={"backend": backend, "device": device, "envs": "2"})
+        cfg = load_config("platoon", overrides={"backend": backend, "sim_device": device, "device": "torch-cpu",
+                                                "envs": "2", "workers": "0"})  # fmt: skip
+        driving = make_driving(cfg)
+        try:
+            assert agent_device(driving) == {expected}
+        finally:
+            driving.close()
         env = make_env(cfg)
         try:
             assert agent_device(env.base_env.driving) == {expected}

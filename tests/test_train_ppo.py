@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 import torch
+from tensordict import TensorDict
 
 from agents.ppo import PPOPolicy
 from train.__main__ import main
@@ -111,23 +112,21 @@ def test_training_config_takes_every_suite_scenario_and_the_task_reward():
         load_config("platoon", overrides={"reward": "{speed_bonus: 1}"})
 
 
-def test_the_ppo_loss_normalises_with_the_statistics_the_policy_acts_with():
-    """torchrl's losses keep references to the policy's buffers: the observation statistics must be
-    updated in place, or the loss scores actions under other inputs than they were taken with."""
-    from torchrl.objectives import ClipPPOLoss
-
+def test_the_ray_modules_normalise_with_the_statistics_the_learner_updates():
+    """The TorchRL modules a Ray collector acts with hold references to the learner's buffers: the
+    observation statistics must be updated in place, or the collectors would act on stale inputs."""
     from train.config import load_config
-    from train.ppo import build_modules, make_env
+    from train.ppo import collection_modules, env_parts, make_env
 
-    cfg = load_config("platoon", overrides={"envs": 1})
+    cfg = load_config("platoon", overrides={"envs": 1, "workers": 0})
     env = make_env(cfg)
     try:
-        layout, normalizer, _, _, actor, critic, _, _ = build_modules(env, cfg)
-        loss = ClipPPOLoss(actor, critic)
-        normalizer.update(torch.randn(64, layout.size) * 3.0 + 1.0)
-        for name, buffer in loss.named_buffers():
+        parts = env_parts(env, cfg)
+        actor = collection_modules(parts, env.action_spec)
+        parts.normalizer.update(torch.randn(64, parts.layout.size) * 3.0 + 1.0)
+        for name, buffer in actor.named_buffers():
             if name.endswith(("normalizer.mean", "normalizer.var", "normalizer.count")):
-                own = getattr(normalizer, name.rsplit(".", 1)[1])
+                own = getattr(parts.normalizer, name.rsplit(".", 1)[1])
                 assert torch.equal(buffer, own), name
     finally:
         env.close()
@@ -209,17 +208,22 @@ def test_init_from_starts_a_new_run_from_trained_networks_in_another_action_spac
     assert "trained with observation interface" in capsys.readouterr().err and not (tmp_path / "x").exists()
 
 
-def test_a_budget_that_is_not_a_whole_number_of_batches_trains_without_torchrl_warnings(tmp_path):
+@pytest.mark.parametrize("lib", ["torchrl", "sb3"])
+def test_total_steps_is_honoured_within_one_step_of_every_slot_on_both_libraries(tmp_path, lib):
+    """3 slots (a01: one follower, a02: two), batches of 64 frames (22 steps of every slot) and a
+    budget of 100: two batches, the second only what is still needed: 102 steps (34 of every
+    slot), the same with either library; no library warns about the last, smaller batch."""
     import warnings
 
-    args = ["ppo", "--task", "platoon", "--scenarios", "adaptive:a01_straight_free", "--total-steps", "100",
-            "--frames-per-batch", "64", "--minibatch-size", "64", "--epochs", "1", "--envs", "1",
+    args = ["ppo", "--task", "platoon", "--lib", lib, "--scenarios",
+            "adaptive:a01_straight_free,adaptive:a02_straight_two_followers_low", "--total-steps", "100",
+            "--frames-per-batch", "64", "--minibatch-size", "32", "--epochs", "1", "--envs", "2",
             "--eval-episodes", "0", "--out-dir", str(tmp_path / "run"), "--quiet"]  # fmt: skip
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         assert main(args) == 0
-    assert not [w for w in caught if "divisible" in str(w.message)]
-    assert torch.load(tmp_path / "run" / "final.pt", weights_only=True)["step"] == 128  # two whole batches
+    assert not [w for w in caught if "divisible" in str(w.message) or "mini-batch size" in str(w.message)]
+    assert torch.load(tmp_path / "run" / "final.pt", weights_only=True)["step"] == 102
 
 
 def test_ctrl_c_saves_interrupted_pt_and_exits_130_without_a_traceback(tmp_path):
@@ -283,20 +287,24 @@ def test_every_run_gets_its_own_numbered_folder_and_latest_points_to_the_newest(
 
 def test_the_ppo_settings_reach_torchrl_objects():
     from train.config import load_config
-    from train.ppo import build_learner, build_modules, make_env
+    from train.ppo import Learner, driving_parts, make_driving
 
     cfg = load_config("platoon", overrides={"envs": 1, "scenarios": "adaptive:a01_straight_free", "gamma": 0.9,
                                             "gae_lambda": 0.8, "clip_epsilon": 0.3, "entropy_coeff": 0.02,
-                                            "critic_coeff": 0.7, "lr": 3e-4})  # fmt: skip
-    env = make_env(cfg)
+                                            "critic_coeff": 0.7, "lr": 3e-4, "minibatch_size": 32, "workers": 0,
+                                            "hidden": [32, 16]})  # fmt: skip
+    driving = make_driving(cfg)
     try:
-        *_, actor, critic, _, _ = build_modules(env, cfg)
-        advantage, loss, optimizer = build_learner(cfg, actor, critic)
+        parts = driving_parts(driving, cfg)
     finally:
-        env.close()
-    assert float(advantage.gamma) == pytest.approx(0.9) and float(advantage.lmbda) == pytest.approx(0.8)
+        driving.close()
+    learner = Learner(cfg, parts, torch.device("cpu"))
+    loss = learner.loss
     assert float(loss.clip_epsilon) == pytest.approx(0.3) and float(loss.entropy_coeff) == pytest.approx(0.02)
-    assert float(loss.critic_coeff) == pytest.approx(0.7) and optimizer.param_groups[0]["lr"] == 3e-4
+    assert float(loss.critic_coeff) == pytest.approx(0.7) and learner.optimizer.param_groups[0]["lr"] == 3e-4
+    assert learner._sampler(100).batch_size == 32
+    linears = [m for m in parts.actor_net.net if isinstance(m, torch.nn.Linear)]
+    assert [m.out_features for m in linears] == [32, 16, 2]  # torchrl's MLP with the config's layers
 
 
 def test_the_ppo_settings_reach_the_sb3_model():
@@ -340,7 +348,7 @@ def test_workers_may_hold_copies_with_different_agent_counts():
     from train.ppo import make_env
 
     cfg = load_config("platoon", overrides={"envs": 2, "workers": 2})
-    split, here = make_env(cfg), make_env(cfg.model_copy(update={"workers": 1}))
+    split, here = make_env(cfg), make_env(cfg.model_copy(update={"workers": 0}))
     try:
         assert split.batch_size == here.batch_size == torch.Size([3])
         assert [len(shard.slots) for shard in split.base_env.driving.shards] == [1, 2]
@@ -354,38 +362,105 @@ def test_workers_may_hold_copies_with_different_agent_counts():
         here.close()
 
 
-def test_the_update_reads_the_same_inputs_and_values_as_the_collection_modules():
-    """The update runs the networks on a flat observation normalised once per batch, and reuses a
-    step's value as the previous step's next value: both must equal what the collection modules
-    (which flatten and normalise on every call) and a critic pass over every next observation give,
-    also across episode ends (auto-resets) and the batch's last step."""
-    from torchrl.collectors import Collector
-
+def _platoon_parts(envs: int, **overrides):
     from train.config import load_config
-    from train.ppo import FLAT_OBSERVATION, ValueInputs, build_modules, make_env, update_modules
 
-    cfg = load_config("platoon", overrides={"envs": 2, "backend": "batched", "scenarios": "adaptive:a01_straight_free"})
+    cfg = load_config("platoon", overrides={"envs": envs, "workers": 0, "scenarios": "adaptive:a01_straight_free,"
+                                            "adaptive:a02_straight_two_followers_low", **overrides})  # fmt: skip
+    return cfg
+
+
+def test_the_slot_collector_plays_what_the_torchrl_env_plays():
+    """The collector on the flat buffers against the TorchRL env over the same copies and seed,
+    driven by the collector's own actions: the same observations the policy acted on, valid
+    flags, rewards, ends and next observations (the final one where an episode ended), over
+    several episode ends and the batch's last step, so both trainers learn from the same data."""
+    from train.ppo import Inference, SlotCollector, driving_parts, make_driving, make_env
+
+    cfg = _platoon_parts(3, controller="direct", init_log_std=[0.5])  # wide raw actions: crashes, waits, restarts
+    driving = make_driving(cfg)
     env = make_env(cfg)
     try:
-        layout, normalizer, actor_net, critic_net, actor, critic, _, _ = build_modules(env, cfg)
-        normalizer.update(torch.randn(256, layout.size) * 2.0 + 0.5)  # statistics that change inputs
-        slots = int(np.prod(env.batch_size))
-        collector = Collector(env, actor, frames_per_batch=slots * 300, total_frames=slots * 300,
-                              auto_register_policy_transforms=False)  # fmt: skip
-        data = next(iter(collector)).reshape(slots, -1)
-        collector.shutdown()
-        assert bool(data["next", "done"].any()), "the batch must hold an episode end"
-        inputs = ValueInputs(data, layout, normalizer)
-        inputs.write_values(data, critic_net)
-        with torch.no_grad():
-            expected = critic(data.clone())["state_value"]
-            expected_next = critic(data["next"].clone())["state_value"]
-            loss_actor, loss_critic = update_modules(actor, critic, env.action_spec)
-            dist_update = loss_actor.get_dist(data.select(FLAT_OBSERVATION))
-            dist_collect = actor.get_dist(data.select("observation"))
+        parts = driving_parts(driving, cfg)
+        parts.normalizer.update(torch.randn(256, parts.layout.size) * 2.0 + 0.5)
+        policy = Inference(parts, torch.device("cpu"), seed=3)
+        policy.sync(parts)
+        batch = SlotCollector(driving, parts.layout, policy, torch.device("cpu")).collect(150)
+        assert bool(batch.done.any()) and not bool(batch.valid.all())  # ends and waiting slots
+        td = env.reset()
+        flat = parts.layout.flatten
+        steps, slots, _ = batch.obs.shape
+        next_obs = []
+        for t in range(steps):
+            assert torch.equal(flat(dict(td["observation"].items())), batch.obs[t]), t
+            assert torch.equal(td["valid"][:, 0], batch.valid[t]), t
+            td = env.step(td.set("action", batch.action[t].clone()))
+            nxt = td["next"]
+            assert torch.equal(nxt["reward"][:, 0], batch.reward[t]), t
+            assert torch.equal(nxt["done"][:, 0], batch.done[t]) and torch.equal(nxt["terminated"][:, 0], batch.terminated[t])
+            next_obs.append(flat(dict(nxt["observation"].items())))
+            td = env.step_mdp(td)
+            if bool(td["done"].any()):
+                td = env.reset(td.set("_reset", td["done"].clone()))
+        following = torch.stack(next_obs)
+        assert torch.equal(batch.own_next_obs, following[batch.own_next])
+        assert bool(batch.own_next[-1].all())
+        not_own = ~batch.own_next[:-1] & batch.valid[:-1]
+        assert torch.equal(following[:-1][not_own], batch.obs[1:][not_own])  # else the next step's own observation
+        ended = batch.done & batch.valid
+        assert len(batch.episode_returns) == int(ended.sum())
     finally:
+        driving.close()
         env.close()
-    assert torch.allclose(data["state_value"], expected, atol=1e-5)
-    assert torch.allclose(data["next", "state_value"], expected_next, atol=1e-5)
-    assert bool(inputs.own[:, -1].all()) and int(inputs.own.sum()) < inputs.own.numel() // 2
-    assert torch.allclose(dist_update.log_prob(data["action"]), dist_collect.log_prob(data["action"]), atol=1e-5)
+
+
+def test_the_update_reads_the_values_and_log_probabilities_of_the_acting_policy():
+    """The learner's values (one critic pass, the next value taken from the following step where
+    it is the slot's own) equal a critic pass over every next observation, and the loss's actor
+    scores an action as the acting copy did."""
+    from train.ppo import FLAT_OBSERVATION, Inference, Learner, SlotCollector, driving_parts, loss_modules, make_driving
+
+    cfg = _platoon_parts(2)
+    driving = make_driving(cfg)
+    try:
+        parts = driving_parts(driving, cfg)
+        parts.normalizer.update(torch.randn(256, parts.layout.size) * 2.0 + 0.5)
+        policy = Inference(parts, torch.device("cpu"), seed=1)
+        policy.sync(parts)
+        batch = SlotCollector(driving, parts.layout, policy, torch.device("cpu")).collect(120)
+    finally:
+        driving.close()
+    learner = Learner(cfg, parts, torch.device("cpu"))
+    with torch.no_grad():
+        x = parts.normalizer(batch.obs)
+        value, next_value = learner._values(x, parts.normalizer(batch.own_next_obs), batch.own_next)
+        expected = parts.critic_net(x).squeeze(-1)
+        following = torch.cat([x[1:], x[-1:]])  # not used where own_next
+        following[batch.own_next] = parts.normalizer(batch.own_next_obs)
+        expected_next = parts.critic_net(following).squeeze(-1)
+        actor, _ = loss_modules(parts)
+        dist = actor.get_dist(TensorDict({FLAT_OBSERVATION: x.reshape(-1, x.shape[-1])}, batch_size=[x.shape[0] * x.shape[1]]))
+        log_prob = dist.log_prob(batch.action.reshape(-1, batch.action.shape[-1]))
+    assert torch.allclose(value, expected, atol=1e-5) and torch.allclose(next_value, expected_next, atol=1e-5)
+    assert torch.allclose(log_prob, batch.log_prob.reshape(-1), atol=1e-4)
+
+
+
+
+@pytest.mark.parametrize("lib", ["torchrl", "sb3"])
+@pytest.mark.parametrize("device", ["torch-cpu", pytest.param("cuda", marks=pytest.mark.skipif(
+    not torch.cuda.is_available(), reason="no CUDA GPU"))])  # fmt: skip
+def test_the_learner_runs_on_the_named_device_with_the_simulations_on_cpu_workers(tmp_path, lib, device):
+    """``--device``: inference and updates on that device (torch-cpu: the GPU's code path, explicit
+    transfers included, on the CPU), the copies in a worker process; the checkpoint is plain CPU
+    tensors that evaluation loads anywhere."""
+    out = tmp_path / "run"
+    args = ["ppo", "--task", "platoon", "--lib", lib, "--device", device, "--workers", "1", "--scenarios",
+            "adaptive:a01_straight_free", "--total-steps", "128", "--frames-per-batch", "64", "--minibatch-size", "32",
+            "--epochs", "2", "--envs", "2", "--eval-episodes", "0", "--out-dir", str(out), "--quiet"]  # fmt: skip
+    assert main(args) == 0
+    blob = torch.load(out / "final.pt", weights_only=True)
+    assert blob["step"] == 128 and blob["config"]["device"] == device
+    weights = blob["actor"] if lib == "torchrl" else blob["policy"]
+    assert all(t.device.type == "cpu" for t in weights.values())
+    assert np.isfinite(blob["metrics"]["loss/objective"])

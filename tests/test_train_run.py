@@ -211,3 +211,52 @@ def test_best_pt_holds_the_highest_held_out_score_so_far(tmp_path, monkeypatch):
                  "--out-dir", str(out), "--resume", str(out / "last.pt")]) == 0  # fmt: skip
     assert (out / "evals" / "step_128" / "results.json").is_file() and (out / "eval" / "results.json").is_file()
     assert torch.load(out / "best.pt", weights_only=True)["step"] == 64
+
+
+@pytest.mark.parametrize("lib", ["torchrl", "sb3"])
+def test_tensorboard_holds_the_update_diagnostics_and_the_config(tmp_path, lib):
+    """Read back from the event files: clip fraction, explained variance and gradient norm after
+    every batch, a KL estimate that is never negative, and the run's settings as text."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    out = tmp_path / lib
+    args = ["ppo", "--task", "platoon", "--lib", lib, "--scenarios", "adaptive:a01_straight_free", "--total-steps",
+            "192", "--eval-episodes", "0", "--out-dir", str(out), *SMALL]  # fmt: skip
+    assert main(args) == 0
+    acc = EventAccumulator(str(out / "tensorboard"), size_guidance={"scalars": 0, "tensors": 0})
+    acc.Reload()
+
+    def values(tag: str) -> np.ndarray:
+        return np.array([e.value for e in acc.Scalars(tag)])
+
+    batches = 3  # 192 steps of 2 slots in batches of 64
+    clip, explained, grad, kl = (values(t) for t in ("policy/clip_fraction", "train/explained_variance",
+                                                      "train/grad_norm", "policy/kl_approx"))  # fmt: skip
+    assert len(clip) == len(explained) == len(grad) == len(kl) == batches
+    assert ((clip >= 0) & (clip <= 1)).all() and np.isfinite(explained).all()
+    assert (grad > 0).all() and (kl >= 0).all()
+    text = acc.Tensors("config/text_summary")[0].tensor_proto.string_val[0].decode()
+    config = json.loads(text.strip().strip("`").strip())
+    assert config == json.loads((out / "config.json").read_text()) and config["lib"] == lib
+
+
+@pytest.mark.parametrize("lib", ["torchrl", "sb3"])
+def test_a_log_that_is_not_a_terminal_gets_the_run_folder_first_then_one_line_per_batch(tmp_path, lib):
+    """stdout to a pipe (a cluster job's log): the run folder and the TensorBoard command before
+    anything else, then one plain progress line per batch (no bar's control characters)."""
+    import subprocess
+    import sys
+
+    out = tmp_path / lib
+    command = [sys.executable, "-m", "train", "ppo", "--task", "platoon", "--lib", lib, "--scenarios",
+               "adaptive:a01_straight_free", "--total-steps", "192", "--frames-per-batch", "64", "--minibatch-size",
+               "32", "--epochs", "1", "--envs", "2", "--eval-episodes", "0", "--out-dir", str(out)]  # fmt: skip
+    done = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    lines = done.stdout.splitlines()
+    assert lines[0] == f"run folder: {out}"
+    assert lines[1] == f"TensorBoard: tensorboard --logdir {out / 'tensorboard'}"
+    progress = [line for line in lines if line.startswith("PPO")]
+    assert len(progress) == 3 and "\x1b" not in done.stdout
+    assert progress[0].startswith("PPO") and "64/192 steps (33%)" in progress[0] and "env-steps/s" in progress[0]
+    assert "192/192 steps (100%)" in progress[-1]

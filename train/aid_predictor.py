@@ -138,7 +138,7 @@ def evaluate(net, data: dict[str, torch.Tensor], batch: int = 256) -> dict[str, 
 
 def train(args: argparse.Namespace) -> dict:
     from torch.utils.tensorboard import SummaryWriter
-    from tqdm import tqdm
+    from train.run import Bar
 
     from agents.planners.nets import AIDPredictor, save_net
 
@@ -161,7 +161,7 @@ def train(args: argparse.Namespace) -> dict:
     gen = torch.Generator().manual_seed(args.seed)
     n = len(train_set["ego"])
     best, best_metrics = np.inf, {}
-    bar = tqdm(range(1, args.steps + 1), desc="aid-predictor", disable=args.quiet)
+    bar = Bar(range(1, args.steps + 1), desc="aid-predictor", disable=args.quiet)
     for step in bar:
         idx = torch.randint(0, n, (args.batch,), generator=gen)
         trajs, scores = net(train_set["ego"][idx], train_set["neighbours"][idx])
@@ -181,7 +181,7 @@ def train(args: argparse.Namespace) -> dict:
             if metrics["fde"] < best:
                 best, best_metrics = metrics["fde"], {**metrics, "step": step}
                 save_net(out / "best.pt", "aid-predictor", net, best_metrics)
-            tqdm.write(f"step {step}: held-out FDE {metrics['fde']:.2f} m (CV {metrics['cv_fde']:.2f} m, "
+            Bar.write(f"step {step}: held-out FDE {metrics['fde']:.2f} m (CV {metrics['cv_fde']:.2f} m, "
                        f"min over modes {metrics['min_fde']:.2f} m)")  # fmt: skip
     minutes = (time.time() - started) / 60
     summary = {**best_metrics, "accepted": bool(best_metrics.get("fde", np.inf) < best_metrics.get("cv_fde", 0.0)),

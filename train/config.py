@@ -28,6 +28,7 @@ from pydantic import (
     create_model,
     field_validator,
     model_serializer,
+    model_validator,
 )
 
 from smarts.core.errors import ConfigError
@@ -148,26 +149,43 @@ class TrainConfig(Schema):
     lib: Literal[LIBS] = Field("torchrl", description="torchrl | sb3 (Stable-Baselines3's PPO).")
     backend: Literal[BACKENDS] = Field(
         "per_env",
-        description="batched: every copy, whatever its map, in one simulation of the batched core in this process (a "
-        "SUMO copy in a worker process of its own, as libsumo holds one simulation per process), or spread over "
-        "workers processes when workers > 1 | per_env: the same (kept for configs that name it: an episode gives the "
+        description="batched: every copy, whatever its map, in one simulation of the batched core per process (this "
+        "one with workers 0, else spread over the workers; a SUMO copy in a worker process of its own, as libsumo "
+        "holds one simulation per process) | per_env: the same (kept for configs that name it: an episode gives the "
         "same bits whatever it is stepped beside, so one simulation per copy would only be slower). With ray_address "
         "each collector steps its share the same way.",
     )
     device: str = Field(
         "cpu",
-        description="Where the simulation stages that have a torch version run (either backend): cpu: the "
-        "compiled numpy kernels | torch-cpu: the torch stages on the CPU (to check them) | cuda, cuda:N: the torch "
-        "stages on that GPU (refused when torch sees none).",
+        description="Where the learner runs, policy inference during collection and the PPO updates (lib torchrl; "
+        "lib sb3: SB3's device): cpu | cuda, cuda:N: that GPU, the simulations staying on CPU workers (refused when "
+        "torch sees none) | torch-cpu: the GPU's code path (explicit transfers) on the CPU, for tests. Before, this "
+        "field placed the simulation's torch stages: that is sim_device now.",
     )
-    total_steps: PositiveInt = Field(60_000, description="Env steps to train for, summed over the envs.")
+    sim_device: str = Field(
+        "cpu",
+        description="Where the simulation stages that have a torch version run: cpu: the compiled numpy kernels | "
+        "torch-cpu: the torch stages on the CPU (to check them) | cuda, cuda:N: the torch stages on that GPU.",
+    )
+    total_steps: PositiveInt = Field(
+        60_000,
+        description="Env steps to train for, summed over the slots; the last batch takes only what is still "
+        "needed, so a run ends less than one step of every slot past it (with ray_address: whole batches).",
+    )
     envs: PositiveInt = Field(
         16, description="Scenario copies stepped together (in this process, or split over workers)."
     )
-    workers: PositiveInt = Field(
+    workers: NonNegativeInt = Field(
         1,
-        description="Processes that step the envs (<= envs): 1 steps them in this process, N > 1 in N worker processes, "
-        "each one simulation of its share; with ray_address, the Ray collectors.",
+        description="Processes that step the envs (<= envs): 0 steps them in this process, N >= 1 in N worker "
+        "processes, each one simulation of its share, writing into one shared-memory buffer this process reads "
+        "(SUMO copies always get a process of their own); with ray_address, the Ray collectors (>= 1).",
+    )
+    overlap: bool = Field(
+        True,
+        description="Collect the next batch while the learner updates on this one (lib torchrl): collection acts with "
+        "the policy of one update before, which PPO's probability ratio accounts for; the two then share the cores "
+        "instead of taking turns. false: collect with the policy just updated, then update, in turn.",
     )
     seed: NonNegativeInt = Field(0, description="Seed of torch, numpy and the training episodes.")
     frames_per_batch: PositiveInt = Field(2048, description="Env steps collected for each PPO update.")
@@ -280,11 +298,17 @@ class TrainConfig(Schema):
             raise ValueError(f"must be <= frames_per_batch ({frames})")
         return size
 
-    @field_validator("device")
+    @field_validator("device", "sim_device")
     @classmethod
     def _device_name(cls, name: str) -> str:
         check_device_name(name)  # whether the GPU is there is asked when the envs are built
         return name
+
+    @model_validator(mode="after")
+    def _ray_workers(self) -> "TrainConfig":
+        if self.ray_address and self.workers < 1:
+            raise ValueError("workers: with ray_address, the number of Ray collectors (>= 1), got 0")
+        return self
 
     @field_validator("interface")
     @classmethod

@@ -1,23 +1,32 @@
-"""PPO on the simulator with TorchRL: collector, GAE and ClipPPOLoss (no hand-written PPO maths).
+"""PPO on the simulator with TorchRL's loss and advantage (no hand-written PPO maths).
 
 The whole algorithm in one readable loop:
 
 1. ``envs`` copies of the task's training scenarios (every learning agent of every copy is one
-   slot, all driven by one shared policy) run as one batched env, in ``workers`` processes when
-   > 1; a ``Collector`` gathers ``frames_per_batch`` steps with the current stochastic policy.
-   With ``ray_address``, each of the ``workers`` batches is stepped by its own collector running
-   as a Ray actor instead.
-2. The observations are flattened and normalised once for the whole update (``ValueInputs``).
-3. ``epochs`` passes, each starting with torchrl's GAE (advantages and value targets per slot
-   trajectory, with the critic as updated so far), then dropping the steps of slots that were
-   waiting for their scenario copy to restart (``valid`` false), then minibatch updates of
-   torchrl's ``ClipPPOLoss`` (clipped objective + value loss + entropy bonus, normalised
-   advantages), Adam, gradient clipping; then the observation normaliser takes the batch's
-   statistics for the next collection.
-4. TensorBoard: episode return/length, losses, entropy, KL, learning rate, env steps/s; a checkpoint
-   after every batch (``last.pt``) and on Ctrl-C. Every ``eval_every`` steps the task's benchmark
-   suite runs on the checkpoint with held-out seeds; ``best.pt`` is the one with the highest
-   S_bench. At the end ``final.pt`` is evaluated the same way.
+   slot, all driven by one shared policy) run as one ``BatchedDriving``, in ``workers``
+   processes over one shared-memory buffer (0: in this process). ``SlotCollector`` steps it for
+   a batch of about ``frames_per_batch`` slot-steps, acting with a copy of the policy on the flat
+   observation buffer (one normalise-and-act pass per step, no TensorDict per step).
+2. ``overlap``: while the learner updates on one batch, the collector gathers the next with the
+   policy of the update before (one update behind; PPO's probability ratio is taken against the
+   policy that acted, so it corrects for that). Collection and update then share the machine's
+   cores instead of taking turns.
+3. ``Learner.update``: the observations are normalised once per batch; ``epochs`` passes, each
+   starting with torchrl's GAE (advantages and value targets per slot trajectory, with the critic
+   as updated so far), then dropping the steps of slots that were waiting for their scenario copy
+   to restart, then minibatches from torchrl's sampler through torchrl's ``ClipPPOLoss`` (clipped
+   objective + value loss + entropy bonus, normalised advantages), Adam, gradient clipping; then
+   the observation normaliser takes the batch's statistics for the next collection.
+4. TensorBoard: episode return/length, losses, entropy, KL, clip fraction, explained variance,
+   gradient norm, learning rate, env steps/s; a checkpoint after every batch (``last.pt``) and on
+   Ctrl-C. Every ``eval_every`` steps the task's benchmark suite runs on the checkpoint with
+   held-out seeds; ``best.pt`` is the one with the highest S_bench. At the end ``final.pt`` is
+   evaluated the same way.
+
+``device`` is where the learner runs (inference and updates; ``cuda`` for a GPU), the
+simulations stay on the CPU workers. With ``ray_address``, each of the ``workers`` batches is
+stepped by torchrl's ``Collector`` running as a Ray actor instead (``RayCollection``); the
+learner is the same.
 
 The run folder, checkpoint set, TensorBoard tags, evaluations and summary are the ones every
 trainer shares (``train.run``; ``train.sb3_ppo`` trains SB3's PPO under the same contract).
@@ -27,18 +36,24 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import logging
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import torch
+from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 from torch import nn
-from torchrl.collectors import Collector
+from torchrl.data import LazyTensorStorage, ReplayBuffer, SamplerWithoutReplacement
 from torchrl.envs import RewardSum, TransformedEnv
 from torchrl.modules import IndependentNormal, ProbabilisticActor, ValueOperator
 from torchrl.objectives import ClipPPOLoss
-from torchrl.objectives.value import GAE
+from torchrl.objectives.value.functional import vec_generalized_advantage_estimate
 
 from agents.ppo import (
     Actor,
@@ -50,11 +65,29 @@ from agents.ppo import (
     save_checkpoint,
     scale_action,
 )
-from smarts.env.task_rewards import reward_factory
 from smarts.dynamics.pose_control_torch import resolve_device
-from smarts.env.torchrl_env import SmartsBatchedEnv
+from smarts.env.task_rewards import reward_factory
 from train.config import ACTION_SPACES, TrainConfig
-from train.run import TRAIN_SEED_BASE, Run, check_resume, interface_dict, lane_relative_dict, training_specs
+from train.run import (
+    TRAIN_SEED_BASE,
+    BatchPlan,
+    Progress,
+    Run,
+    check_resume,
+    interface_dict,
+    lane_relative_dict,
+    training_specs,
+)
+
+logging.getLogger("torchrl").setLevel(logging.WARNING)  # not a line per storage it sets up
+
+TRAINING_SEED_OFFSET = 1_000_003
+"""Training seeds of run seed ``s`` start at ``TRAIN_SEED_BASE + s * TRAINING_SEED_OFFSET``."""
+
+
+def training_seed(cfg: TrainConfig) -> int:
+    """The seed of the training episodes (copy ``i`` then counts up from ``+ i * 100_003``)."""
+    return TRAIN_SEED_BASE + cfg.seed * TRAINING_SEED_OFFSET
 
 
 def env_options(cfg: TrainConfig) -> dict:
@@ -64,94 +97,110 @@ def env_options(cfg: TrainConfig) -> dict:
         "observation": cfg.observation_interface(),
         "reward_factory": reward_factory(cfg.reward_weights()),
         "lane_relative": cfg.lane_relative_params(),
-        "sim_device": cfg.device,
+        "sim_device": cfg.sim_device,
     }
 
 
-def env_workers(cfg: TrainConfig) -> int:
-    """``BatchedDriving``'s ``workers`` for the config: ``workers: 1`` steps the copies in this
-    process (0 worker processes), N > 1 spreads them over N processes. Both backends build the same
-    env (``TrainConfig.backend``); SUMO copies always get a worker process of their own."""
-    return cfg.workers if cfg.workers > 1 else 0
+def learner_device(cfg: TrainConfig) -> torch.device:
+    """The torch device of inference and updates: ``cpu`` (and ``torch-cpu``, the same path with
+    explicit transfers, for tests without a GPU) or the named GPU; refused when it is not there."""
+    return resolve_device(cfg.device) or torch.device("cpu")
 
 
-def check_env_split(cfg: TrainConfig, specs: list) -> None:
-    """Refuse, before anything is built or written, a ``device`` whose GPU is not there. (Any split
-    of the copies over workers works: each worker process steps its share as one simulation, and
-    SUMO copies run in processes of their own.)"""
+def check_devices(cfg: TrainConfig) -> None:
+    """Refuse, before anything is built or written, a ``device`` or ``sim_device`` whose GPU is
+    not there."""
     resolve_device(cfg.device)
+    resolve_device(cfg.sim_device)
+
+
+def make_driving(cfg: TrainConfig, specs: list | None = None):
+    """``envs`` scenario copies (cycling through the task's scenarios; ``specs`` when already
+    built) as one ``BatchedDriving``: every copy in this process (``workers: 0``) or spread over
+    ``workers`` processes that share one buffer with this one; SUMO copies always in processes of
+    their own."""
+    from smarts.env.batched import BatchedDriving
+
+    specs = training_specs(cfg) if specs is None else specs
+    check_devices(cfg)
+    driving = BatchedDriving(specs, workers=cfg.workers, **env_options(cfg))
+    driving.set_seed(training_seed(cfg))
+    return driving
 
 
 def make_env(cfg: TrainConfig, specs: list | None = None) -> TransformedEnv:
-    """``envs`` scenario copies (cycling through the task's scenarios; ``specs`` when already
-    built) as one ``SmartsBatchedEnv`` whatever the backend: one simulation of every copy in this
-    process, or spread over ``workers`` processes (``env_workers``)."""
+    """The same copies as a TorchRL env (``SmartsBatchedEnv`` with the episode statistics), what
+    the Ray collectors step and TorchRL users train on."""
+    from smarts.env.torchrl_env import SmartsBatchedEnv
+
     specs = training_specs(cfg) if specs is None else specs
-    check_env_split(cfg, specs)
-    env = TransformedEnv(SmartsBatchedEnv(specs, workers=env_workers(cfg), **env_options(cfg)), RewardSum())
-    env.set_seed(TRAIN_SEED_BASE + cfg.seed * 1_000_003)
+    check_devices(cfg)
+    env = TransformedEnv(SmartsBatchedEnv(specs, workers=cfg.workers, **env_options(cfg)), RewardSum())
+    env.set_seed(training_seed(cfg))
     return env
 
 
 def transformed_batched_env(specs: list, seed: int, options: dict) -> TransformedEnv:
     """One batch of scenario copies with the episode statistics training reads; module-level so
     that ``functools.partial`` of it pickles to Ray actors."""
+    from smarts.env.torchrl_env import SmartsBatchedEnv
+
     env = TransformedEnv(SmartsBatchedEnv(specs, **options), RewardSum())
     env.set_seed(seed)
     return env
 
 
 def ray_env_factories(cfg: TrainConfig) -> list:
-    """Per Ray collector, a picklable factory of its share of the ``envs`` scenario copies, the
-    same for both backends. Each share keeps its copies' numbers in the whole batch
-    (``copy_ids``), so with the one training seed every copy plays the episodes it plays without
-    Ray."""
+    """Per Ray collector, a picklable factory of its share of the ``envs`` scenario copies. Each
+    share keeps its copies' numbers in the whole batch (``copy_ids``), so with the one training
+    seed every copy plays the episodes it plays without Ray."""
     if cfg.envs % cfg.workers or cfg.frames_per_batch % cfg.workers:
         raise ValueError(f"with ray_address, envs ({cfg.envs}) and frames_per_batch ({cfg.frames_per_batch}) "
                          f"must be multiples of workers ({cfg.workers})")  # fmt: skip
     specs = training_specs(cfg)
     shares = [list(range(w, cfg.envs, cfg.workers)) for w in range(cfg.workers)]
-    seed = TRAIN_SEED_BASE + cfg.seed * 1_000_003
     # Ray stacks the collectors' batches: pad every collector to the same number of slots.
     slots = max(sum(not a.is_social for i in share for a in specs[i].agents) for share in shares)
-    return [functools.partial(transformed_batched_env, [specs[i] for i in share], seed,
+    return [functools.partial(transformed_batched_env, [specs[i] for i in share], training_seed(cfg),
                               {**env_options(cfg), "slots": slots, "copy_ids": share})
             for share in shares]  # fmt: skip
 
 
-class RewardScaler:
-    """Divides rewards by a running standard deviation of the discounted return (per slot), so the
-    critic regresses targets of order one whatever the reward's scale (the usual PPO reward
-    normalisation; the logged episode returns stay in the reward's own units)."""
+# ------------------------------------------------------------------ the policy's parts
+class _GaussianInActionUnits(nn.Module):
+    """A Gaussian whose mean is the actor output mapped onto [low, high] (the same mean
+    ``PPOPolicy`` acts with) and whose spread is relative to the action range. Samples may leave
+    the box; the action limits of the simulator clip them (no tanh Jacobian, so PPO's ratios and
+    entropy stay well behaved)."""
 
-    def __init__(self, gamma: float):
-        self.gamma = gamma
-        self.returns: torch.Tensor | None = None
-        self.mean, self.var, self.count = 0.0, 1.0, 1e-4
+    def __init__(self, actor: Actor, low: torch.Tensor, high: torch.Tensor):
+        super().__init__()
+        self.actor = actor
+        self.register_buffer("low", low.float())
+        self.register_buffer("high", high.float())
+        self.last: tuple[torch.Tensor, torch.Tensor] | None = None
+        """(mean, scale) of the last pass with gradients (the loss's own actor pass), for the
+        action-bound penalty and the KL estimate: they reuse that pass instead of running the
+        actor again."""
 
-    def __call__(self, data) -> None:
-        reward = data["next", "reward"]  # [slots, time, 1]
-        done = data["next", "done"].float()
-        valid = data["valid"].float()
-        if self.returns is None:
-            self.returns = torch.zeros(reward.shape[0], 1)
-        seen = []
-        for t in range(reward.shape[1]):
-            self.returns = self.returns * self.gamma * valid[:, t] + reward[:, t] * valid[:, t]
-            seen.append(self.returns[valid[:, t] > 0])
-            self.returns = self.returns * (1.0 - done[:, t])
-        batch = torch.cat(seen) if seen else torch.zeros(0)
-        if batch.numel() > 1:
-            b_mean, b_var, n = float(batch.mean()), float(batch.var(unbiased=False)), batch.numel()
-            delta, total = b_mean - self.mean, self.count + n
-            self.mean += delta * n / total
-            self.var = (self.var * self.count + b_var * n + delta**2 * self.count * n / total) / total
-            self.count = total
-        data["next", "reward"] = reward / max(self.var**0.5, 1e-4)
+    def forward(self, x: torch.Tensor):
+        pre, std = self.actor(x)
+        mean = scale_action(pre, self.low, self.high)
+        scale = std * 0.5 * (self.high - self.low)
+        if torch.is_grad_enabled():
+            self.last = (mean, scale)
+        return mean, scale
+
+    def take_last(self) -> tuple[torch.Tensor, torch.Tensor]:
+        last, self.last = self.last, None
+        if last is None:
+            raise RuntimeError("the PPO loss did not run the actor with gradients before the action-bound penalty")
+        return last
 
 
 class _FlatNormalised(nn.Module):
-    """Concatenate the observation entries and normalise them, then apply ``head``."""
+    """Concatenate the observation entries and normalise them, then apply ``head`` (the modules
+    the Ray collectors act with: they read TorchRL's per-key observations)."""
 
     def __init__(self, layout: ObservationLayout, normalizer: ObsNormalizer, head: nn.Module):
         super().__init__()
@@ -162,36 +211,7 @@ class _FlatNormalised(nn.Module):
         return self.head(self.normalizer(flat))
 
 
-class _GaussianInActionUnits(nn.Module):
-    """A Gaussian whose mean is the squashed actor output mapped onto [low, high] (the same mean
-    ``PPOPolicy`` acts with) and whose spread is relative to the action range. Samples may leave
-    the box; the action limits of the simulator clip them (no tanh Jacobian, so PPO's ratios and
-    entropy stay well behaved)."""
-
-    def __init__(self, actor: Actor, low: torch.Tensor, high: torch.Tensor):
-        super().__init__()
-        self.actor = actor
-        self.register_buffer("low", low.float())
-        self.register_buffer("high", high.float())
-        self.last_mean: torch.Tensor | None = None
-        """The mean of the last pass with gradients (the loss's own actor pass), for the action-bound
-        penalty: it reuses that pass instead of running the actor again."""
-
-    def forward(self, x: torch.Tensor):
-        pre, std = self.actor(x)
-        mean = scale_action(pre, self.low, self.high)
-        if torch.is_grad_enabled():
-            self.last_mean = mean
-        return mean, std * 0.5 * (self.high - self.low)
-
-    def take_last_mean(self) -> torch.Tensor:
-        mean, self.last_mean = self.last_mean, None
-        if mean is None:
-            raise RuntimeError("the PPO loss did not run the actor with gradients before the action-bound penalty")
-        return mean
-
-
-def raw_features(layout: ObservationLayout, obs_spec) -> torch.Tensor:
+def raw_features(layout: ObservationLayout, space: gym.spaces.Dict) -> torch.Tensor:
     """1 for the flat inputs the normaliser must pass unchanged: masks and 0/1 flags (entries
     bounded to [0, 1], and the flag columns of ``lead`` and ``signal``)."""
     from smarts.sensors.observation import LEAD_FEATURE_NAMES
@@ -200,9 +220,8 @@ def raw_features(layout: ObservationLayout, obs_spec) -> torch.Tensor:
     parts = []
     for key, shape in zip(layout.keys, layout.shapes):
         size = int(np.prod(shape))
-        spec = obs_spec[key]
-        low, high = getattr(spec.space, "low", None), getattr(spec.space, "high", None)
-        bounded01 = low is not None and bool((low == 0).all()) and bool((high == 1).all())
+        box = space.spaces[key]
+        bounded01 = bool((box.low == 0).all()) and bool((box.high == 1).all())
         mark = torch.full((size,), 1.0 if bounded01 else 0.0)
         if key == "lead":
             mark[[LEAD_FEATURE_NAMES.index(n) for n in flags["lead"]]] = 1.0
@@ -212,78 +231,274 @@ def raw_features(layout: ObservationLayout, obs_spec) -> torch.Tensor:
     return torch.cat(parts)
 
 
-def build_modules(env, cfg: TrainConfig):
-    obs_spec = env.observation_spec["observation"]
-    keys = tuple(sorted(obs_spec.keys()))
-    batch_dims = len(env.batch_size)  # [slots] in front when the env is batched
-    layout = ObservationLayout(keys, tuple(tuple(obs_spec[k].shape[batch_dims:]) for k in keys))
-    action_spec = env.action_spec
-    low = action_spec.space.low.reshape(-1, action_spec.shape[-1])[0]
-    high = action_spec.space.high.reshape(-1, action_spec.shape[-1])[0]
+@dataclass
+class PolicyParts:
+    """The networks a run trains and checkpoints, and what they read and act in."""
+
+    layout: ObservationLayout
+    normalizer: ObsNormalizer
+    actor_net: Actor
+    critic_net: Critic
+    head: _GaussianInActionUnits  # actor_net as a Gaussian in action units
+    low: np.ndarray
+    high: np.ndarray
+
+    def to(self, device: torch.device) -> "PolicyParts":
+        for module in (self.normalizer, self.actor_net, self.critic_net, self.head):
+            module.to(device)
+        return self
+
+
+def build_parts(space: gym.spaces.Dict, low: np.ndarray, high: np.ndarray, cfg: TrainConfig) -> PolicyParts:
+    """Networks for observations of ``space`` and actions in [``low``, ``high``] with the
+    config's layers, initial spread and normaliser settings."""
+    keys = tuple(sorted(space.spaces))
+    layout = ObservationLayout(keys, tuple(tuple(space.spaces[k].shape) for k in keys))
+    low, high = np.asarray(low, dtype=np.float32), np.asarray(high, dtype=np.float32)
     normalizer = ObsNormalizer(layout.size, clip=cfg.obs_clip, std_floor=cfg.obs_std_floor,
-                               raw=raw_features(layout, obs_spec))  # fmt: skip
-    size = action_spec.shape[-1]
-    log_std = cfg.init_log_std if len(cfg.init_log_std) == size else cfg.init_log_std[:1] * size
+                               raw=raw_features(layout, space))  # fmt: skip
+    size = len(low)
     if len(cfg.init_log_std) not in (1, size):
         raise ValueError(f"init_log_std: expected 1 or {size} values (one per action component), got {cfg.init_log_std}")
+    log_std = cfg.init_log_std if len(cfg.init_log_std) == size else cfg.init_log_std[:1] * size
     actor_net = Actor(layout.size, size, tuple(cfg.hidden), init_log_std=log_std)
     critic_net = Critic(layout.size, tuple(cfg.hidden))
-    in_keys = [("observation", k) for k in layout.keys]
-    head = _GaussianInActionUnits(actor_net, low, high)
-    policy = TensorDictModule(_FlatNormalised(layout, normalizer, head), in_keys=in_keys, out_keys=["loc", "scale"])
-    actor = ProbabilisticActor(
-        policy,
-        in_keys=["loc", "scale"],
-        spec=action_spec,
-        distribution_class=IndependentNormal,
-        return_log_prob=True,
-    )
-    critic = ValueOperator(_FlatNormalised(layout, normalizer, critic_net), in_keys=in_keys)
-    return layout, normalizer, actor_net, critic_net, actor, critic, low.numpy(), high.numpy()
+    head = _GaussianInActionUnits(actor_net, torch.as_tensor(low), torch.as_tensor(high))
+    return PolicyParts(layout, normalizer, actor_net, critic_net, head, low, high)
+
+
+def driving_parts(driving, cfg: TrainConfig) -> PolicyParts:
+    """``build_parts`` for a ``BatchedDriving`` (its observation space; slot 0's action box, the
+    one the task's slots share)."""
+    return build_parts(driving.observation_space, driving.action_low[0], driving.action_high[0], cfg)
+
+
+def env_parts(env, cfg: TrainConfig) -> PolicyParts:
+    """``build_parts`` for a TorchRL ``SmartsBatchedEnv`` (a Ray collector's share)."""
+    return driving_parts(env.base_env.driving, cfg)
+
+
+def collection_modules(parts: PolicyParts, action_spec) -> ProbabilisticActor:
+    """The policy as TorchRL modules reading the per-key observations (what a Ray collector acts
+    with), on the same networks and statistics."""
+    in_keys = [("observation", k) for k in parts.layout.keys]
+    policy = TensorDictModule(_FlatNormalised(parts.layout, parts.normalizer, parts.head), in_keys=in_keys,
+                              out_keys=["loc", "scale"])  # fmt: skip
+    return ProbabilisticActor(policy, in_keys=["loc", "scale"], spec=action_spec, distribution_class=IndependentNormal,
+                              return_log_prob=True)  # fmt: skip
 
 
 FLAT_OBSERVATION = "flat_observation"
-"""Key of the normalised flat observation the PPO update works on (written once per batch)."""
+"""Key of the normalised flat observation the PPO loss reads."""
 
 
-def update_modules(actor: ProbabilisticActor, critic: ValueOperator, action_spec) -> tuple[ProbabilisticActor, ValueOperator]:
-    """The policy and critic as the update runs them: the same networks (shared parameters) read
-    ``FLAT_OBSERVATION`` instead of flattening and normalising the observation on every call. The
-    statistics stay fixed during an update, so once per batch (``ValueInputs``) gives the same inputs."""
-    policy_head = next(m for m in actor.modules() if isinstance(m, _FlatNormalised)).head
-    critic_head = next(m for m in critic.modules() if isinstance(m, _FlatNormalised)).head
-    policy = TensorDictModule(policy_head, in_keys=[FLAT_OBSERVATION], out_keys=["loc", "scale"])
-    loss_actor = ProbabilisticActor(policy, in_keys=["loc", "scale"], spec=action_spec,
-                                    distribution_class=IndependentNormal, return_log_prob=True)  # fmt: skip
-    return loss_actor, ValueOperator(critic_head, in_keys=[FLAT_OBSERVATION])
+def loss_modules(parts: PolicyParts) -> tuple[ProbabilisticActor, ValueOperator]:
+    """The policy and critic as the update runs them, reading ``FLAT_OBSERVATION`` (normalised
+    once per batch; the statistics stay fixed during an update)."""
+    policy = TensorDictModule(parts.head, in_keys=[FLAT_OBSERVATION], out_keys=["loc", "scale"])
+    actor = ProbabilisticActor(policy, in_keys=["loc", "scale"], distribution_class=IndependentNormal,
+                               return_log_prob=True)  # fmt: skip
+    return actor, ValueOperator(parts.critic_net, in_keys=[FLAT_OBSERVATION])
 
 
-class ValueInputs:
-    """The critic's inputs of a [slots, time] batch, prepared once per batch: the normalised flat
-    observations (written into ``data`` as ``FLAT_OBSERVATION``, which the update's actor also
-    reads) and the few next observations that are not the slot's following observation (ends of
-    episodes, the last step of the batch). Every other next value is the following step's value,
-    so each epoch's values cost one critic pass over the batch instead of two. ``raw`` keeps the
-    flat observations before normalising, for the statistics update after the epochs."""
+# ------------------------------------------------------------------ collection
+class Inference(nn.Module):
+    """The acting copy of the policy: normalise the flat observations, run the actor, sample a
+    Gaussian action with its own generator and return it with its log-probability, in one pass.
+    A copy (``sync`` loads the learner's weights and statistics) so that collection can run while
+    the learner updates its own."""
 
-    @torch.no_grad()
-    def __init__(self, data, layout: ObservationLayout, normalizer: ObsNormalizer):
-        self.raw = layout.flatten({k: data["observation", k] for k in layout.keys})
-        following = layout.flatten({k: data["next", "observation", k] for k in layout.keys})
-        self.own = torch.ones(self.raw.shape[:2], dtype=torch.bool)
-        self.own[:, :-1] = (following[:, :-1] != self.raw[:, 1:]).any(-1)
-        self.own_next = normalizer(following[self.own])
-        data[FLAT_OBSERVATION] = normalizer(self.raw)
+    def __init__(self, parts: PolicyParts, device: torch.device, seed: int):
+        super().__init__()
+        self.normalizer = ObsNormalizer(parts.layout.size)
+        self.actor = Actor(parts.layout.size, len(parts.low), tuple(parts.actor_net.hidden))
+        self.register_buffer("low", torch.as_tensor(parts.low))
+        self.register_buffer("high", torch.as_tensor(parts.high))
+        self.to(device)
+        self.device = device
+        self.generator = torch.Generator(device=device).manual_seed(seed)
 
     @torch.no_grad()
-    def write_values(self, data, critic_net: nn.Module) -> None:
-        """``state_value`` and ``("next", "state_value")`` of ``data`` with the critic as it is now."""
-        value = critic_net(data[FLAT_OBSERVATION])
-        next_value = torch.empty_like(value)
-        next_value[:, :-1] = value[:, 1:]
-        next_value[self.own] = critic_net(self.own_next)
-        data["state_value"] = value
-        data["next", "state_value"] = next_value
+    def sync(self, parts: PolicyParts) -> None:
+        self.actor.load_state_dict(parts.actor_net.state_dict())
+        self.normalizer.load_state_dict(parts.normalizer.state_dict())
+
+    @torch.no_grad()
+    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        pre, std = self.actor(self.normalizer(obs))
+        mean = scale_action(pre, self.low, self.high)
+        scale = std * 0.5 * (self.high - self.low)
+        action = mean + scale * torch.randn(mean.shape, generator=self.generator, device=self.device)
+        return action, torch.distributions.Normal(mean, scale).log_prob(action).sum(-1)
+
+
+@dataclass
+class Batch:
+    """A batch of slot-steps, time first ([T, S, ...]), on the learner's device."""
+
+    obs: torch.Tensor  # [T, S, D] raw flat observations the policy acted on (zeros while waiting)
+    action: torch.Tensor  # [T, S, A]
+    log_prob: torch.Tensor  # [T, S] of the action under the policy that acted
+    reward: torch.Tensor  # [T, S]
+    done: torch.Tensor  # [T, S] the slot's episode ended with this step
+    terminated: torch.Tensor  # [T, S] ... by a terminal event (no bootstrap)
+    valid: torch.Tensor  # [T, S] the slot's agent acted (a real transition)
+    own_next: torch.Tensor  # [T, S] the next observation is not obs[t + 1] (an episode's end, the last step)
+    own_next_obs: torch.Tensor  # [K, D] those next observations, in the row order of own_next
+    episode_returns: np.ndarray  # of the episodes that ended in the batch, in the reward's units
+    episode_lengths: np.ndarray
+
+    @property
+    def frames(self) -> int:
+        return int(self.valid.numel())
+
+
+class SlotCollector:
+    """Steps a ``BatchedDriving`` for batches of slot-steps with an ``Inference`` policy, reading
+    and writing the env's flat buffers (in shared memory when the copies run in workers).
+
+    A slot whose agent has finished *waits* (zero observation, not valid) until every agent of its
+    copy has finished; the copy then restarts and the slot goes on from the new episode's first
+    observation. ``stop`` ends a collection at the next step (Ctrl-C while overlapping)."""
+
+    def __init__(self, driving, layout: ObservationLayout, policy: Inference, device: torch.device):
+        self.driving, self.layout, self.policy, self.device = driving, layout, policy, device
+        n, d = driving.num_slots, layout.size
+        self.width = driving.action_width
+        self.obs = torch.zeros(n, d)  # the observation each slot acts on next
+        self.live = np.zeros(n, dtype=bool)
+        self._flat = torch.zeros(n, d)
+        self._first = torch.zeros(n, d)
+        self.returns = np.zeros(n)
+        self.lengths = np.zeros(n, dtype=np.int64)
+        self.stop = threading.Event()
+        self.started = False
+
+    def flatten(self, obs: dict[str, np.ndarray], out: torch.Tensor) -> torch.Tensor:
+        """The per-key arrays of every slot as one [slots, D] float32 tensor (one copy)."""
+        n = out.shape[0]
+        torch.cat([torch.from_numpy(obs[k]).reshape(n, -1) for k in self.layout.keys], dim=1, out=out)
+        return out
+
+    def reset(self) -> None:
+        self.flatten(self.driving.reset(), self.obs)
+        self.live[:] = True
+        self.returns[:] = 0.0
+        self.lengths[:] = 0
+        self.started = True
+
+    def collect(self, steps: int) -> Batch:
+        if not self.started:
+            self.reset()
+        n, d, dev = self.driving.num_slots, self.layout.size, self.device
+        obs = torch.empty(steps, n, d, device=dev)
+        action = torch.empty(steps, n, self.width, device=dev)
+        log_prob = torch.empty(steps, n, device=dev)
+        reward = np.zeros((steps, n), dtype=np.float32)
+        done = np.zeros((steps, n), dtype=bool)
+        terminated = np.zeros((steps, n), dtype=bool)
+        valid = np.zeros((steps, n), dtype=bool)
+        own_rows, own_obs, returns, lengths = [], [], [], []
+        for t in range(steps):
+            if self.stop.is_set():
+                raise KeyboardInterrupt
+            obs[t].copy_(self.obs, non_blocking=True)
+            valid[t] = self.live
+            act, lp = self.policy(obs[t])
+            action[t], log_prob[t] = act, lp
+            res = self.driving.step(act.cpu().numpy()[:, : self.width])
+            ended = res.terminated | res.truncated
+            reward[t], done[t], terminated[t] = res.reward, ended, res.terminated
+            following = self.flatten(res.obs, self._flat)
+            self.returns[res.acted] += res.reward[res.acted]
+            self.lengths[res.acted] += 1
+            last = t == steps - 1
+            if ended.any():
+                rows = np.flatnonzero(ended)
+                returns.append(self.returns[rows].copy())
+                lengths.append(self.lengths[rows].copy())
+                self.returns[rows], self.lengths[rows] = 0.0, 0
+                if not last:  # the last step's next observations are taken below, for every slot
+                    own_rows.append(t * n + rows)
+                    own_obs.append(following[rows].clone())
+            # What each slot acts on next: the following observation, zeros once its agent has
+            # finished, the new episode's first observation where its copy restarted.
+            nxt = following.clone() if last else following
+            nxt[torch.from_numpy(ended)] = 0.0
+            self.live &= ~ended
+            if res.restarted.any():
+                again = torch.from_numpy(res.restarted)
+                nxt[again] = self.flatten(res.first, self._first)[again]
+                self.live |= res.restarted
+            if last:  # the next observation of every slot: its final one where it ended, else the carried one
+                ending = torch.from_numpy(ended)
+                tail = torch.where(ending[:, None], following, nxt)
+                own_rows.append(t * n + np.arange(n))
+                own_obs.append(tail)
+            self.obs.copy_(nxt)
+        own_next = torch.zeros(steps * n, dtype=torch.bool)
+        rows = np.concatenate(own_rows) if own_rows else np.zeros(0, dtype=np.int64)
+        own_next[torch.from_numpy(rows)] = True
+        order = np.argsort(rows, kind="stable")  # own_next_obs in the row order of own_next
+        own_stack = torch.cat(own_obs)[torch.from_numpy(order)] if own_obs else torch.zeros(0, d)
+        return Batch(
+            obs=obs, action=action, log_prob=log_prob,
+            reward=torch.from_numpy(reward).to(dev), done=torch.from_numpy(done).to(dev),
+            terminated=torch.from_numpy(terminated).to(dev), valid=torch.from_numpy(valid).to(dev),
+            own_next=own_next.reshape(steps, n).to(dev), own_next_obs=own_stack.to(dev),
+            episode_returns=np.concatenate(returns) if returns else np.zeros(0),
+            episode_lengths=np.concatenate(lengths) if lengths else np.zeros(0),
+        )  # fmt: skip
+
+
+def batch_from_tensordict(data, layout: ObservationLayout, device: torch.device) -> Batch:
+    """A [slots, time] TensorDict of TorchRL's collector (the Ray path) as a ``Batch``."""
+    data = data.reshape(-1, data.shape[-1]).to(device)
+    obs = layout.flatten({k: data["observation", k] for k in layout.keys}).transpose(0, 1).contiguous()
+    following = layout.flatten({k: data["next", "observation", k] for k in layout.keys}).transpose(0, 1)
+    own = torch.ones(obs.shape[:2], dtype=torch.bool, device=device)
+    own[:-1] = (following[:-1] != obs[1:]).any(-1)
+    done = data["next", "done"][..., 0].transpose(0, 1)
+    valid = data["valid"][..., 0].transpose(0, 1)
+    ended = (done & valid).cpu().numpy()
+    return Batch(
+        obs=obs, action=data["action"].transpose(0, 1), log_prob=data["action_log_prob"].transpose(0, 1),
+        reward=data["next", "reward"][..., 0].transpose(0, 1), done=done,
+        terminated=data["next", "terminated"][..., 0].transpose(0, 1), valid=valid,
+        own_next=own, own_next_obs=following[own],
+        episode_returns=data["next", "episode_reward"][..., 0].transpose(0, 1).cpu().numpy()[ended],
+        episode_lengths=data["next", "agent_steps"][..., 0].transpose(0, 1).cpu().numpy()[ended],
+    )  # fmt: skip
+
+
+# ------------------------------------------------------------------ learning
+class RewardScaler:
+    """Divides rewards by a running standard deviation of the discounted return (per slot), so the
+    critic regresses targets of order one whatever the reward's scale (the usual PPO reward
+    normalisation; the logged episode returns stay in the reward's own units)."""
+
+    def __init__(self, gamma: float):
+        self.gamma = gamma
+        self.returns: torch.Tensor | None = None
+        self.mean, self.var, self.count = 0.0, 1.0, 1e-4
+
+    def __call__(self, batch: Batch) -> None:
+        reward, done, valid = batch.reward, batch.done.float(), batch.valid.float()  # [T, S]
+        if self.returns is None or self.returns.shape[0] != reward.shape[1]:
+            self.returns = torch.zeros(reward.shape[1], device=reward.device)
+        seen = []
+        for t in range(reward.shape[0]):
+            self.returns = self.returns * self.gamma * valid[t] + reward[t] * valid[t]
+            seen.append(self.returns[valid[t] > 0])
+            self.returns = self.returns * (1.0 - done[t])
+        values = torch.cat(seen) if seen else torch.zeros(0)
+        if values.numel() > 1:
+            b_mean, b_var, n = float(values.mean()), float(values.var(unbiased=False)), values.numel()
+            delta, total = b_mean - self.mean, self.count + n
+            self.mean += delta * n / total
+            self.var = (self.var * self.count + b_var * n + delta**2 * self.count * n / total) / total
+            self.count = total
+        batch.reward = reward / max(self.var**0.5, 1e-4)
 
 
 def action_bound_loss(mean: torch.Tensor, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:
@@ -293,12 +508,12 @@ def action_bound_loss(mean: torch.Tensor, low: torch.Tensor, high: torch.Tensor)
     return ((mean - high).clamp(min=0.0) ** 2 + (low - mean).clamp(min=0.0) ** 2).sum(-1).mean()
 
 
-def minibatches(data, size: int):
-    """``data`` (a flat TensorDict) in random minibatches of ``size`` (the last one smaller), each
-    step once: one permutation and one gather per minibatch."""
-    order = torch.randperm(data.shape[0])
-    for start in range(0, data.shape[0], size):
-        yield data[order[start : start + size]]
+def kl_estimate(mean, scale, action, old_log_prob) -> torch.Tensor:
+    """``E[(r - 1) - log r]`` with ``r`` the probability ratio of the taken actions: an estimate
+    of KL(old || new) that is never negative (each term is), unlike the mean of ``-log r``."""
+    new = torch.distributions.Normal(mean, scale).log_prob(action).sum(-1)
+    log_ratio = new - old_log_prob
+    return (log_ratio.exp() - 1.0 - log_ratio).mean()
 
 
 def check_init_from(path: Path, cfg: TrainConfig) -> dict:
@@ -326,31 +541,223 @@ def check_init_from(path: Path, cfg: TrainConfig) -> dict:
     return blob
 
 
-def build_learner(cfg: TrainConfig, actor, critic) -> tuple[GAE, ClipPPOLoss, torch.optim.Adam]:
-    """torchrl's GAE and clipped PPO loss and the optimiser, with the config's settings. GAE reads
-    the values ``ValueInputs.write_values`` writes."""
-    advantage = GAE(gamma=cfg.gamma, lmbda=cfg.gae_lambda, value_network=None, average_gae=False)
-    loss_module = ClipPPOLoss(actor, critic, clip_epsilon=cfg.clip_epsilon, entropy_coeff=cfg.entropy_coeff,
-                              critic_coeff=cfg.critic_coeff, loss_critic_type="l2",
-                              normalize_advantage=True)  # fmt: skip
-    optimizer = torch.optim.Adam(loss_module.parameters(), lr=cfg.lr)
-    return advantage, loss_module, optimizer
+class Learner:
+    """PPO updates of ``parts`` on ``device``: torchrl's GAE (``vec_generalized_advantage_estimate``)
+    per slot trajectory, its ``ClipPPOLoss`` over minibatches from its ``SamplerWithoutReplacement``,
+    Adam with gradient clipping, the KL stop, the action-bound penalty and the observation
+    statistics."""
+
+    def __init__(self, cfg: TrainConfig, parts: PolicyParts, device: torch.device):
+        self.cfg, self.parts, self.device = cfg, parts, device
+        actor, critic = loss_modules(parts)
+        self.loss = ClipPPOLoss(actor, critic, clip_epsilon=cfg.clip_epsilon, entropy_coeff=cfg.entropy_coeff,
+                                critic_coeff=cfg.critic_coeff, loss_critic_type="l2", normalize_advantage=True)  # fmt: skip
+        self.loss.set_keys(sample_log_prob="action_log_prob")
+        self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=cfg.lr)
+        self.scale_rewards = RewardScaler(cfg.gamma) if cfg.reward_scaling else None
+        self.low, self.high = torch.as_tensor(parts.low, device=device), torch.as_tensor(parts.high, device=device)
+        self._buffer: ReplayBuffer | None = None
+
+    def _sampler(self, frames: int) -> ReplayBuffer:
+        # (A plain permutation would skip the storage's copy of the epoch's data, about 1% of an update.)
+        """torchrl's replay buffer over one epoch's valid steps: every step once, in random
+        minibatches (the last one smaller)."""
+        if self._buffer is None or self._buffer.storage.max_size < frames:
+            self._buffer = ReplayBuffer(storage=LazyTensorStorage(frames, device=self.device),
+                                        sampler=SamplerWithoutReplacement(), batch_size=self.cfg.minibatch_size)  # fmt: skip
+        self._buffer.empty()
+        return self._buffer
+
+    @torch.no_grad()
+    def _values(self, x: torch.Tensor, own_x: torch.Tensor, own: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """State values [T, S] of every step and of its next observation: the following step's
+        value, except where the next observation is the slot's own (``own``): one critic pass over
+        the batch instead of two."""
+        critic = self.parts.critic_net
+        value = critic(x).squeeze(-1)
+        next_value = torch.empty_like(value)
+        next_value[:-1] = value[1:]
+        if own_x.shape[0]:
+            next_value[own] = critic(own_x).squeeze(-1)
+        return value, next_value
+
+    def update(self, batch: Batch) -> dict[str, float]:
+        cfg, parts = self.cfg, self.parts
+        if self.scale_rewards is not None:
+            self.scale_rewards(batch)
+        steps, slots, size = batch.obs.shape
+        with torch.no_grad():
+            # Normalised once for the whole update: the statistics change only after it.
+            x = parts.normalizer(batch.obs.reshape(-1, size)).reshape(steps, slots, size)
+            own_x = parts.normalizer(batch.own_next_obs)
+        valid = batch.valid.reshape(-1)
+        flat_valid = torch.nonzero(valid).squeeze(-1)
+        stats: dict[str, list[float]] = {k: [] for k in ("objective", "critic", "entropy_loss", "entropy", "kl",
+                                                         "clip", "explained", "grad")}  # fmt: skip
+        stop = False
+        for _ in range(cfg.epochs):
+            # GAE on each slot's trajectory [S, T, 1], with the critic as updated so far (once per
+            # batch learned markedly slower); the steps of waiting slots are then dropped.
+            value, next_value = self._values(x, own_x, batch.own_next)
+            advantage, target = vec_generalized_advantage_estimate(
+                cfg.gamma, cfg.gae_lambda, value.T[..., None], next_value.T[..., None], batch.reward.T[..., None],
+                batch.done.T[..., None], batch.terminated.T[..., None], time_dim=-2,
+            )  # fmt: skip
+            learn = TensorDict({
+                FLAT_OBSERVATION: x.reshape(-1, size)[flat_valid],
+                "action": batch.action.reshape(steps * slots, -1)[flat_valid],
+                "action_log_prob": batch.log_prob.reshape(-1)[flat_valid],
+                "advantage": advantage.transpose(0, 1).reshape(-1, 1)[flat_valid],
+                "value_target": target.transpose(0, 1).reshape(-1, 1)[flat_valid],
+            }, batch_size=[len(flat_valid)], device=self.device)  # fmt: skip
+            sampler = self._sampler(len(flat_valid))
+            sampler.extend(learn)
+            for minibatch in sampler:
+                losses = self.loss(minibatch)
+                mean, scale = parts.head.take_last()  # the actor's pass inside the loss
+                kl = float(kl_estimate(mean.detach(), scale.detach(), minibatch["action"], minibatch["action_log_prob"]))
+                if cfg.target_kl and kl > cfg.target_kl:
+                    stop = True  # the policy has moved far enough on this batch (as SB3 does)
+                    break
+                total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+                if cfg.action_bound_coeff > 0:
+                    total = total + cfg.action_bound_coeff * action_bound_loss(mean, self.low, self.high)
+                self.optimizer.zero_grad()
+                total.backward()
+                grad = nn.utils.clip_grad_norm_(self.loss.parameters(), cfg.max_grad_norm)
+                self.optimizer.step()
+                for key, value_ in (("objective", losses["loss_objective"]), ("critic", losses["loss_critic"]),
+                                    ("entropy_loss", losses["loss_entropy"]), ("entropy", losses.get("entropy")),
+                                    ("clip", losses.get("clip_fraction")), ("explained", losses.get("explained_variance")),
+                                    ("grad", grad)):  # fmt: skip
+                    stats[key].append(float(value_.detach()) if value_ is not None else float("nan"))
+                stats["kl"].append(kl)
+            if stop:
+                break
+        # Refresh the observation statistics only now: during the update the policy must see its
+        # inputs exactly as it did when it acted, or PPO's probability ratios are off.
+        inputs = batch.obs.reshape(-1, size)[flat_valid]
+        clipped = parts.normalizer.clipped_fraction(inputs, normalised=x.reshape(-1, size)[flat_valid])
+        if cfg.obs_norm:
+            parts.normalizer.update(inputs)
+
+        def mean_of(key: str) -> float:
+            return float(np.mean(stats[key])) if stats[key] else float("nan")
+
+        return {
+            "loss/objective": mean_of("objective"),
+            "loss/critic": mean_of("critic"),
+            "loss/entropy": mean_of("entropy_loss"),
+            "policy/entropy": mean_of("entropy"),
+            "policy/kl_approx": mean_of("kl"),
+            "policy/clip_fraction": mean_of("clip"),
+            "policy/action_std": float(parts.actor_net.log_std.detach().clamp(-3.0, 0.5).exp().mean()),
+            "train/explained_variance": mean_of("explained"),
+            "train/grad_norm": mean_of("grad"),
+            "obs/clipped_fraction": clipped,
+            "train/lr": self.optimizer.param_groups[0]["lr"],
+            "train/valid_fraction": float(len(flat_valid) / max(batch.frames, 1)),
+        }
 
 
+# ------------------------------------------------------------------ where batches come from
+class LocalCollection:
+    """Batches from the ``BatchedDriving`` of this run (copies in this process or in shared-memory
+    workers); with ``overlap`` the next batch is collected in a thread while the learner updates
+    (the torch ops and the workers' stepping release the interpreter lock)."""
+
+    def __init__(self, cfg: TrainConfig, driving, parts: PolicyParts, device: torch.device):
+        self.driving = driving
+        self.policy = Inference(parts, device, seed=cfg.seed * 7919 + 17)
+        self.policy.sync(parts)
+        self.collector = SlotCollector(driving, parts.layout, self.policy, device)
+        self.overlap = cfg.overlap
+        self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="collect") if cfg.overlap else None
+        self.pending = None
+
+    @property
+    def slots(self) -> int:
+        return self.driving.num_slots
+
+    def start(self, steps: int) -> None:
+        """Begin collecting a batch of ``steps`` per slot (in the background with ``overlap``)."""
+        if self.pool is not None:
+            self.pending = self.pool.submit(self.collector.collect, steps)
+        else:
+            self.pending = steps
+
+    def take(self) -> Batch:
+        """The batch ``start`` began (waiting for it)."""
+        pending, self.pending = self.pending, None
+        return pending.result() if self.pool is not None else self.collector.collect(pending)
+
+    def sync(self, parts: PolicyParts) -> None:
+        """The acting copy takes the learner's weights and statistics (never while collecting)."""
+        self.policy.sync(parts)
+
+    def close(self) -> None:
+        self.collector.stop.set()
+        if self.pool is not None:
+            if self.pending is not None:
+                with contextlib.suppress(BaseException):
+                    self.pending.result()
+                self.pending = None
+            self.pool.shutdown(wait=True)
+        self.driving.close()
+
+
+class RayCollection:
+    """Batches from torchrl's ``Collector`` with ``backend="ray"``: each of the ``workers`` Ray
+    actors steps its share of the copies as a ``SmartsBatchedEnv``, acting with the policy's
+    TorchRL modules; the learner sends the new weights after every update (no overlap)."""
+
+    overlap = False
+
+    def __init__(self, cfg: TrainConfig, factories: list, parts: PolicyParts, action_spec, slots: int, plan: BatchPlan,
+                 device: torch.device):  # fmt: skip
+        from torchrl.collectors import Collector
+
+        self.layout, self.device = parts.layout, device
+        self.actor = collection_modules(parts, action_spec)
+        self._slots = slots
+        self.collector = Collector(factories, self.actor, backend="ray", num_collectors=cfg.workers, sync=True,
+                                   frames_per_batch=plan.first_steps * slots, total_frames=plan.frames,
+                                   remote_configs={"num_cpus": 1})  # fmt: skip
+        self.collector.update_policy_weights_()  # the actors start from these (possibly resumed) weights
+        self.iterator = iter(self.collector)
+
+    @property
+    def slots(self) -> int:
+        return self._slots
+
+    def start(self, steps: int) -> None:
+        pass
+
+    def take(self) -> Batch:
+        return batch_from_tensordict(next(self.iterator), self.layout, self.device)
+
+    def sync(self, parts: PolicyParts) -> None:
+        self.collector.update_policy_weights_()
+
+    def close(self) -> None:
+        if self.collector is not None:
+            self.collector.shutdown()
+            self.collector = None
+
+
+# ------------------------------------------------------------------ the run
 def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | None = None) -> Path:
     """Train, log and checkpoint under ``out``; returns the final checkpoint path. ``resume``
     continues from a checkpoint (networks, observation statistics, optimiser, step count) up to
     ``total_steps``."""
-    from rich.progress import Progress
-
     torch.set_num_threads(cfg.torch_threads)
     blob = check_resume(resume, cfg) if resume is not None else None
     start_from = check_init_from(Path(cfg.init_from), cfg) if cfg.init_from else None
     if blob is not None and start_from is not None:
         raise ValueError("resume continues a run and init_from starts a new one from trained networks: give one")
+    check_devices(cfg)
+    device = learner_device(cfg)
     specs = None if cfg.ray_address else training_specs(cfg)
-    if specs is not None:
-        check_env_split(cfg, specs)
     torch.manual_seed(cfg.seed)
     np.random.seed(cfg.seed)
     run = Run(cfg, out, resume, progress=progress)  # the run folder (never another run's), config.json, TensorBoard
@@ -360,130 +767,79 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
 
         factories = ray_env_factories(cfg)
         env = factories[0]()  # only for the specs the networks are built from
+        parts, action_spec = env_parts(env, cfg), env.action_spec
+        slots = int(np.prod(env.batch_size)) * cfg.workers
+        env.close()
         scale_out.enter_context(ray_session(cfg.ray_address, num_cpus=max(2, cfg.workers)))
     else:
-        env = make_env(cfg, specs)
-    layout, normalizer, actor_net, critic_net, actor, critic, low, high = build_modules(env, cfg)
-    advantage, loss_module, optimizer = build_learner(cfg, *update_modules(actor, critic, env.action_spec))
-    head = next(m for m in actor.modules() if isinstance(m, _GaussianInActionUnits))
-    scale_rewards = RewardScaler(cfg.gamma)
-    bound_low, bound_high = torch.as_tensor(low), torch.as_tensor(high)
+        driving = make_driving(cfg, specs)
+        parts, slots = driving_parts(driving, cfg), driving.num_slots
+    parts.to(device)
+    learner = Learner(cfg, parts, device)
     step = 0
-    if blob is not None:
+    for source, what in ((blob, resume), (start_from, cfg.init_from)):
+        if source is None:
+            continue
         try:
-            actor_net.load_state_dict(blob["actor"])
-            critic_net.load_state_dict(blob["critic"])
-            normalizer.load_state_dict(blob["normalizer"])
-            if "optimizer" in blob:
-                optimizer.load_state_dict(blob["optimizer"])
+            parts.actor_net.load_state_dict(source["actor"])
+            parts.critic_net.load_state_dict(source["critic"])
+            parts.normalizer.load_state_dict(source["normalizer"])
+            if source is blob and "optimizer" in blob:  # init_from: networks and statistics, a fresh optimiser
+                learner.optimizer.load_state_dict(blob["optimizer"])
         except (RuntimeError, ValueError) as err:
-            raise CheckpointError(f"{resume}: does not match this training setup ({err})") from None
-        step = int(blob["step"])
-    if start_from is not None:  # networks and statistics only: a fresh optimiser from step 0
-        try:
-            actor_net.load_state_dict(start_from["actor"])
-            critic_net.load_state_dict(start_from["critic"])
-            normalizer.load_state_dict(start_from["normalizer"])
-        except (RuntimeError, ValueError) as err:
-            raise CheckpointError(f"{cfg.init_from}: does not match this training setup ({err})") from None
-    # A whole number of steps of every slot per batch (torchrl rounds up to it anyway).
-    slots = int(np.prod(env.batch_size)) if not cfg.ray_address else 1
-    frames = -(-cfg.frames_per_batch // slots) * slots
-    remaining = -(-(cfg.total_steps - step) // frames) * frames  # whole batches (torchrl would round up too)
+            raise CheckpointError(f"{what}: does not match this training setup ({err})") from None
+        if source is blob:
+            step = int(blob["step"])
+    # Ray's collector takes whole batches; the local one ends the run within one step of every slot.
+    plan = BatchPlan.of(cfg.total_steps - step, cfg.frames_per_batch, slots, whole=bool(cfg.ray_address))
     if cfg.ray_address:
-        env.close()
-        collector = Collector(factories, actor, backend="ray", num_collectors=cfg.workers, sync=True,
-                              frames_per_batch=frames, total_frames=remaining,
-                              remote_configs={"num_cpus": 1})  # fmt: skip
-        collector.update_policy_weights_()  # the actors start from these (possibly resumed) weights
+        source = RayCollection(cfg, factories, parts, action_spec, slots, plan, device)
     else:
-        collector = Collector(env, actor, frames_per_batch=frames, total_frames=remaining,
-                              auto_register_policy_transforms=False)
-    metrics, start, first_step = {}, time.perf_counter(), step
-    collecting_s, batch_end = 0.0, start  # time spent collecting (env steps and policy inference)
+        source = LocalCollection(cfg, driving, parts, device)
+    metrics: dict[str, float] = {}
 
     def save(path: Path) -> Path:
-        return save_checkpoint(path, actor=actor_net, critic=critic_net, normalizer=normalizer, layout=layout,
-                               low=low, high=high, action_space=ACTION_SPACES[cfg.action_space],
-                               controller=cfg.controller, interface=interface_dict(cfg),
-                               lane_relative=lane_relative_dict(cfg),
+        return save_checkpoint(path, actor=parts.actor_net, critic=parts.critic_net, normalizer=parts.normalizer,
+                               layout=parts.layout, low=parts.low, high=parts.high,
+                               action_space=ACTION_SPACES[cfg.action_space], controller=cfg.controller,
+                               interface=interface_dict(cfg), lane_relative=lane_relative_dict(cfg),
                                config=cfg.model_dump(), step=step, metrics=metrics,
-                               optimizer_state=optimizer.state_dict())  # fmt: skip
+                               optimizer_state=learner.optimizer.state_dict())  # fmt: skip
 
+    bar = Progress(f"PPO {cfg.task}", cfg.total_steps, step, enabled=progress)
+    start, first_step = time.perf_counter(), step
     try:
-        with Progress(disable=not progress) as bar:
-            task = bar.add_task(f"PPO {cfg.task}", total=cfg.total_steps)
-            for data in collector:
-                collect_time = time.perf_counter()
-                collecting_s += collect_time - batch_end
-                data = data.reshape(-1, data.shape[-1])  # [slots (of every collector), time]
-                flat = data.reshape(-1)
-                ended = flat["next", "done"].reshape(-1) & flat["valid"].reshape(-1)
-                returns = flat["next", "episode_reward"].reshape(-1)[ended]  # in the reward's units
-                lengths = flat["next", "agent_steps"].reshape(-1)[ended]
-                if cfg.reward_scaling:
-                    scale_rewards(data)
-                # GAE on [slots, time], so advantages stop at each trajectory's end, once per epoch
-                # with the critic as updated so far (once per batch learned markedly slower in short
-                # runs); steps of waiting slots are then dropped and the minibatches mix the real steps.
-                value_inputs = ValueInputs(data, layout, normalizer)
-                valid = data["valid"].reshape(-1)
-                stop = False
-                for _ in range(cfg.epochs):
-                    value_inputs.write_values(data, critic_net)
-                    advantage(data)
-                    learn = data.exclude("observation", "next").reshape(-1)[valid]  # what the loss reads
-                    for batch in minibatches(learn, cfg.minibatch_size):
-                        losses = loss_module(batch)
-                        mean = head.take_last_mean()  # the actor's mean from the loss's own pass
-                        if cfg.target_kl and float(losses.get("kl_approx", torch.tensor(0.0))) > cfg.target_kl:
-                            stop = True  # the policy has moved far enough on this batch (as SB3 does)
-                            break
-                        total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
-                        if cfg.action_bound_coeff > 0:
-                            total = total + cfg.action_bound_coeff * action_bound_loss(mean, bound_low, bound_high)
-                        optimizer.zero_grad()
-                        total.backward()
-                        nn.utils.clip_grad_norm_(loss_module.parameters(), cfg.max_grad_norm)
-                        optimizer.step()
-                    if stop:
-                        break
-                # Refresh the observation statistics only now: during the update the policy must see
-                # its inputs exactly as it did when it acted, or PPO's probability ratios are off.
-                inputs = value_inputs.raw.reshape(-1, layout.size)[valid]
-                clipped = normalizer.clipped_fraction(inputs)
-                if cfg.obs_norm:
-                    normalizer.update(inputs)
-                collector.update_policy_weights_()
-                step += data.numel()
-                losses = losses.detach()
-                metrics = {
-                    "loss/objective": float(losses["loss_objective"]),
-                    "loss/critic": float(losses["loss_critic"]),
-                    "loss/entropy": float(losses["loss_entropy"]),
-                    "policy/entropy": float(losses.get("entropy", torch.tensor(float("nan")))),
-                    "policy/kl_approx": float(losses.get("kl_approx", torch.tensor(float("nan")))),
-                    "policy/action_std": float(actor_net.log_std.detach().clamp(-3.0, 0.5).exp().mean()),
-                    "obs/clipped_fraction": clipped,
-                    "train/lr": optimizer.param_groups[0]["lr"],
-                    "train/valid_fraction": float(inputs.shape[0] / max(flat.numel(), 1)),
-                    "perf/env_steps_per_s": (step - first_step) / (time.perf_counter() - start),
-                    "perf/update_s": time.perf_counter() - collect_time,
-                    "perf/collect_steps_per_s": (step - first_step) / max(collecting_s, 1e-9),
-                }
-                if len(returns):
-                    metrics["episode/return"] = float(returns.mean())
-                    metrics["episode/length"] = float(lengths.float().mean())
-                # TensorBoard, last.pt and, every eval_every steps, a held-out evaluation (best.pt).
-                run.end_of_batch(step, data.numel(), metrics, save)
-                batch_end = time.perf_counter()
-                bar.update(task, completed=min(step, cfg.total_steps),
-                           description=f"PPO {cfg.task} return {metrics.get('episode/return', float('nan')):.1f}")  # fmt: skip
+        batches = list(plan.steps_per_batch())
+        source.sync(parts)
+        source.start(batches[0])
+        for following in [*batches[1:], None]:
+            batch = source.take()
+            if following is not None and source.overlap:
+                # Collected while this batch trains, by the policy as it is now (one update behind
+                # when it is used): the collector is idle here, so the copy changes between batches.
+                source.sync(parts)
+                source.start(following)
+            update_start = time.perf_counter()
+            metrics = learner.update(batch)
+            step += batch.frames
+            metrics["perf/update_s"] = time.perf_counter() - update_start
+            metrics["perf/env_steps_per_s"] = (step - first_step) / (time.perf_counter() - start)
+            if len(batch.episode_returns):
+                metrics["episode/return"] = float(batch.episode_returns.mean())
+                metrics["episode/length"] = float(batch.episode_lengths.mean())
+            if following is not None and not source.overlap:
+                source.sync(parts)
+                source.start(following)
+            # TensorBoard, last.pt and, every eval_every steps, a held-out evaluation (best.pt).
+            run.end_of_batch(step, batch.frames, metrics, save)
+            bar.update(step, metrics)
     except KeyboardInterrupt:
+        bar.close()
+        source.close()
         run.interrupted(step, save)  # interrupted.pt
         raise
     finally:
-        collector.shutdown()
-        env.close(raise_if_closed=False)  # the collector may have closed it already
+        bar.close()
+        source.close()
         scale_out.close()
     return run.finish(step, metrics, save, start)  # final.pt, its evaluation, the summary

@@ -159,6 +159,50 @@ class Progress:
             self.bar = None
 
 
+class Bar:
+    """A counting bar on rich (the project's one progress-bar library) for the planners' trainers
+    and data generators: ``Bar(iterable)`` or ``Bar(total=n)`` with ``update``, ``set_postfix``,
+    ``close`` and ``Bar.write`` for a line above it; ``disable`` shows nothing."""
+
+    def __init__(self, iterable=None, total: int | None = None, desc: str = "", disable: bool = False):
+        from rich.progress import Progress as RichProgress
+
+        self.iterable, self.desc = iterable, desc
+        if total is None and iterable is not None and hasattr(iterable, "__len__"):
+            total = len(iterable)
+        self.bar = None if disable else RichProgress()
+        if self.bar is not None:
+            self.bar.start()
+            self.task = self.bar.add_task(desc, total=total)
+
+    def __iter__(self):
+        try:
+            for item in self.iterable:
+                yield item
+                self.update(1)
+        finally:
+            self.close()
+
+    def update(self, n: int = 1) -> None:
+        if self.bar is not None:
+            self.bar.advance(self.task, n)
+
+    def set_postfix(self, **values) -> None:
+        if self.bar is not None:
+            shown = ", ".join(f"{k}={v}" for k, v in values.items())
+            self.bar.update(self.task, description=f"{self.desc} {shown}")
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+            self.bar = None
+
+    @staticmethod
+    def write(text: str) -> None:
+        """A line of its own (rich keeps a live bar below what is printed)."""
+        print(text, flush=True)
+
+
 # ------------------------------------------------------------------ what a run trains on
 def scenario_names(names: list[str]) -> list[str]:
     """``suite:*`` expanded to every scenario of that suite, in suite order."""

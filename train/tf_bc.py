@@ -32,7 +32,7 @@ from train.heldout import add_run_options, apply_run_options, road_car, situatio
 
 def demonstrations(scenarios, seeds: int, progress: bool = True) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """scenario name -> (features [n, 53], labels [n]) with TF's turn:cruise sampling."""
-    from tqdm import tqdm
+    from train.run import Bar
 
     from agents.keep_lane import KeepLanePolicy
     from agents.planners.paths import valid_path
@@ -43,7 +43,7 @@ def demonstrations(scenarios, seeds: int, progress: bool = True) -> dict[str, tu
     interface = interface_from_dict(INTERFACE)
     driver = KeepLanePolicy()
     out = {}
-    bar = tqdm(total=len(scenarios) * seeds, desc="demonstrations", disable=not progress)
+    bar = Bar(total=len(scenarios) * seeds, desc="demonstrations", disable=not progress)
     rng = np.random.default_rng(0)
     for entry in scenarios:
         feats, labels, turning = [], [], []
@@ -105,7 +105,7 @@ def hindsight(count: int, steps: int, horizon: int, progress: bool = True) -> di
     grouped 10 to a key ``situations_<k>``: (features, labels, hindsight flags). Labels: stop (0)
     for every step from ``horizon`` steps before a collision on (moving on at the rules' speed
     led into it; flagged), else the rules' own decision (stop when they stopped the car)."""
-    from tqdm import tqdm
+    from train.run import Bar
 
     from agents.planners.paths import valid_path
     from agents.planners.tf import INTERFACE, TFPlanner, stop_move_features
@@ -114,7 +114,7 @@ def hindsight(count: int, steps: int, horizon: int, progress: bool = True) -> di
     interface = interface_from_dict(INTERFACE)
     rng = np.random.default_rng(2)
     groups: dict[str, tuple[list, list, list]] = {}
-    for k in tqdm(range(count), desc="hindsight", disable=not progress):
+    for k in Bar(range(count), desc="hindsight", disable=not progress):
         env, obs = situation_env(f"danger_{k}", danger_situation(rng), interface, "tf-bc situations", seed=k)
         rules = TFPlanner()
         track, crashed = [], False
@@ -143,7 +143,7 @@ def hindsight(count: int, steps: int, horizon: int, progress: bool = True) -> di
 
 def train(args: argparse.Namespace) -> dict:
     from torch.utils.tensorboard import SummaryWriter
-    from tqdm import tqdm
+    from train.run import Bar
 
     from agents.planners.nets import StopMoveNet, save_net
 
@@ -208,7 +208,7 @@ def train(args: argparse.Namespace) -> dict:
                 metrics[f"{which}/hindsight_stop_recall"] = float(stop_pred[flag].float().mean()) if flag.any() else 0.0
         return metrics
 
-    bar = tqdm(range(1, args.steps + 1), desc="tf-bc", disable=args.quiet)
+    bar = Bar(range(1, args.steps + 1), desc="tf-bc", disable=args.quiet)
     for step in bar:
         idx = torch.multinomial(draw, args.batch, replacement=True, generator=gen)
         logits = net(train_x[idx])

@@ -78,7 +78,7 @@ def log_suites(out: Path, suites: list[str], seeds: int, first_seed: int = 0, st
     """Log ``seeds`` episodes of every scenario of the named suites into ``out``; returns the files."""
     import dataclasses
 
-    from tqdm import tqdm
+    from train.run import Bar
 
     from smarts.benchmark.suites import load_suite
 
@@ -89,7 +89,7 @@ def log_suites(out: Path, suites: list[str], seeds: int, first_seed: int = 0, st
         for entry in suite.scenarios:
             jobs.append(entry)
     files = []
-    bar = tqdm(total=len(jobs) * seeds, desc="logging trajectories", disable=not progress)
+    bar = Bar(total=len(jobs) * seeds, desc="logging trajectories", disable=not progress)
     for entry in jobs:
         # traffic keeps driving after the mission vehicles finish: log the whole time limit
         spec = entry.spec

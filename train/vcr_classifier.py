@@ -100,7 +100,7 @@ def _cap_safe(rasters: list, numbers: list, labels: list, rng: np.random.Generat
 
 def generate(scenarios, seeds: int, progress: bool = True) -> dict[str, dict[str, np.ndarray]]:
     """scenario name -> {"rasters" uint8 [n, 3, 64, 64], "numbers" [n, 24], "labels" [n]}."""
-    from tqdm import tqdm
+    from train.run import Bar
 
     from agents.planners.vcr import LEARNED_INTERFACE
     from smarts.env import DrivingParallelEnv
@@ -109,7 +109,7 @@ def generate(scenarios, seeds: int, progress: bool = True) -> dict[str, dict[str
     interface = interface_from_dict(LEARNED_INTERFACE)
     rng = np.random.default_rng(0)
     out = {}
-    bar = tqdm(total=len(scenarios) * seeds, desc="vcr data", disable=not progress)
+    bar = Bar(total=len(scenarios) * seeds, desc="vcr data", disable=not progress)
     for entry in scenarios:
         parts = ([], [], [])
         for seed in range(seeds):
@@ -148,7 +148,7 @@ def following_situation(rng: np.random.Generator) -> dict:
 def generate_situations(count: int, steps: int, progress: bool = True) -> dict[str, dict[str, np.ndarray]]:
     """``count`` scripted following situations (``following_situation``), each one episode of
     ``steps`` steps, grouped 10 to a key ``situations_<k>`` (the held-out split takes whole groups)."""
-    from tqdm import tqdm
+    from train.run import Bar
 
     from agents.planners.vcr import LEARNED_INTERFACE
     from smarts.sensors.interface import interface_from_dict
@@ -156,7 +156,7 @@ def generate_situations(count: int, steps: int, progress: bool = True) -> dict[s
     interface = interface_from_dict(LEARNED_INTERFACE)
     rng = np.random.default_rng(1)
     groups: dict[str, tuple[list, list, list]] = {}
-    for k in tqdm(range(count), desc="vcr situations", disable=not progress):
+    for k in Bar(range(count), desc="vcr situations", disable=not progress):
         env, obs = situation_env(f"situation_{k}", following_situation(rng), interface, "vcr-classifier situations", seed=k)
         parts = groups.setdefault(f"situations_{k // 10:03d}", ([], [], []))
         for part, new in zip(parts, explore(env, obs, steps, rng)):
@@ -167,7 +167,7 @@ def generate_situations(count: int, steps: int, progress: bool = True) -> dict[s
 
 def train(args: argparse.Namespace) -> dict:
     from torch.utils.tensorboard import SummaryWriter
-    from tqdm import tqdm
+    from train.run import Bar
 
     from agents.planners.nets import VCRClassifier, save_net
 
@@ -235,7 +235,7 @@ def train(args: argparse.Namespace) -> dict:
         return metrics
 
     step = 0
-    for epoch in tqdm(range(1, args.epochs + 1), desc="vcr-classifier", disable=args.quiet):
+    for epoch in Bar(range(1, args.epochs + 1), desc="vcr-classifier", disable=args.quiet):
         perm = torch.randperm(len(tr[2]), generator=gen)
         for i in range(0, len(perm), args.batch):
             idx = perm[i : i + args.batch]

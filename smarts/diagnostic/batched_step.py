@@ -22,9 +22,10 @@ all-sensors case (10 agents with occlusion, 64x64 rasters of every layer with RG
 extended neighbours, and V2V messaging among 50 built-in traffic vehicles) against the same batch
 with the sensors and V2V off, and their ratio; ``SMARTS_SENSOR_THREADS`` sets the sensors' threads.
 
-``--ppo-steps N`` adds end-to-end rows: ``python -m train ppo --task platoon`` on each backend
-(run as users run it; the env-steps/s it records over the whole run and over its collection
-phases alone: env steps and policy inference, without the PPO updates).
+``--ppo-steps N`` adds end-to-end rows: ``python -m train ppo --task platoon`` with the copies in
+``--ppo-workers`` worker processes (default 1 and 2; 0 steps them in the training process), run
+as users run it, each row the env-steps/s it records over the whole run, its update's seconds per
+batch and the rate against the first row.
 """
 
 from __future__ import annotations
@@ -230,29 +231,32 @@ def sensor_rows(batch: int, steps: int, warmup: int, seed: int = 0) -> list[dict
 SENSOR_AGENTS, SENSOR_VEHICLES = 10, 50
 
 
-def ppo_rate(backend: str, envs: int, steps: int, out_dir: Path, frames: int, minibatch: int, epochs: int) -> dict:
-    """End-to-end env-steps/s of ``python -m train ppo --task platoon`` on ``backend``: run as
-    users run it (a subprocess), the rate read from the metrics of its final checkpoint."""
+def ppo_rate(workers: int, envs: int, steps: int, out_dir: Path, frames: int, minibatch: int, epochs: int,
+             extra: tuple[str, ...] = ()) -> dict:  # fmt: skip
+    """End-to-end env-steps/s of ``python -m train ppo --task platoon`` with the copies in
+    ``workers`` worker processes: run as users run it (a subprocess), the rate read from the
+    metrics of its final checkpoint."""
     import subprocess
     import sys
 
     import torch
 
-    out = Path(out_dir) / f"ppo_{backend}"
+    out = Path(out_dir) / f"ppo_workers{workers}"
     command = [
-        sys.executable, "-m", "train", "ppo", "--task", "platoon", "--backend", backend, "--envs", str(envs),
-        "--total-steps", str(steps), "--frames-per-batch", str(frames), "--minibatch-size", str(minibatch),
-        "--epochs", str(epochs), "--eval-episodes", "0", "--out-dir", str(out), "--quiet",
+        sys.executable, "-m", "train", "ppo", "--task", "platoon", "--backend", "batched", "--envs", str(envs),
+        "--workers", str(workers), "--total-steps", str(steps), "--frames-per-batch", str(frames),
+        "--minibatch-size", str(minibatch), "--epochs", str(epochs), "--eval-episodes", "0", "--out-dir", str(out),
+        "--quiet", *extra,
     ]  # fmt: skip
     done = subprocess.run(command, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
     metrics = torch.load(out / "final.pt", weights_only=True)["metrics"]
     return {
-        "backend": backend, "envs": envs, "total_steps": steps, "frames_per_batch": frames,
-        "minibatch_size": minibatch, "epochs": epochs,
+        "workers": workers, "envs": envs, "total_steps": steps, "frames_per_batch": frames,
+        "minibatch_size": minibatch, "epochs": epochs, "options": list(extra),
         "env_steps_per_s": float(metrics["perf/env_steps_per_s"]),
-        "collect_steps_per_s": float(metrics.get("perf/collect_steps_per_s", float("nan"))),
+        "update_s": float(metrics.get("perf/update_s", float("nan"))),
         "episode_return": float(metrics.get("episode/return", float("nan"))),
     }  # fmt: skip
 
@@ -284,6 +288,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ppo-frames", type=int, default=16384, help="frames per batch of the PPO runs")
     parser.add_argument("--ppo-minibatch", type=int, default=4096, help="minibatch size of the PPO runs")
     parser.add_argument("--ppo-epochs", type=int, default=4, help="epochs of the PPO runs")
+    parser.add_argument("--ppo-workers", default="1,2", help="worker processes of each PPO run (0: the training process)")
+    parser.add_argument("--ppo-options", default="", help="more `python -m train ppo` options for every PPO run, e.g. "
+                        "'--device cuda --torch-threads 2'")
     parser.add_argument("--ppo-dir", type=Path, default=Path("runs/diagnostic_ppo"), help="where the PPO runs write")
     parser.add_argument("--out", type=Path, default=Path("reports/diagnostic_batched.json"), help="JSON output file")
     args = parser.parse_args(argv)
@@ -296,6 +303,12 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--steps must be >= {CHUNKS}, --warmup >= 0, --per-env-agent-steps >= 1, --ppo-steps >= 0")
     if args.ppo_steps and args.ppo_minibatch > args.ppo_frames:
         parser.error("--ppo-minibatch must be <= --ppo-frames")
+    try:
+        ppo_workers = [int(v) for v in args.ppo_workers.split(",") if v.strip()]
+    except ValueError:
+        ppo_workers = []
+    if not ppo_workers or min(ppo_workers) < 0:
+        parser.error(f"--ppo-workers: expected comma-separated numbers >= 0, got {args.ppo_workers!r}")
 
     from rich.console import Console
     from rich.table import Table
@@ -326,18 +339,20 @@ def main(argv: list[str] | None = None) -> int:
         console.print(stable)
     ppo_rows = []
     if args.ppo_steps:
-        for backend in ("per_env", "batched"):
-            console.log(f"PPO on {backend}: {args.ppo_steps} env steps")
-            ppo_rows.append(ppo_rate(backend, args.ppo_envs, args.ppo_steps, args.ppo_dir, args.ppo_frames,
-                                     args.ppo_minibatch, args.ppo_epochs))  # fmt: skip
+        extra = tuple(args.ppo_options.split())
+        for workers in ppo_workers:
+            console.log(f"PPO with {workers} worker process(es): {args.ppo_steps} env steps")
+            ppo_rows.append(ppo_rate(workers, args.ppo_envs, args.ppo_steps, args.ppo_dir, args.ppo_frames,
+                                     args.ppo_minibatch, args.ppo_epochs, extra))  # fmt: skip
         ptable = Table(title=f"PPO platoon end to end ({args.ppo_envs} copies, {args.ppo_steps} steps, frames "
-                             f"{args.ppo_frames}, minibatch {args.ppo_minibatch}, {args.ppo_epochs} epochs)")  # fmt: skip
-        for col in ("backend", "env-steps/s end to end", "ratio", "collection env-steps/s", "ratio "):
+                             f"{args.ppo_frames}, minibatch {args.ppo_minibatch}, {args.ppo_epochs} epochs"
+                             f"{', ' + args.ppo_options if args.ppo_options else ''})")  # fmt: skip
+        for col in ("workers", "env-steps/s end to end", "ratio", "update s/batch"):
             ptable.add_column(col, justify="right")
-        base, base_collect = ppo_rows[0]["env_steps_per_s"], ppo_rows[0]["collect_steps_per_s"]
+        base = ppo_rows[0]["env_steps_per_s"]
         for r in ppo_rows:
-            ptable.add_row(r["backend"], f"{r['env_steps_per_s']:,.0f}", f"{r['env_steps_per_s'] / base:.2f}x",
-                           f"{r['collect_steps_per_s']:,.0f}", f"{r['collect_steps_per_s'] / base_collect:.2f}x")  # fmt: skip
+            ptable.add_row(str(r["workers"]), f"{r['env_steps_per_s']:,.0f}", f"{r['env_steps_per_s'] / base:.2f}x",
+                           f"{r['update_s']:.2f}")  # fmt: skip
         console.print(ptable)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     report = {
