@@ -197,6 +197,26 @@ def agent_events(tables, alive, agents, rows, b, time):  # pragma: no cover - co
 
 
 @numba.njit(cache=True, nogil=True)
+def events_by_episode(
+    tables, alive, agents, rows, episodes, alive_lo, alive_hi, agent_lo, agent_hi, episode_time,
+):  # pragma: no cover - compiled
+    """``episode_events`` of each episode in ``episodes`` with only that episode's rows as others
+    (``alive[alive_lo[b]:alive_hi[b]]``), its agents ``agents[agent_lo[b]:agent_hi[b]]`` and its
+    clock; it reads the episode's map, raster and event rules from ``tables`` (the simulation's
+    frozen ``SimTables``, gathered once here).
+
+    In this module with the kernel it calls: numba's cache of a compiled function holds the code
+    of what it calls but is dropped only when its own file changes."""
+    et = event_tables(tables)
+    for k in range(episodes.shape[0]):
+        b = episodes[k]
+        lo, hi = agent_lo[b], agent_hi[b]
+        if lo == hi:
+            continue
+        episode_events(et, alive[alive_lo[b]:alive_hi[b]], agents[lo:hi], rows[lo:hi], b, episode_time[b])
+
+
+@numba.njit(cache=True, nogil=True)
 def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - compiled
     """Every event of ``Event`` for the agents ``agents`` (rows ``rows``) of episode ``b`` at its
     clock ``time``, from and into ``et`` (``EventTables``): its ``agent_events`` and

@@ -38,7 +38,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from smarts.core.events import NUM_EVENTS, Event, NotMovingTracker, agent_events, episode_events, event_tables
+from smarts.core.events import NUM_EVENTS, Event, NotMovingTracker, agent_events, events_by_episode
 from smarts.core.missions import MissionArrays, ResolvedMission, stack_missions
 from smarts.core.provider import Provider, ProviderBase
 from smarts.core.sim_records import sim_tables
@@ -719,7 +719,7 @@ class Simulation:
             agent_events(tables, self.alive, agents, self.agent_row[agents], 0, float(self.episode_time[0]))
             return
         alive_lo, alive_hi, agent_lo, agent_hi = self.episode_ranges(self.alive, agents)
-        _episode_events(
+        events_by_episode(
             tables, self.alive, agents, self.agent_row[agents], episodes, alive_lo, alive_hi, agent_lo, agent_hi,
             self.episode_time,
         )  # fmt: skip
@@ -754,23 +754,6 @@ def _route_progress(tables, agents, rows, first):  # pragma: no cover - compiled
             delta[a] = progress - route_progress[a]
         route_progress[a] = progress
         route_index[a] = best
-
-
-@numba.njit(cache=True, nogil=True)
-def _episode_events(
-    tables, alive, agents, rows, episodes, alive_lo, alive_hi, agent_lo, agent_hi, episode_time,
-):  # pragma: no cover - compiled
-    """``episode_events`` of each episode in ``episodes`` with only that episode's rows as others
-    (``alive[alive_lo[b]:alive_hi[b]]``), its agents ``agents[agent_lo[b]:agent_hi[b]]`` and its
-    clock; it reads the episode's map, raster and event rules from ``tables`` (the simulation's
-    frozen ``SimTables``, gathered once here)."""
-    et = event_tables(tables)
-    for k in range(episodes.shape[0]):
-        b = episodes[k]
-        lo, hi = agent_lo[b], agent_hi[b]
-        if lo == hi:
-            continue
-        episode_events(et, alive[alive_lo[b]:alive_hi[b]], agents[lo:hi], rows[lo:hi], b, episode_time[b])
 
 
 _X, _Y = COLUMN["x"], COLUMN["y"]
