@@ -6,7 +6,6 @@ import sys
 import types
 
 import numba
-import numpy as np
 import pytest
 from numba.core.caching import IndexDataCacheFile
 
