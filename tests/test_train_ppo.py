@@ -302,7 +302,11 @@ def test_the_ppo_settings_reach_torchrl_objects():
     loss = learner.loss
     assert float(loss.clip_epsilon) == pytest.approx(0.3) and float(loss.entropy_coeff) == pytest.approx(0.02)
     assert float(loss.critic_coeff) == pytest.approx(0.7) and learner.optimizer.param_groups[0]["lr"] == 3e-4
-    assert learner._sampler(100).batch_size == 32
+    rows = torch.arange(100)
+    sizes = [len(b) for b in learner.minibatches(rows, {"x": torch.arange(100.0)})]
+    assert sizes == [32, 32, 32, 4]
+    seen = torch.cat([b["x"] for b in learner.minibatches(rows, {"x": torch.arange(100.0)})])
+    assert sorted(seen.tolist()) == list(range(100))  # every step once
     linears = [m for m in parts.actor_net.net if isinstance(m, torch.nn.Linear)]
     assert [m.out_features for m in linears] == [32, 16, 2]  # torchrl's MLP with the config's layers
 

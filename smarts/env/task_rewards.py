@@ -25,6 +25,7 @@ Both add the shared terms (the Humanness and RC ingredients, and the events)::
     + lane_centre * (1 - min(|lane offset| / (0.5 * lane width), 1))
     - speeding * min(max(v - limit, 0) / (0.5 * limit), 1)
     - wrong_way * [wrong way] - partial_off_road * [a wheel off the road]
+    - red_light * [entered a junction lane from a road lane on red]   (RC's red-light rule)
     - collision * [collision] - off_road * [off road]
 
 Every weight lives in ``configs/train/<task>.yaml`` (``reward:``); the limits default to the
@@ -40,6 +41,7 @@ import numpy as np
 from smarts.core.events import Event
 from smarts.core.following import lead_state
 from smarts.core.simulation import Simulation
+from smarts.traffic.signals import RED
 
 TASK_REWARDS = ("platoon", "drive")
 
@@ -65,6 +67,9 @@ class RewardWeights:
     speeding: float = 0.5
     wrong_way: float = 0.5
     partial_off_road: float = 0.5
+    red_light: float = 0.0
+    """Entering a junction from a road lane while the junction lane's signal is red (as the
+    benchmark's RC rule counts it; yellow is no violation). 0 leaves it out."""
     collision: float = 20.0
     off_road: float = 20.0
     # limits (the benchmark's defaults)
@@ -97,6 +102,7 @@ class TaskReward:
     def __init__(self, weights: RewardWeights):
         self.w = weights
         self._lat = np.zeros(0)
+        self._lane = np.zeros(0, dtype=np.int64)
         self._step = np.zeros(0, dtype=np.int64)
 
     def __call__(self, sim: Simulation, agents: np.ndarray) -> np.ndarray:
@@ -113,12 +119,15 @@ class TaskReward:
         # Humanness and RC ingredients.
         if self._lat.shape[0] != len(sim.agent_ids):
             self._lat = np.zeros(len(sim.agent_ids))
+            self._lane = np.full(len(sim.agent_ids), -1, dtype=np.int64)
             self._step = np.full(len(sim.agent_ids), -10, dtype=np.int64)
         lat = t.lat_accel[rows]
         step = sim.agent_step(agents)  # each agent's episode's step
-        previous = np.where(self._step[agents] == step - 1, self._lat[agents], lat)
+        going_on = self._step[agents] == step - 1  # the agent's previous step was the one before
+        previous = np.where(going_on, self._lat[agents], lat)
         lat_jerk = (lat - previous) / sim.dt
-        self._lat[agents], self._step[agents] = lat, step
+        red_light = self._red_light(sim, agents, lane, going_on) if w.red_light > 0 else 0.0
+        self._lat[agents], self._lane[agents], self._step[agents] = lat, lane, step
         uncomfortable = (
             (np.abs(t.jerk[rows]) > w.jerk_long_max)
             | (np.abs(lat_jerk) > w.jerk_lat_max)
@@ -134,6 +143,7 @@ class TaskReward:
             - w.speeding * overspeed
             - w.wrong_way * ev[:, Event.WRONG_WAY]
             - w.partial_off_road * ev[:, Event.PARTIAL_OFF_ROAD]
+            - w.red_light * red_light
             - w.collision * ev[:, Event.COLLISION]
             - w.off_road * ev[:, Event.OFF_ROAD]
         )
@@ -143,6 +153,20 @@ class TaskReward:
             reward += w.progress * sim.route_progress_delta[agents] - w.time
             reward += w.goal * ev[:, Event.REACHED_GOAL]
         return reward
+
+    def _red_light(self, sim: Simulation, agents: np.ndarray, lane: np.ndarray, going_on: np.ndarray) -> np.ndarray:
+        """1 where the agent entered, on this step, from a road lane a junction lane whose signal
+        (its own episode's) is red now: the benchmark recorder's red-light rule, so the reward
+        counts what RC counts (moving on from one junction lane to another is not entering)."""
+        colours = getattr(sim, "via_colour", None)
+        if colours is None or not colours.any():
+            return np.zeros(len(agents))
+        prev = np.where(going_on, self._lane[agents], lane)  # an episode's first step enters nothing
+        internal = sim.road_map.lane_internal
+        from_road = (prev < 0) | ~internal[np.maximum(prev, 0)]
+        entered = (lane >= 0) & (lane != prev) & from_road
+        colour = colours[sim.agent_episode[agents], np.maximum(lane, 0)]
+        return (entered & (colour == RED)).astype(np.float64)
 
     def _platoon(self, sim: Simulation, agents: np.ndarray, speed: np.ndarray) -> np.ndarray:
         w = self.w

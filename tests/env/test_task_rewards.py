@@ -149,3 +149,40 @@ def test_event_penalties_wrong_way_partial_and_full_off_road(task):
     env.sim.table.heading[env.sim.agent_row[0]] += np.pi  # turned around in its lane
     r = env.step({"agent_0": np.array([1.0, 0.0, 0.0])})[1]["agent_0"]
     assert env.sim.agent_events[0, Event.WRONG_WAY] and r == pytest.approx(-1.5)
+
+
+def test_red_light_term_charges_the_step_the_benchmark_records_as_running_a_red_light(tmp_path):
+    """The crossing of the benchmark's red-light test: the signal-blind driver of the south arm
+    enters the junction on red once; the term charges exactly that step (the recorder's rule),
+    the west driver (green) nothing."""
+    import dataclasses
+
+    from smarts.benchmark.recorder import EpisodeRecorder
+    from smarts.benchmark.suites import load_suite
+    from tests.benchmark.test_rules import CROSSING, SignalBlind
+
+    path = tmp_path / "crossing.yaml"
+    path.write_text(CROSSING)
+    entry = load_suite(path).scenarios[0]
+    spec = dataclasses.replace(entry.spec, agents=[dataclasses.replace(a, action_space="relative_target_pose")
+                                                   for a in entry.spec.agents])  # fmt: skip
+    env = DrivingParallelEnv(spec, reward=TaskReward(_weights("drive", red_light=3.0)))
+    obs, _ = env.reset(seed=0)
+    recorder = EpisodeRecorder(env.sim, env.possible_agents, scenario=entry.name, task="collaborative", episode=0,
+                               seed=0, time_limit=entry.time_limit, follow=entry.follow)  # fmt: skip
+    env.add_step_listener(lambda sim: recorder.record())
+    policy, charged = SignalBlind(), {a: [] for a in env.possible_agents}
+    try:
+        while env.agents and env.sim.time < entry.time_limit - 1e-9:
+            batch = {k: np.stack([obs[a][k] for a in env.agents]) for k in obs[env.agents[0]]}
+            obs, rewards, *_ = env.step(dict(zip(env.agents, policy.act(batch))))
+            for a in env.possible_agents:
+                charged[a].append(-rewards.get(a, 0.0))
+        log = recorder.finish()
+    finally:
+        env.close()
+    ran = log.agents["agent_1"].red_light
+    assert ran.sum() == 1 and not log.agents["agent_0"].red_light.any()
+    south = np.array(charged["agent_1"])
+    assert np.flatnonzero(south).tolist() == np.flatnonzero(ran).tolist() and south[ran][0] == pytest.approx(3.0)
+    assert not np.any(charged["agent_0"])
