@@ -476,14 +476,15 @@ class BuiltinTrafficProvider(ProviderBase):
 
     # ------------------------------------------------------------------ hand-over
     def can_accept(self, sim: Simulation, rows: np.ndarray) -> np.ndarray:
-        """Any vehicle on a lane: it gets a route from there to a way out of the map."""
+        """Any motor vehicle on a lane: it gets a route from there to a way out of the map
+        (pedestrians and cyclists are not driven by the car model)."""
         rows = np.asarray(rows, dtype=np.int64)
         t = sim.table
         if rows.size == 0:
             return np.zeros(0, dtype=bool)
         proj = project(self.map, t.data[_XY][:, rows].T, t.heading[rows])
         lane = proj.lane
-        ok = (lane >= 0) & (t.vtype[rows] != int(VehicleType.PEDESTRIAN)) & t.alive[rows]
+        ok = (lane >= 0) & ~np.isin(t.vtype[rows], _NOT_DRIVEN) & t.alive[rows]
         width = np.where(lane >= 0, self.map.lane_width[np.maximum(lane, 0)], 0.0)
         return ok & (proj.distance <= 0.5 * width + ON_LANE_TOLERANCE)
 
@@ -523,3 +524,4 @@ class BuiltinTrafficProvider(ProviderBase):
 
 
 _XY = [COLUMN["x"], COLUMN["y"]]
+_NOT_DRIVEN = np.array([int(VehicleType.PEDESTRIAN), int(VehicleType.BICYCLE)], dtype=np.int8)
