@@ -146,6 +146,9 @@ class EventTables(NamedTuple):
     anchor_time: np.ndarray
     lane_road: np.ndarray
     lane_internal: np.ndarray
+    lane_length: np.ndarray
+    lane_width: np.ndarray
+    lane_succ_offsets: np.ndarray
     raster_flat: np.ndarray
     raster_base: np.ndarray
     raster_width: np.ndarray
@@ -172,6 +175,10 @@ class EventTables(NamedTuple):
     not_moving_distance: np.ndarray
 
 
+_END_MARGIN = 0.5
+"""Metres short of a dead-end lane's end at which a vehicle's front counts as having reached it."""
+
+
 @numba.njit(cache=True, nogil=True)
 def event_tables(tables):  # pragma: no cover - compiled
     """The ``EventTables`` of a frozen ``SimTables`` (read once per kernel call: the per-episode
@@ -179,7 +186,8 @@ def event_tables(tables):  # pragma: no cover - compiled
     t = tables
     return EventTables(
         data=t.data, lane=t.lane, anchor=t.anchor, anchor_time=t.anchor_time, lane_road=t.lane_road,
-        lane_internal=t.lane_internal, raster_flat=t.raster_flat, raster_base=t.raster_base,
+        lane_internal=t.lane_internal, lane_length=t.lane_length, lane_width=t.lane_width,
+        lane_succ_offsets=t.lane_succ_offsets, raster_flat=t.raster_flat, raster_base=t.raster_base,
         raster_width=t.raster_width, raster_origin=t.raster_origin, raster_inv_res=t.raster_inv_res,
         raster_cell_max=t.raster_cell_max, on_route_road=t.on_route_road, goal_kind=t.goal_kind,
         goal_xy=t.goal_xy, goal_radius=t.goal_radius, goal_road=t.goal_road, goal_lane=t.goal_lane,
@@ -233,6 +241,11 @@ def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - comp
     line (``goal_gate``) forwards. A lane shorter than one step's travel is otherwise jumped over
     and its goal never seen. Off route is not flagged on the step the goal is reached (the route
     ends at the goal; what lies beyond it is off the route).
+
+    The end of the map is not the edge of the road: a vehicle whose front reaches the end of a
+    lane of its route that leads nowhere (no successor), still within the lane's width, has left
+    the map, as SUMO removes a vehicle at its route's end. Its episode ends there (done, by no
+    terminal event: truncated, like the step limit), without off-road flags for that step.
     """
     data, lane = et.data, et.lane
     m = et.episode_map[b]
@@ -274,6 +287,16 @@ def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - comp
                 ev[PARTIAL_OFF_ROAD] = True
         ln = lane[r]
         road = lane_road[ln] if ln >= 0 else -1
+        left_map = (
+            ln >= 0
+            and (ev[OFF_ROAD] or ev[PARTIAL_OFF_ROAD])
+            and et.lane_succ_offsets[ln + 1] == et.lane_succ_offsets[ln]
+            and on_route_road[a, road]
+            and data[_S, r] + 0.5 * length >= et.lane_length[ln] - _END_MARGIN
+            and abs(data[_T, r]) <= 0.5 * et.lane_width[ln]
+        )
+        if left_map:
+            ev[OFF_ROAD] = ev[PARTIAL_OFF_ROAD] = False
         if ln >= 0 and not lane_internal[ln]:  # junction lanes cross each other: no direction
             ev[WRONG_WAY] = math.cos(h - data[_LANE_HEADING, r]) < 0.0
             ev[OFF_ROUTE] = not on_route_road[a, road]
@@ -296,7 +319,7 @@ def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - comp
             anchor, anchor_time, r, x, y, time, not_moving_seconds, not_moving_distance
         )
         ev[MAX_STEPS] = at_step_limit
-        finished = at_step_limit
+        finished = at_step_limit or left_map
         for e in range(ev.shape[0]):
             finished |= ev[e] and terminate_on[e]
         done[a] = finished
@@ -329,7 +352,7 @@ def crosses_gate(x0, y0, x1, y1, gate):  # pragma: no cover - compiled
 
 _X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
 _LENGTH, _WIDTH = COLUMN["length"], COLUMN["width"]
-_S, _LANE_HEADING = COLUMN["s"], COLUMN["lane_heading"]
+_S, _T, _LANE_HEADING = COLUMN["s"], COLUMN["t"], COLUMN["lane_heading"]
 # Plain ints for the compiled code (IntEnum members are Python objects).
 (COLLISION, OFF_ROAD, PARTIAL_OFF_ROAD, WRONG_WAY, OFF_ROUTE, REACHED_GOAL, NOT_MOVING, MAX_STEPS) = (
     int(e) for e in Event

@@ -60,6 +60,7 @@ class SimTables(NamedTuple):
     lane_road: np.ndarray  # int32[L]
     lane_index: np.ndarray  # int16[L] position on its road, 0 = rightmost
     lane_internal: np.ndarray  # bool[L] inside a junction
+    lane_succ_offsets: np.ndarray  # int64[L + 1] CSR of each lane's successors (none: the map ends)
     # every map's drivable raster, concatenated as ``MapStack`` stacks them: map m's cells are
     # raster_flat[raster_base[m]:raster_base[m + 1]], raster_width[m] a row
     raster_flat: np.ndarray  # bool[cells of every map]
@@ -153,6 +154,7 @@ def tables_of(sim) -> SimTables:
         anchor_time=sim.not_moving.anchor_time,
         lane_length=rm.lane_length, lane_width=rm.lane_width, lane_speed_limit=rm.lane_speed_limit,
         lane_road=rm.lane_road, lane_index=rm.lane_index, lane_internal=rm.lane_internal,
+        lane_succ_offsets=rm.succ_offsets,
         raster_flat=st.raster_flat, raster_base=st.raster_base, raster_width=st.raster_width,
         raster_origin=st.raster_origin, raster_inv_res=st.raster_inv_res, raster_cell_max=st.raster_cell_max,
         flat_paths=ma.flat_paths, flat_valid=ma.flat_valid, stride=int(ma.stride), path_len=ma.path_len,
