@@ -27,7 +27,9 @@ def run_files(out: Path) -> set[str]:
     for path in out.rglob("*"):
         if path.is_file() and not path.name.endswith("_sb3.zip"):
             rel = path.relative_to(out).as_posix()
-            names.add(re.sub(r"events\.out\.tfevents\..*", "events", rel))
+            rel = re.sub(r"events\.out\.tfevents\..*", "events", rel)
+            # An evaluation names the policy after its library or run folder (torchrl_step_N_policy).
+            names.add(re.sub(r"(torchrl|sb3)(?=[^/]*_policy/)", "LIB", rel))
     return names
 
 

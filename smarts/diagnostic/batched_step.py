@@ -207,7 +207,7 @@ def batched_rows(batches=DEFAULT_BATCHES, cases=tuple(CASES), steps: int = 300, 
 
 def sensor_rows(batch: int, steps: int, warmup: int, seed: int = 0) -> list[dict]:
     """Agent-steps/s of ``batch`` copies of the all-sensors case with sensors and V2V on, and off."""
-    from smarts.diagnostic.__main__ import sensor_scenario
+    from smarts.diagnostic.scenarios import sensor_scenario
     from smarts.env.batched import BatchedDriving
     from smarts.sensors.rays import sensor_threads
 

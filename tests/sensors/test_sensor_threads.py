@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from smarts.diagnostic.__main__ import sensor_scenario
+from smarts.diagnostic.scenarios import sensor_scenario
 from smarts.env import DrivingParallelEnv
 from smarts.sensors.rays import PARALLEL_AGENTS, parallel_worth_it
 
