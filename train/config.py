@@ -125,6 +125,11 @@ class TrainConfig(Schema):
         description="suite:scenario names (e.g. adaptive:a01_straight_free), suite:* for every scenario of a suite, "
         "or library scenario names.",
     )
+    suite: str | None = Field(
+        None,
+        description="A benchmark suite (a name or a YAML path, e.g. one written by `smarts replay suite`): train on "
+        "every scenario of it (replacing scenarios) and evaluate on it unless eval_suite is given.",
+    )
     action_space: Literal[tuple(ACTION_SPACES)] = Field(
         "rtp", description="rtp (RelativeTargetPose) | continuous (throttle, brake, steering on the pybullet car)."
     )
@@ -303,6 +308,14 @@ class TrainConfig(Schema):
     def _device_name(cls, name: str) -> str:
         check_device_name(name)  # whether the GPU is there is asked when the envs are built
         return name
+
+    @model_validator(mode="after")
+    def _whole_suite(self) -> "TrainConfig":
+        if self.suite:
+            object.__setattr__(self, "scenarios", [f"{self.suite}:*"])
+            if self.eval_suite is None:
+                object.__setattr__(self, "eval_suite", self.suite)
+        return self
 
     @model_validator(mode="after")
     def _ray_workers(self) -> "TrainConfig":

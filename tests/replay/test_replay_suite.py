@@ -53,6 +53,17 @@ def test_a_folder_of_waymo_files_becomes_a_suite_that_the_benchmark_runs(tmp_pat
     assert keep_lane["overall"]["PR"] == 1.0  # it drives each recorded ego's route to its end
     assert len(list((bench / "logs").rglob("episode_000.npz"))) == 9 and (bench / "report.md").is_file()
 
+    # and trainable: --suite trains on every scenario of it and evaluates on it
+    run = tmp_path / "run"
+    code = train_main(["ppo", "--task", "drive", "--suite", str(out), "--total-steps", "128", "--envs", "3",
+                       "--workers", "0", "--frames-per-batch", "64", "--minibatch-size", "32", "--epochs", "1",
+                       "--eval-episodes", "1", "--eval-workers", "1", "--out-dir", str(run), "--quiet"])  # fmt: skip
+    assert code == 0
+    config = json.loads((run / "config.json").read_text())
+    assert config["scenarios"] == [f"{out}:*"] and config["eval_suite"] == str(out)
+    trained = json.loads((run / "eval" / "results.json").read_text())
+    assert set(trained["agents"]["zoo:keep-lane"]["scores"]["scenarios"]) == set(names)
+
 
 def test_argoverse2_and_ngsim_folders_and_what_is_left_out(tmp_path, capsys):
     from smarts.scenario.builtin_maps import builtin_map_path
