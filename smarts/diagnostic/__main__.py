@@ -11,6 +11,10 @@ layers plus RGB, 64-ray lidar, extended neighbours) and V2V messaging (``SENSOR_
 sends 8 floats a step, half the traffic broadcasts its state) among 50 built-in traffic vehicles on
 the same highway, and splits the observation time into its sensors and the V2V exchange.
 
+The CPU rows (``--cpu``, default ``1,sumo50``) time the two cases where fixed costs dominate in
+thread CPU time (``smarts.diagnostic.cpu_step``): the one-agent env step and the simulation step
+with 50 SUMO vehicles; ``--stages`` splits each by stage.
+
 The replay cases (``--replay``) replay 1/10/20/50 recorded NGSIM vehicles on the same highway, and 50
 with an agent taking one of them over (``smarts.diagnostic.replay_step``).
 """
@@ -179,6 +183,39 @@ def _replay_rows(cases: list[tuple[int, bool]], steps: int, warmup: int, console
     return rows
 
 
+def _cpu_rows(cases: list[str], steps: int, warmup: int, stages: bool, console) -> list[dict]:
+    """Time the CPU cases (``smarts.diagnostic.cpu_step``) and print them, split by stage with ``stages``."""
+    from rich.table import Table
+
+    from smarts.diagnostic import cpu_step
+
+    rows = []
+    for case in cases:
+        def run(split: bool) -> dict:
+            return cpu_step.one_agent(steps, warmup, split) if case == "1" else cpu_step.sumo(int(case[4:]), steps, split)
+
+        row = run(False)  # the headline: no timing wrappers
+        name = "1 agent, env step" if case == "1" else f"{case[4:]} SUMO vehicles ({row['vehicles']:.0f} on the road), simulation step"
+        row = {"case": name, **row}
+        if stages:
+            row["stages_us"] = run(True)["stages_us"]
+        rows.append(row)
+    table = Table(title=f"Thread CPU time per step, {steps} timed steps (microseconds)")
+    for col in ("case", "median", "mean"):
+        table.add_column(col, justify="right", no_wrap=True)
+    for r in rows:
+        table.add_row(r["case"], f"{r['cpu_us_median']:.1f}", f"{r['cpu_us_mean']:.1f}")
+    console.print(table)
+    for r in (r for r in rows if "stages_us" in r):
+        split = Table(title=f"{r['case']}: CPU by stage (us per step; timing wrappers included)")
+        split.add_column("stage", no_wrap=True)
+        split.add_column("us", justify="right")
+        for stage, us in r["stages_us"].items():
+            split.add_row(stage, f"{us:.1f}")
+        console.print(split)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if "--batched" in argv:  # the batched backend's rows have their own options
@@ -206,6 +243,11 @@ def main(argv: list[str] | None = None) -> int:
         help="replayed NGSIM vehicle counts; N+ adds an agent taking one over, 0 is the reference without replay "
         "(default 0,1,10,20,50,50+; 'none' to skip)",
     )
+    parser.add_argument(
+        "--cpu", default="1,sumo50",
+        help="CPU-time rows: 1 (one agent, env step) and/or sumoN (N SUMO vehicles, simulation step); 'none' to skip",
+    )
+    parser.add_argument("--stages", action="store_true", help="split the CPU rows by stage")
     parser.add_argument("--out", type=Path, default=Path("reports/diagnostic.json"), help="JSON output file")
     args = parser.parse_args(argv)
     try:
@@ -242,11 +284,16 @@ def main(argv: list[str] | None = None) -> int:
         if 5.0 + TRAFFIC_SPACING * rows_needed + travel > ROAD_LENGTH - END_MARGIN:
             parser.error(f"--sensors: {args.sensors} does not fit on the 455 m highway for {args.steps} steps")
 
+    cpu_cases = [c.strip() for c in args.cpu.split(",") if c.strip() and args.cpu != "none"]
+    if any(c != "1" and not (c.startswith("sumo") and c[4:].isdigit() and int(c[4:]) > 0) for c in cpu_cases):
+        parser.error(f"--cpu: expected 1 and/or sumoN (N > 0), or none; got {args.cpu!r}")
+
     from rich.console import Console
     from rich.progress import track
     from rich.table import Table
 
     console = Console(width=max(Console().width, 110))
+    cpu_rows = _cpu_rows(cpu_cases, args.steps, args.warmup, args.stages, console) if cpu_cases else []
     rows = [time_case(n, args.steps, args.warmup) for n in track(counts, description="timing cases", console=console)]
 
     table = Table(title=f"Step time at full load, {args.steps} timed steps per case (ms per step)")
@@ -311,6 +358,7 @@ def main(argv: list[str] | None = None) -> int:
         "sensor_cases": sensor_rows,
         "traffic_cases": traffic_rows,
         "replay_cases": replay_rows,
+        "cpu_cases": cpu_rows,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(report, indent=2))

@@ -46,6 +46,26 @@ def benchmark_traffic(n_vehicles: int) -> TrafficSpec:
     return TrafficSpec(engine="sumo", flows=flows)
 
 
+def benchmark_spec(n_vehicles: int, seed: int = 42) -> ScenarioSpec:
+    """The scenario without its traffic: the highway (the long one above ``LONG_MAP_ABOVE``
+    vehicles) and one stopped agent on the on-ramp."""
+    agent = {
+        "action_space": "relative_target_pose",
+        "mission": {"start": {"road": "ramp", "lane": 0, "offset": 5.0, "speed": 0.0}, "goal": {"endless": True}},
+    }
+    road = LONG_BENCHMARK_MAP if n_vehicles > LONG_MAP_ABOVE else BENCHMARK_MAP
+    return ScenarioSpec.from_dict(
+        {
+            "name": f"sumo_benchmark_{n_vehicles}",
+            "map": f"builtin:{road}",
+            "seed": seed,
+            "vehicle_capacity": max(256, 2 * n_vehicles),
+            "agents": [agent],
+        },
+        source="sumo-benchmark",
+    )
+
+
 def sumo_step_benchmark(n_vehicles: int, steps: int = 200, seed: int = 42) -> dict:
     """Run the scenario and time ``steps`` steps once ``n_vehicles`` SUMO vehicles exist.
 
@@ -54,24 +74,7 @@ def sumo_step_benchmark(n_vehicles: int, steps: int = 200, seed: int = 42) -> di
     """
     from smarts.env.assembly import build_simulation
 
-    spec = ScenarioSpec.from_dict(
-        {
-            "name": f"sumo_benchmark_{n_vehicles}",
-            "map": f"builtin:{LONG_BENCHMARK_MAP if n_vehicles > LONG_MAP_ABOVE else BENCHMARK_MAP}",
-            "seed": seed,
-            "vehicle_capacity": max(256, 2 * n_vehicles),
-            "agents": [
-                {
-                    "action_space": "relative_target_pose",
-                    "mission": {
-                        "start": {"road": "ramp", "lane": 0, "offset": 5.0, "speed": 0.0},
-                        "goal": {"endless": True},
-                    },
-                }
-            ],
-        },
-        source="sumo-benchmark",
-    )
+    spec = benchmark_spec(n_vehicles, seed)
     sim = build_simulation(dataclasses.replace(spec, traffic=benchmark_traffic(n_vehicles)))
     (provider,) = [p for p in sim.providers if isinstance(p, SumoTrafficProvider)]
     sumo_times: list[float] = []

@@ -5,7 +5,8 @@ from smarts.diagnostic.__main__ import main
 
 def test_diagnostic_writes_a_table_and_json(tmp_path, capsys):
     out = tmp_path / "diag.json"
-    args = ["--agents", "1,3", "--vehicles", "10", "--traffic", "sumo,builtin", "--steps", "5", "--warmup", "1"]
+    args = ["--agents", "1,3", "--vehicles", "10", "--traffic", "sumo,builtin", "--steps", "5", "--warmup", "1",
+            "--cpu", "1,sumo10", "--stages"]
     assert main([*args, "--out", str(out)]) == 0
     report = json.loads(out.read_text())
     cases = report["cases"]
@@ -17,5 +18,10 @@ def test_diagnostic_writes_a_table_and_json(tmp_path, capsys):
     assert [(c["engine"], c["vehicles"]) for c in traffic] == [("sumo", 10), ("builtin", 10)]
     for c in traffic:
         assert c["vehicles_on_road"] >= 10 and c["step_ms"] > c["provider_ms"] > 0
+    cpu = report["cpu_cases"]
+    assert [c["case"].split(",")[0] for c in cpu] == ["1 agent", "10 SUMO vehicles (10 on the road)"]
+    for c in cpu:
+        assert c["cpu_us_median"] > 0 and c["steps"] >= 5  # timed steps in all
+        assert "map, route, events" in c["stages_us"] and "other" in c["stages_us"]
     printed = capsys.readouterr().out
-    assert "agent-steps/s" in printed and "traffic provider" in printed
+    assert "agent-steps/s" in printed and "traffic provider" in printed and "CPU by stage" in printed
