@@ -207,7 +207,7 @@ def _cpu_rows(cases: list[str], steps: int, warmup: int, stages: bool, console) 
         table.add_row(r["case"], f"{r['cpu_us_median']:.1f}", f"{r['cpu_us_mean']:.1f}")
     console.print(table)
     for r in (r for r in rows if "stages_us" in r):
-        split = Table(title=f"{r['case']}: CPU by stage (us per step; timing wrappers included)")
+        split = Table(title=f"{r['case']}: CPU by stage (us per step; timing wrappers included)", min_width=100)
         split.add_column("stage", no_wrap=True)
         split.add_column("us", justify="right")
         for stage, us in r["stages_us"].items():
