@@ -19,13 +19,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from agents.obs_columns import Ego, Waypoint, WaypointPath
+
 ACTION_SPACE = "relative_target_pose"
+AIM_POINT = 1
+"""The route waypoint a step heads for, as keep-lane's."""
 
 
 class StandStillPolicy:
     """Batched: ``act`` maps observations ``{key: [n, ...]}`` of n agents to actions [n, 3]."""
 
     action_space = ACTION_SPACE
+    batching = "rows"  # row by row, no state: the benchmark stacks the rows of many episodes
 
     def __init__(self, max_decel: float = 1.5, jerk: float = 0.5, dt: float = 0.1):
         self.max_decel = max_decel
@@ -34,8 +39,8 @@ class StandStillPolicy:
 
     def act(self, obs: dict[str, np.ndarray]) -> np.ndarray:
         ego = obs["ego"].astype(np.float64)
-        speed = np.maximum(ego[:, 0], 0.0)
-        accel = np.clip(ego[:, 1], -self.max_decel, self.max_decel)
+        speed = np.maximum(ego[:, Ego.SPEED], 0.0)
+        accel = np.clip(ego[:, Ego.ACCEL], -self.max_decel, self.max_decel)
         # Deceleration that fades out, one jerk step per step, exactly as the speed reaches zero:
         # m steps of -m, -(m-1), ..., -1 times jerk*dt shed v = jerk dt^2 m (m+1) / 2.
         step = self.jerk * self.dt
@@ -45,15 +50,16 @@ class StandStillPolicy:
         new_speed = np.maximum(speed + a * self.dt, 0.0)
         dist = new_speed * self.dt
         # Direction: the route's next waypoints (as keep-lane); without them, back to the lane centre.
-        wp = obs["waypoints"][:, 0, 1].astype(np.float64)  # [n, 3] (x, y, heading) in the ego frame
-        has_wp = obs["waypoint_mask"][:, 0, 1] > 0
-        length = np.maximum(np.hypot(wp[:, 0], wp[:, 1]), 1e-6)
+        wp = obs["waypoints"][:, WaypointPath.ROUTE, AIM_POINT].astype(np.float64)  # [n, 3] in the ego frame
+        has_wp = obs["waypoint_mask"][:, WaypointPath.ROUTE, AIM_POINT] > 0
+        x, y, heading = wp[:, Waypoint.X], wp[:, Waypoint.Y], wp[:, Waypoint.HEADING]
+        length = np.maximum(np.hypot(x, y), 1e-6)
         scale = np.where(has_wp, dist / length, 0.0)
-        action = np.stack([wp[:, 0] * scale, wp[:, 1] * scale, wp[:, 2] * scale], axis=1)
+        action = np.stack([x * scale, y * scale, heading * scale], axis=1)
         lane = ~has_wp & (dist > 0)
         if lane.any():
             action[lane, 0] = dist[lane]
-            action[lane, 1] = np.clip(-ego[lane, 7], -0.05, 0.05)
-            action[lane, 2] = np.clip(-ego[lane, 6], -0.02, 0.02)
+            action[lane, 1] = np.clip(-ego[lane, Ego.LANE_OFFSET], -0.05, 0.05)
+            action[lane, 2] = np.clip(-ego[lane, Ego.HEADING_ERROR], -0.02, 0.02)
         action[dist <= 0] = 0.0
         return action.astype(np.float32)

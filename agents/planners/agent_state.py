@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.obs_columns import Ego, Goal
 from agents.planners.frames import Odometry
 
 RELATIVE_TARGET_POSE = "relative_target_pose"
@@ -37,19 +38,19 @@ class AgentState:
         expected; above 1: not this agent's next step)."""
         if self.last_action is None:
             return 0.0
-        speed_gap = abs(float(ego[0]) - self.expect_speed) / 2.0
-        route_gap = abs(float(goal[2]) - self.expect_route) / 8.0 if goal[3] > 0 else 0.0
+        speed_gap = abs(float(ego[Ego.SPEED]) - self.expect_speed) / 2.0
+        route_gap = abs(float(goal[Goal.ROUTE_LEFT]) - self.expect_route) / 8.0 if goal[Goal.HAS_GOAL] > 0 else 0.0
         return speed_gap + route_gap
 
     def observe(self, ego: np.ndarray) -> None:
         """Integrate the executed last step into the odometry (its length scaled to the distance
         the observed speed allows when the limits cut the request short)."""
-        self.speed = max(float(ego[0]), 0.0)
+        self.speed = max(float(ego[Ego.SPEED]), 0.0)
         if self.last_action is None:
             return
         step = self.last_action.astype(np.float64).copy()
         asked = float(np.hypot(step[0], step[1]))
-        done = max(float(ego[0]), 0.0) * 0.1
+        done = max(float(ego[Ego.SPEED]), 0.0) * 0.1
         if asked > 1e-6 and asked > 1.1 * done + 0.05:
             step[:2] *= done / asked
         self.odometry.advance(step)
@@ -60,7 +61,7 @@ class AgentState:
         # the speed the step asks for, as far as the vehicle's limits let it change in one step: a
         # stop commanded at speed is a brake, and the next observation still moves
         self.expect_speed = float(np.clip(travel / dt, self.speed - SPEED_CHANGE[0] * dt, self.speed + SPEED_CHANGE[1] * dt))
-        self.expect_route = float(goal[2]) - travel
+        self.expect_route = float(goal[Goal.ROUTE_LEFT]) - travel
         self.steps += 1
 
 

@@ -25,6 +25,7 @@ from typing import Callable
 
 import numpy as np
 
+from agents.obs_columns import GOAL_XY, NEIGHBOUR_XY, Ego, Goal, Neighbour
 from agents.planners.agent_state import AgentState, StatefulPlanner
 from agents.planners.frames import chain, wrap
 from agents.planners.geometry import cubic_coefficients, polyval, quintic_coefficients
@@ -158,9 +159,9 @@ class ConstantVelocity:
 
     def __call__(self, state: AIDState, row: dict[str, np.ndarray], picked: np.ndarray) -> np.ndarray:
         nb = row["neighbours"][picked].astype(np.float64)
-        vel = np.stack([nb[:, 4] + float(row["ego"][0]), nb[:, 5]], axis=1)
+        vel = np.stack([nb[:, Neighbour.VX] + float(row["ego"][Ego.SPEED]), nb[:, Neighbour.VY]], axis=1)
         t = np.arange(1, HORIZON + 1) * DT
-        return nb[:, None, :2] + vel[:, None, :] * t[None, :, None]
+        return nb[:, None, NEIGHBOUR_XY] + vel[:, None, :] * t[None, :, None]
 
 
 def in_frame(states: np.ndarray, pose: np.ndarray) -> np.ndarray:
@@ -221,14 +222,15 @@ class AIDPlanner(StatefulPlanner):
 
     def decide(self, state: AIDState, row: dict[str, np.ndarray]) -> np.ndarray:
         ego = row["ego"]
-        state.ids = state.tracker.update(state.odometry.pose, float(ego[0]), row["neighbours"], row["neighbour_mask"])
-        state.ego_history = (state.ego_history + [np.array([*state.odometry.pose, float(ego[0])])])[-HISTORY:]
+        speed = float(ego[Ego.SPEED])
+        state.ids = state.tracker.update(state.odometry.pose, speed, row["neighbours"], row["neighbour_mask"])
+        state.ego_history = (state.ego_history + [np.array([*state.odometry.pose, speed])])[-HISTORY:]
         if state.queue and state.since_plan < REPLAN_EVERY:
             state.since_plan += 1
             return state.queue.pop(0)
         poses = self.plan(state, row)
         if poses is None:  # no usable lane path: keep heading, brake gently
-            v = max(float(ego[0]) - 2.0 * DT, 0.0)
+            v = max(speed - 2.0 * DT, 0.0)
             return np.array([v * DT, 0.0, 0.0])
         state.queue = list(chain(poses))
         state.since_plan = 1
@@ -251,10 +253,10 @@ class AIDPlanner(StatefulPlanner):
         refs = self.references(row)
         if not refs:
             return None
-        speed, accel = float(ego[0]), float(ego[1])
-        v_lim = max(float(ego[9]), 1.0)
-        has_goal = goal[3] > 0
-        goal_dist = [float(np.min(np.linalg.norm(ref.xy - goal[:2], axis=1))) for _, ref in refs]
+        speed, accel = float(ego[Ego.SPEED]), float(ego[Ego.ACCEL])
+        v_lim = max(float(ego[Ego.SPEED_LIMIT]), 1.0)
+        has_goal = goal[Goal.HAS_GOAL] > 0
+        goal_dist = [float(np.min(np.linalg.norm(ref.xy - goal[GOAL_XY], axis=1))) for _, ref in refs]
         best_goal = min(goal_dist)
         predicted = self.predict(state, row)
         candidates, costs, refs_of = [], [], []
@@ -315,6 +317,6 @@ class AIDPlanner(StatefulPlanner):
         idx = np.flatnonzero(mask)
         if idx.size == 0:
             return np.zeros((0, HORIZON, 2))
-        dist = np.hypot(row["neighbours"][idx, 0], row["neighbours"][idx, 1])
+        dist = np.hypot(row["neighbours"][idx, Neighbour.DX], row["neighbours"][idx, Neighbour.DY])
         picked = idx[np.argsort(dist, kind="stable")[:NEAREST]]
         return np.asarray(self.predictor(state, row, picked), dtype=np.float64)

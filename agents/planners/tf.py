@@ -22,6 +22,7 @@ from typing import Callable
 
 import numpy as np
 
+from agents.obs_columns import NEIGHBOUR_XY, Ego, Goal, Neighbour, WaypointPath
 from agents.planners.agent_state import AgentState, StatefulPlanner
 from agents.planners.frames import wrap
 from agents.planners.geometry import collision_forecast
@@ -63,8 +64,8 @@ def neighbour_kinematics(row: dict[str, np.ndarray]) -> tuple[np.ndarray, np.nda
     """(rows present, heading, speed, ego-frame velocity) of the observed neighbours."""
     nb = row["neighbours"].astype(np.float64)
     present = np.flatnonzero(row["neighbour_mask"] > 0)
-    heading = np.arctan2(nb[:, 3], nb[:, 2])
-    vel = np.stack([nb[:, 4] + float(row["ego"][0]), nb[:, 5]], axis=1)
+    heading = np.arctan2(nb[:, Neighbour.SIN_HEADING], nb[:, Neighbour.COS_HEADING])
+    vel = np.stack([nb[:, Neighbour.VX] + float(row["ego"][Ego.SPEED]), nb[:, Neighbour.VY]], axis=1)
     return present, heading, np.linalg.norm(vel, axis=1), vel
 
 
@@ -77,18 +78,20 @@ def stop_move_features(row: dict[str, np.ndarray], target_points: np.ndarray) ->
     present, heading, _, vel = neighbour_kinematics(row)
     nb = row["neighbours"].astype(np.float64)
     if present.size:
-        lanes = lane_view(row["waypoints"], row["waypoint_mask"], float(ego[8]))
-        on_lane = present[lanes.lane_of(nb[present, :2], float(ego[8])) >= 0] if lanes.paths else present[:0]
-        order = on_lane[np.argsort(np.hypot(nb[on_lane, 0], nb[on_lane, 1]), kind="stable")][:5]
+        lane_width = float(ego[Ego.LANE_WIDTH])
+        lanes = lane_view(row["waypoints"], row["waypoint_mask"], lane_width)
+        on_lane = present[lanes.lane_of(nb[present, NEIGHBOUR_XY], lane_width) >= 0] if lanes.paths else present[:0]
+        order = on_lane[np.argsort(np.hypot(nb[on_lane, Neighbour.DX], nb[on_lane, Neighbour.DY]), kind="stable")][:5]
         for j, i in enumerate(order):
-            rel_v = vel[i] - np.array([ego[0], 0.0])
-            out[7 * j: 7 * j + 7] = [-nb[i, 1], nb[i, 0], -rel_v[1], rel_v[0], heading[i], nb[i, 6], nb[i, 7]]
+            rel_v = vel[i] - np.array([ego[Ego.SPEED], 0.0])
+            out[7 * j: 7 * j + 7] = [-nb[i, Neighbour.DY], nb[i, Neighbour.DX], -rel_v[1], rel_v[0], heading[i],
+                                     nb[i, Neighbour.LENGTH], nb[i, Neighbour.WIDTH]]  # fmt: skip
     pts = np.zeros((5, 3))
     k = min(5, len(target_points))
     pts[:k] = target_points[:k]
     out[35:45] = np.stack([-pts[:, 1], pts[:, 0]], axis=1).reshape(-1)
     out[45:50] = pts[:, 2]
-    out[50:53] = [ego[9], ego[10], ego[11]]
+    out[50:53] = [ego[Ego.SPEED_LIMIT], ego[Ego.LENGTH], ego[Ego.WIDTH]]
     return out
 
 
@@ -112,18 +115,19 @@ class TFPlanner(StatefulPlanner):
             return rows
         _, heading, speed, _ = neighbour_kinematics(row)
         nb = row["neighbours"].astype(np.float64)
-        bearing = np.abs(np.arctan2(nb[rows, 1], nb[rows, 0]))
+        bearing = np.abs(np.arctan2(nb[rows, Neighbour.DY], nb[rows, Neighbour.DX]))
         rows = rows[bearing <= REAR_CONE]
         if rows.size == 0:
             return rows
-        margin = ego[0] ** 2 / (2 * BRAKE) if self.braking_margin else 0.0
-        hit = collision_forecast(float(ego[0]), float(ego[10]), float(ego[11]), nb[rows, :2], heading[rows],
-                                 speed[rows], nb[rows, 6], nb[rows, 7], l_front + margin, w_left, w_right, 5)  # fmt: skip
+        margin = ego[Ego.SPEED] ** 2 / (2 * BRAKE) if self.braking_margin else 0.0
+        hit = collision_forecast(float(ego[Ego.SPEED]), float(ego[Ego.LENGTH]), float(ego[Ego.WIDTH]),
+                                 nb[rows, NEIGHBOUR_XY], heading[rows], speed[rows], nb[rows, Neighbour.LENGTH],
+                                 nb[rows, Neighbour.WIDTH], l_front + margin, w_left, w_right, 5)  # fmt: skip
         return rows[hit]
 
     def decide(self, st: TFState, row: dict[str, np.ndarray]) -> np.ndarray:
         ego, goal = row["ego"].astype(np.float64), row["goal"].astype(np.float64)
-        speed, width = float(ego[0]), max(float(ego[8]), 2.0)
+        speed, width = float(ego[Ego.SPEED]), max(float(ego[Ego.LANE_WIDTH]), 2.0)
         ids = st.tracker.update(st.odometry.pose, speed, row["neighbours"], row["neighbour_mask"])
         moved = speed * self.dt
         st.static_cnt = st.static_cnt + 1 if moved < 0.01 else 0
@@ -140,15 +144,15 @@ class TFPlanner(StatefulPlanner):
         turning = bool((dh > np.deg2rad(5.0)).any())
         present, heading, nb_speed, _ = neighbour_kinematics(row)
         nb = row["neighbours"].astype(np.float64)
-        near = int((np.hypot(nb[present, 0], nb[present, 1]) < 20.0).sum())
+        near = int((np.hypot(nb[present, Neighbour.DX], nb[present, Neighbour.DY]) < 20.0).sum())
         atten = max(0.5, 1.0 - 0.02 * near)
         straight = all((np.abs(wrap(np.diff(p[:11, 2]))) <= 1e-3).all() for p in lanes.paths.values())
         st.straight_cnt = st.straight_cnt + 1 if straight else 0
-        v_lim = max(float(ego[9]), 0.1)
+        v_lim = max(float(ego[Ego.SPEED_LIMIT]), 0.1)
         v = {"cur": v_lim, "left": v_lim if lanes.left >= 0 else 0.0, "right": v_lim if lanes.right >= 0 else 0.0}
         v["target"] = v_lim
         gaps = {"left": 10.0, "right": 10.0}
-        offset = float(ego[7])
+        offset = float(ego[Ego.LANE_OFFSET])
         changing = st.target != lanes.current or abs(offset) >= width / 10
         w_left = width / 2 if changing and offset < 0 and abs(offset) >= width / 10 else 1.25
         w_right = width / 2 if changing and offset > 0 and abs(offset) >= width / 10 else 1.25
@@ -192,12 +196,13 @@ class TFPlanner(StatefulPlanner):
                 return np.zeros(3)
 
         # ---- scheduler: leader-limited lane speeds
-        lane_of = lanes.lane_of(nb[present, :2], width) if present.size else np.zeros(0, dtype=np.int64)
-        ego_diag = float(np.hypot(ego[10], ego[11]))
+        lane_of = lanes.lane_of(nb[present, NEIGHBOUR_XY], width) if present.size else np.zeros(0, dtype=np.int64)
+        ego_diag = float(np.hypot(ego[Ego.LENGTH], ego[Ego.WIDTH]))
         for r, lane in zip(present, lane_of):
-            if lane < 0 or nb[r, 0] <= 0 or abs(wrap(heading[r])) > np.pi / 2:
+            if lane < 0 or nb[r, Neighbour.DX] <= 0 or abs(wrap(heading[r])) > np.pi / 2:
                 continue
-            gap = max(float(np.hypot(nb[r, 0], nb[r, 1])) - ego_diag - float(np.hypot(nb[r, 6], nb[r, 7])), 0.0)
+            size = float(np.hypot(nb[r, Neighbour.LENGTH], nb[r, Neighbour.WIDTH]))
+            gap = max(float(np.hypot(nb[r, Neighbour.DX], nb[r, Neighbour.DY])) - ego_diag - size, 0.0)
             if lane == lanes.current and gap < 5.5:
                 v["cur"] = min(v["cur"], float(nb_speed[r]))
             elif changing and lane == st.target and gap < 5.5:
@@ -260,9 +265,9 @@ class TFPlanner(StatefulPlanner):
         """-1 right, 0 keep, +1 left: argmax(v_R - thr_R, v_cur, v_L - thr_L)."""
         ego, goal = row["ego"].astype(np.float64), row["goal"].astype(np.float64)
         thr = {"left": 1.0, "right": 1.0}
-        route = 0 if 0 in lanes.paths else lanes.current
+        route = WaypointPath.ROUTE if WaypointPath.ROUTE in lanes.paths else lanes.current
         route_side = lanes.side(route)
-        dist_goal = float(np.hypot(goal[0], goal[1])) if goal[3] > 0 else np.inf
+        dist_goal = float(np.hypot(goal[Goal.DX], goal[Goal.DY])) if goal[Goal.HAS_GOAL] > 0 else np.inf
         near = 50.0 if st.straight_cnt >= 10 else 20.0
         if route_side != 0:  # off the route path: go back to it (the goal lane of the original)
             toward, away = ("left", "right") if route_side > 0 else ("right", "left")
@@ -270,7 +275,7 @@ class TFPlanner(StatefulPlanner):
             side_path = lanes.left if toward == "left" else lanes.right
             nb = row["neighbours"].astype(np.float64)
             occupied = any(
-                lane == side_path and -6.0 <= nb[r, 0] <= 1.5 for r, lane in zip(present, lane_of)
+                lane == side_path and -6.0 <= nb[r, Neighbour.DX] <= 1.5 for r, lane in zip(present, lane_of)
             )
             if occupied and dist_goal < near and straight:
                 st.final_straight_cnt += 1

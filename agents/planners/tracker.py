@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from agents.obs_columns import NEIGHBOUR_XY, Neighbour
 from agents.planners.frames import local_to_global, rotation, wrap
 
 STATE = ("x", "y", "heading", "speed", "vx", "vy")
@@ -46,9 +47,9 @@ class NeighbourTracker:
     def observed_states(pose: np.ndarray, ego_speed: float, neighbours: np.ndarray) -> np.ndarray:
         """Neighbour rows [K, >=8] of the ego observation -> odometry-frame states [K, 6]."""
         nb = np.asarray(neighbours, dtype=np.float64)
-        xy = local_to_global(nb[:, :2], pose)
-        heading = wrap(pose[2] + np.arctan2(nb[:, 3], nb[:, 2]))
-        vel = np.stack([nb[:, 4] + ego_speed, nb[:, 5]], axis=1) @ rotation(pose[2]).T
+        xy = local_to_global(nb[:, NEIGHBOUR_XY], pose)
+        heading = wrap(pose[2] + np.arctan2(nb[:, Neighbour.SIN_HEADING], nb[:, Neighbour.COS_HEADING]))
+        vel = np.stack([nb[:, Neighbour.VX] + ego_speed, nb[:, Neighbour.VY]], axis=1) @ rotation(pose[2]).T
         speed = np.linalg.norm(vel, axis=1)
         return np.column_stack([xy, heading, speed, vel])
 
@@ -94,7 +95,7 @@ class NeighbourTracker:
     def _record(self, track: Track, state: np.ndarray, row: np.ndarray) -> None:
         track.states[self.frame] = state
         track.last_frame = self.frame
-        track.length, track.width = float(row[6]), float(row[7])
+        track.length, track.width = float(row[Neighbour.LENGTH]), float(row[Neighbour.WIDTH])
         for old in [f for f in track.states if f <= self.frame - self.keep]:
             del track.states[old]
 

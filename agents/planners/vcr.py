@@ -22,6 +22,7 @@ from typing import Callable
 
 import numpy as np
 
+from agents.obs_columns import GOAL_XY, Ego, Goal, Neighbour, WaypointPath
 from agents.planners.agent_state import AgentState, StatefulPlanner
 from agents.planners.frames import wrap
 from agents.planners.geometry import bezier_length, bezier_points, bezier_tangents
@@ -52,9 +53,9 @@ def obstacles(row: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     +-120 deg rear; road users heading the opposite way (|dheading| > 175 deg) are dropped."""
     nb = row["neighbours"].astype(np.float64)
     present = np.flatnonzero(row["neighbour_mask"] > 0)
-    dist = np.hypot(nb[present, 0], nb[present, 1])
-    bearing = np.abs(np.arctan2(nb[present, 1], nb[present, 0]))
-    dh = np.abs(np.arctan2(nb[present, 3], nb[present, 2]))
+    dist = np.hypot(nb[present, Neighbour.DX], nb[present, Neighbour.DY])
+    bearing = np.abs(np.arctan2(nb[present, Neighbour.DY], nb[present, Neighbour.DX]))
+    dh = np.abs(np.arctan2(nb[present, Neighbour.SIN_HEADING], nb[present, Neighbour.COS_HEADING]))
     keep = (dist < OBSTACLE_RANGE) & (dh <= OPPOSITE)
     return present[keep & (bearing <= FRONT)], present[keep & (bearing >= REAR)]
 
@@ -68,10 +69,11 @@ def ttc_risk(row: dict[str, np.ndarray], front: np.ndarray, plan: np.ndarray, dt
         return 0.0
     nb = row["neighbours"].astype(np.float64)
     ego = row["ego"].astype(np.float64)
-    bearing = np.arctan2(nb[front, 1], nb[front, 0])
-    gap = np.hypot(nb[front, 0], nb[front, 1]) - 0.5 * (nb[front, 6] + ego[10])
+    bearing = np.arctan2(nb[front, Neighbour.DY], nb[front, Neighbour.DX])
+    dist = np.hypot(nb[front, Neighbour.DX], nb[front, Neighbour.DY])
+    gap = dist - 0.5 * (nb[front, Neighbour.LENGTH] + ego[Ego.LENGTH])
     planned = float(np.hypot(plan[0, 0], plan[0, 1])) / dt
-    own = np.array([nb[front, 4] + ego[0], nb[front, 5]])  # obstacle velocity, ego frame
+    own = np.array([nb[front, Neighbour.VX] + ego[Ego.SPEED], nb[front, Neighbour.VY]])  # obstacle velocity, ego frame
     closing = planned * np.cos(bearing) - (own[0] * np.cos(bearing) + own[1] * np.sin(bearing))
     ttc = np.where(gap <= 0, 0.0, np.where(closing > 1e-3, gap / np.maximum(closing, 1e-3), np.inf))
     return float(np.clip((TTC_HORIZON - ttc.min()) / TTC_HORIZON, 0.0, 1.0))
@@ -88,14 +90,16 @@ def classifier_numbers(row: dict[str, np.ndarray], step: np.ndarray, path: np.nd
     if k > 0:
         out[3 : 3 + 3 * k] = np.asarray(path[1 : 1 + k, :3], dtype=np.float32).reshape(-1)
     ego = row["ego"].astype(np.float64)
-    out[18] = ego[0] / 10.0
+    out[18] = ego[Ego.SPEED] / 10.0
     nb = row["neighbours"].astype(np.float64)
     present = np.flatnonzero(row["neighbour_mask"] > 0)
-    ahead = present[(nb[present, 0] > 0) & (np.abs(np.arctan2(nb[present, 1], nb[present, 0])) <= FRONT)]
+    dx, dy = nb[present, Neighbour.DX], nb[present, Neighbour.DY]
+    ahead = present[(dx > 0) & (np.abs(np.arctan2(dy, dx)) <= FRONT)]
     if ahead.size:
-        i = ahead[np.argmin(np.hypot(nb[ahead, 0], nb[ahead, 1]))]
-        gap = float(nb[i, 0]) - 0.5 * (float(nb[i, 6]) + float(ego[10]))
-        out[19:24] = [1.0, gap / 10.0, nb[i, 1] / 10.0, nb[i, 4] / 10.0, nb[i, 5] / 10.0]
+        i = ahead[np.argmin(np.hypot(nb[ahead, Neighbour.DX], nb[ahead, Neighbour.DY]))]
+        gap = float(nb[i, Neighbour.DX]) - 0.5 * (float(nb[i, Neighbour.LENGTH]) + float(ego[Ego.LENGTH]))
+        side, vx, vy = nb[i, Neighbour.DY], nb[i, Neighbour.VX], nb[i, Neighbour.VY]
+        out[19:24] = [1.0, gap / 10.0, side / 10.0, vx / 10.0, vy / 10.0]
     return out
 
 
@@ -130,10 +134,10 @@ class VCRPlanner(StatefulPlanner):
         if not paths:
             return None
         current = min(paths, key=lambda p: float(np.hypot(*paths[p][0, :2])))
-        if goal[3] > 0:
-            target = min(paths, key=lambda p: float(np.hypot(*(paths[p][-1, :2] - goal[:2]))))
+        if goal[Goal.HAS_GOAL] > 0:
+            target = min(paths, key=lambda p: float(np.hypot(*(paths[p][-1, :2] - goal[GOAL_XY]))))
         else:
-            target = 0 if 0 in paths else current
+            target = WaypointPath.ROUTE if WaypointPath.ROUTE in paths else current
         st.goal_paths.append(target)
         if st.path not in paths:
             st.path = current
@@ -157,8 +161,8 @@ class VCRPlanner(StatefulPlanner):
                 break
         control = np.vstack([np.zeros(2), pts[start:, :2]])
         goal = row["goal"]
-        if len(pts) - start <= 1 and goal[3] > 0:
-            control = np.vstack([control, goal[None, :2]])
+        if len(pts) - start <= 1 and goal[Goal.HAS_GOAL] > 0:
+            control = np.vstack([control, goal[None, GOAL_XY]])
         if len(control) < 2:
             return None
         length = bezier_length(control)
@@ -181,7 +185,7 @@ class VCRPlanner(StatefulPlanner):
             st.p_collision = float(np.dot(w, np.array(st.scores)) / w.sum())
             st.factor = speed_factor(st.p_collision)
         elif rear.size:
-            near = np.hypot(row["neighbours"][rear, 0], row["neighbours"][rear, 1]).min() < 5.0
+            near = np.hypot(row["neighbours"][rear, Neighbour.DX], row["neighbours"][rear, Neighbour.DY]).min() < 5.0
             st.factor = 2.5 if near else 1.1
         else:
             st.factor = 1.1

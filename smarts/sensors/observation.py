@@ -71,6 +71,7 @@ NEIGHBOUR_FEATURES = 9
 GOAL_FEATURES = 4
 SIGNAL_FEATURES = 4
 NUM_PATHS = 3
+# agents/obs_columns.py names these columns for the agents (which import no simulator); a test keeps them equal.
 EGO_FEATURE_NAMES = (
     "speed", "accel", "jerk", "lat_accel", "yaw_rate", "steering", "heading_error", "lane_offset",
     "lane_width", "speed_limit", "length", "width",
@@ -80,6 +81,11 @@ EXTENDED_NEIGHBOUR_FEATURE_NAMES = (
     "speed", "accel", "yaw_rate", "lane_index", "same_road",
     *(f"type_{t.name.lower()}" for t in VehicleType),
 )  # fmt: skip
+GOAL_FEATURE_NAMES = ("dx", "dy", "route_left", "has_goal")
+SIGNAL_FEATURE_NAMES = ("red", "yellow", "green", "stop_distance")
+WAYPOINT_FEATURE_NAMES = ("x", "y", "heading")
+PATH_NAMES = ("route", "left", "right")
+"""The paths of ``waypoints`` (its first index): along the route, the lanes left and right of it."""
 AHEAD_FEATURE_NAMES = ("present", "gap", "rel_speed", "speed", "accel")
 LEAD_FEATURE_NAMES = (
     "present", "visible", "in_lane", "dx", "dy", "cos_heading", "sin_heading", "vx", "vy", "speed",
