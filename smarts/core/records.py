@@ -47,6 +47,7 @@ when one of them is replaced (not when its contents change).
 
 from __future__ import annotations
 
+import os
 import pickle
 
 import numba
@@ -54,7 +55,7 @@ from numba.core import caching, types
 from numba.core.extending import overload
 from numba.experimental import structref
 
-__all__ = ["declare", "freeze_fields", "view"]
+__all__ = ["cache_depends_on", "declare", "freeze_fields", "view"]
 
 
 class _RecordType(types.StructRef):
@@ -162,3 +163,55 @@ def _tolerate_stale_cache_indexes() -> None:
 
 
 _tolerate_stale_cache_indexes()
+
+
+def cache_depends_on(*modules) -> object:
+    """Decorator under ``numba.njit(cache=True)``: the on-disk cache of the kernel is also stale
+    when one of ``modules`` (those whose compiled functions it calls) changes.
+
+    Why: numba's cache of a function holds the code of what it calls but is checked only against
+    its own file, so a kernel that fuses stages of several modules would go on running an edited
+    stage's old code (and a mutation test would miss the edit)."""
+    files = tuple(m.__file__ for m in modules)
+
+    def mark(py_func):
+        py_func.__cache_depends__ = files
+        return py_func
+
+    return mark
+
+
+class _DependentLocator:
+    """The cache locator of a ``cache_depends_on`` kernel: numba's own, with a source stamp that
+    also covers the files of the modules it depends on."""
+
+    def __init__(self, inner, files: tuple[str, ...]):
+        self._inner, self._files = inner, files
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        files = getattr(py_func, "__cache_depends__", None)
+        if not files:
+            return None
+        for base in caching.CacheImpl._locator_classes:
+            inner = None if base is cls else base.from_function(py_func, py_file)
+            if inner is not None:
+                return cls(inner, files)
+        return None
+
+    def get_source_stamp(self):
+        stamps = tuple((path, os.stat(path).st_mtime, os.stat(path).st_size) for path in self._files)
+        return self._inner.get_source_stamp(), stamps
+
+    def __getattr__(self, name: str):
+        return getattr(self._inner, name)
+
+
+def _register_dependent_locator() -> None:
+    """Put ``_DependentLocator`` first among numba's cache locators (once)."""
+    classes = getattr(getattr(caching, "CacheImpl", None), "_locator_classes", None)
+    if classes is not None and not any(c.__name__ == "_DependentLocator" for c in classes):
+        classes.insert(0, _DependentLocator)
+
+
+_register_dependent_locator()

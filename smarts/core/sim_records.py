@@ -48,6 +48,8 @@ class SimTables(NamedTuple):
 
     # the vehicle table (``VehicleTable``) and its rows' not-moving anchors
     data: np.ndarray  # float64[columns, rows]
+    alive: np.ndarray  # bool[rows]
+    row_map: np.ndarray  # int64[rows] map of each row's episode in the stack
     lane: np.ndarray  # int32[rows] projected lane, -1 off every lane
     role: np.ndarray  # int8[rows]
     vtype: np.ndarray  # int8[rows]
@@ -61,6 +63,15 @@ class SimTables(NamedTuple):
     lane_index: np.ndarray  # int16[L] position on its road, 0 = rightmost
     lane_internal: np.ndarray  # bool[L] inside a junction
     lane_succ_offsets: np.ndarray  # int64[L + 1] CSR of each lane's successors (none: the map ends)
+    # every map's projection grid over one segment table (``smarts.maps.projection.Grids``)
+    grid_table: np.ndarray  # float64[14, S]
+    grid_offsets: np.ndarray  # intp[cells + 1]
+    grid_segs: np.ndarray  # intp[...]
+    grid_cell_base: np.ndarray  # int64[M]
+    grid_ny: np.ndarray  # int64[M]
+    grid_origin: np.ndarray  # float64[M, 2]
+    grid_inv_cell: np.ndarray  # float64[M]
+    grid_cell_max: np.ndarray  # float64[M, 2]
     # every map's drivable raster, concatenated as ``MapStack`` stacks them: map m's cells are
     # raster_flat[raster_base[m]:raster_base[m + 1]], raster_width[m] a row
     raster_flat: np.ndarray  # bool[cells of every map]
@@ -88,6 +99,8 @@ class SimTables(NamedTuple):
     signal_s: np.ndarray  # float64[A * stride] route arc length of its stop line
     # what the simulation keeps per agent between steps
     agent_episode: np.ndarray  # int64[A]
+    agent_active: np.ndarray  # bool[A] still in its episode
+    agent_row: np.ndarray  # int64[A] its vehicle's row (-1: none)
     agent_events: np.ndarray  # bool[A, NUM_EVENTS] this step's events
     agent_done: np.ndarray  # bool[A]
     prev_xy: np.ndarray  # float64[A, 2] position at the last event test
@@ -96,6 +109,8 @@ class SimTables(NamedTuple):
     route_progress: np.ndarray  # float64[A] arc length reached along the route
     progress_delta: np.ndarray  # float64[A] progress of the last step
     # per episode
+    episode_capacity: int  # rows of each episode's block
+    episode_agent_start: np.ndarray  # int64[B + 1] first agent of each episode
     episode_map: np.ndarray  # int64[B] map of each episode in the stack
     episode_step: np.ndarray  # int64[B] steps taken
     episode_limit: np.ndarray  # int64[B] steps allowed
@@ -149,12 +164,15 @@ def sim_tables(sim):
 def tables_of(sim) -> SimTables:
     """``sim``'s ``SimTables`` (its own arrays)."""
     ma, st, t, rm = sim.mission_arrays, sim.map_stack, sim.table, sim.road_map
+    g = sim.grids
     return SimTables(
-        data=t.data, lane=t.lane, role=t.role, vtype=t.vtype, anchor=sim.not_moving.anchor,
+        data=t.data, alive=t.alive, row_map=sim.row_map, lane=t.lane, role=t.role, vtype=t.vtype, anchor=sim.not_moving.anchor,
         anchor_time=sim.not_moving.anchor_time,
         lane_length=rm.lane_length, lane_width=rm.lane_width, lane_speed_limit=rm.lane_speed_limit,
         lane_road=rm.lane_road, lane_index=rm.lane_index, lane_internal=rm.lane_internal,
         lane_succ_offsets=rm.succ_offsets,
+        grid_table=g.table, grid_offsets=g.offsets, grid_segs=g.segs, grid_cell_base=g.cell_base, grid_ny=g.ny,
+        grid_origin=g.origin, grid_inv_cell=g.inv_cell, grid_cell_max=g.cell_max,
         raster_flat=st.raster_flat, raster_base=st.raster_base, raster_width=st.raster_width,
         raster_origin=st.raster_origin, raster_inv_res=st.raster_inv_res, raster_cell_max=st.raster_cell_max,
         flat_paths=ma.flat_paths, flat_valid=ma.flat_valid, stride=int(ma.stride), path_len=ma.path_len,
@@ -162,9 +180,11 @@ def tables_of(sim) -> SimTables:
         goal_xy=ma.goal_xy, goal_radius=ma.goal_radius, goal_road=ma.goal_road, goal_lane=ma.goal_lane,
         goal_s=ma.goal_s, goal_gate=ma.goal_gate, signal_via=ma.signal_via.reshape(-1),
         signal_s=ma.signal_s.reshape(-1),
-        agent_episode=sim.agent_episode, agent_events=sim.agent_events, agent_done=sim.agent_done,
+        agent_episode=sim.agent_episode, agent_active=sim.agent_active, agent_row=sim.agent_row,
+        agent_events=sim.agent_events, agent_done=sim.agent_done,
         prev_xy=sim.agent_prev_xy, prev_row=sim.agent_prev_row, route_index=sim.route_index,
         route_progress=sim.route_progress, progress_delta=sim.route_progress_delta,
+        episode_capacity=int(sim.episode_capacity), episode_agent_start=sim.episode_agent_start,
         episode_map=sim.episode_map, episode_step=sim.episode_step, episode_limit=sim.episode_limit,
         terminate_on=sim.terminate_on, not_moving_seconds=sim.not_moving_seconds,
         not_moving_distance=sim.not_moving_distance, via_colour=sim.via_colour,

@@ -30,20 +30,20 @@ the two spatial lookups (lane projection, the drivable raster) take each row's m
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
 from smarts.core.events import NUM_EVENTS, Event, NotMovingTracker, agent_events, events_by_episode
 from smarts.core.missions import MissionArrays, ResolvedMission, stack_missions
 from smarts.core.provider import Provider, ProviderBase
+from smarts.core.settle import ROUTE_WINDOW_AHEAD, ROUTE_WINDOW_BACK, route_progress, settle  # noqa: F401
 from smarts.core.sim_records import sim_tables
-from smarts.core.vehicle_table import COLUMN, Role, VehicleTable
+from smarts.core.vehicle_table import Role, VehicleTable
 from smarts.maps import RoadMap, project
+from smarts.maps.projection import Grids, projection_index
 from smarts.maps.stack import MapStack, stack_maps
 
 SEED_MAX = 2**64 - 1
@@ -73,10 +73,6 @@ def check_seed(seed: object, what: str = "seed") -> int:
 def derived_seed(seed: int, offset: int) -> int:
     """``seed + offset`` wrapped into the seed range (episode ``k`` of a seeded run, copy ``i``...)."""
     return (int(seed) + int(offset)) % (SEED_MAX + 1)
-
-
-ROUTE_WINDOW_BACK = 2  # route points searched behind the last match
-ROUTE_WINDOW_AHEAD = 10  # ... and ahead of it (more than the farthest one-step move at ~1 m spacing)
 
 
 class Scope(NamedTuple):
@@ -582,7 +578,7 @@ class Simulation:
         self.check_actions(actions)
         self.actions = actions
         self.episode_step += 1
-        self.episode_time = self.episode_step * self.dt  # per episode; no drift from summing dt
+        np.multiply(self.episode_step, self.dt, out=self.episode_time)  # per episode; no drift from summing dt
         for p in self.batch_providers:
             p.step(self, self.dt)
         for b, provs in enumerate(self._stepped):
@@ -592,10 +588,12 @@ class Simulation:
                     p.step(view, self.dt)
         for stage in self.batch_stages:
             stage.step(self, self.dt)
-        self.alive = self.table.alive_rows
-        self._project(self.alive)
-        self._route_progress_of(self._active, first=False)
-        self._events_of(self._all_episodes)
+        self._settle()
+
+    def _settle(self) -> None:
+        """Live rows, map projection, route progress and events in one compiled call
+        (``smarts.core.settle``)."""
+        self.alive = settle(sim_tables(self), self._active, self.episode_time)
 
     def remove_done_agents(self) -> np.ndarray:
         """Remove the vehicles of agents that finished this step (or hand them to traffic, with
@@ -688,6 +686,13 @@ class Simulation:
         self.alive = self.table.alive_rows
         self._project(self.alive)
 
+    @property
+    def grids(self) -> Grids:
+        """The projection grids of the simulation's maps (its one map's own, or the stack's)."""
+        if self.map_stack.num_maps == 1:
+            return projection_index(self.road_map).grids
+        return self.map_stack.grids
+
     def project_rows(self, rows: np.ndarray):
         """``LaneProjection`` of ``rows``, each on its episode's map (stacked lanes)."""
         t = self.table
@@ -706,8 +711,7 @@ class Simulation:
         )
 
     def _route_progress_of(self, agents: np.ndarray, first: bool) -> None:
-        self.route_progress_delta[agents] = 0.0
-        _route_progress(sim_tables(self), agents, self.agent_row[agents], first)
+        route_progress(sim_tables(self), agents, self.agent_row[agents], first)
 
     def _events_of(self, episodes: np.ndarray) -> None:
         self.agent_events[~self.agent_active] = False
@@ -723,40 +727,6 @@ class Simulation:
             tables, self.alive, agents, self.agent_row[agents], episodes, alive_lo, alive_hi, agent_lo, agent_hi,
             self.episode_time,
         )  # fmt: skip
-
-
-@numba.njit(cache=True, nogil=True)
-def _route_progress(tables, agents, rows, first):  # pragma: no cover - compiled
-    """Nearest route point in a window around the last one, and the arc length reached (into
-    ``tables``, the simulation's frozen ``SimTables``)."""
-    data, flat_paths, stride, path_len = tables.data, tables.flat_paths, tables.stride, tables.path_len
-    path_s, route_length = tables.path_s, tables.route_length
-    route_index, route_progress, delta = tables.route_index, tables.route_progress, tables.progress_delta
-    for i in range(agents.shape[0]):
-        a, r = agents[i], rows[i]
-        x, y = data[_X, r], data[_Y, r]
-        last = path_len[a] - 1
-        if first:
-            lo, hi = 0, min(4 * ROUTE_WINDOW_AHEAD, last)
-        else:
-            lo = max(route_index[a] - ROUTE_WINDOW_BACK, 0)
-            hi = min(route_index[a] + ROUTE_WINDOW_AHEAD, last)
-        best, best_d2 = lo, np.inf
-        for k in range(lo, hi + 1):
-            p = flat_paths[a * stride + k, 0]
-            d2 = (p[0] - x) ** 2 + (p[1] - y) ** 2
-            if d2 < best_d2:
-                best, best_d2 = k, d2
-        p = flat_paths[a * stride + best, 0]
-        along = (x - p[0]) * math.cos(p[2]) + (y - p[1]) * math.sin(p[2])
-        progress = min(max(path_s[a, best] + along, 0.0), route_length[a])
-        if not first:
-            delta[a] = progress - route_progress[a]
-        route_progress[a] = progress
-        route_index[a] = best
-
-
-_X, _Y = COLUMN["x"], COLUMN["y"]
 
 
 def _default_terminations() -> np.ndarray:

@@ -150,58 +150,67 @@ def _project_kernel(
     """Point ``p`` searches the grid of map ``point_map[p]`` (``point_map[0]`` for every point
     when it has one entry): per map, its first cell in ``offsets``, its cells per column, origin,
     inverse cell size and largest cell index."""
+    grids = Grids(table, offsets, grid_segs, cell_base, ny, origin, inv_cell, cell_max)
     last_map = point_map.shape[0] - 1
     for p in range(xy.shape[0]):
-        m = point_map[min(p, last_map)]
-        x, y = xy[p, 0], xy[p, 1]
-        gx = min(max((x - origin[m, 0]) * inv_cell[m], 0.0), cell_max[m, 0])  # NaN -> empty border cell
-        gy = min(max((y - origin[m, 1]) * inv_cell[m], 0.0), cell_max[m, 1])
-        cell = cell_base[m] + int(gx) * ny[m] + int(gy)
-        ch = cs = 0.0
-        if use_heading:
-            ch, cs = math.cos(heading[p]), math.sin(heading[p])
-        best, best_key = -1, np.inf
-        first, last = offsets[cell], offsets[cell + 1]
-        if x != x or y != y or (use_heading and heading[p] != heading[p]):
-            last = first  # NaN: no lane
-        for k in range(first, last):
-            seg = grid_segs[k]
-            rx = x - table[_AX, seg]
-            ry = y - table[_AY, seg]
-            vx, vy = table[_VX, seg], table[_VY, seg]
-            u = min(max((rx * vx + ry * vy) * table[_INV_LEN2, seg], 0.0), 1.0)
-            dx, dy = rx - u * vx, ry - u * vy
-            dist2 = dx * dx + dy * dy
-            if not use_heading:
-                key = dist2
-            elif dist2 > table[_HALF_W2, seg]:
-                key = dist2 + _OFF_LANE_RANK
-            else:
-                key = 1.0 - (ch * table[_COS, seg] + cs * table[_SIN, seg])
-                key += ALIGNMENT_DISTANCE_WEIGHT * math.sqrt(dist2)
-            if key < best_key:
-                best, best_key = seg, key
-        if best < 0:
-            out_lane[p] = -1
-            out_s[p] = out_t[p] = out_heading[p] = 0.0
-            out_distance[p] = np.inf
-            continue
-        rx = x - table[_AX, best]
-        ry = y - table[_AY, best]
-        vx, vy = table[_VX, best], table[_VY, best]
-        raw_u = (rx * vx + ry * vy) * table[_INV_LEN2, best]
-        u = min(max(raw_u, 0.0), 1.0)
-        dist = math.hypot(rx - u * vx, ry - u * vy)
-        # Before a lane's first point or past its last, continue the end segment's line so s keeps
-        # growing and t stays the lateral offset rather than a distance to the end point.
-        if (raw_u < 0.0 and table[_FIRST, best] > 0.0) or (raw_u > 1.0 and table[_LAST, best] > 0.0):
-            u = raw_u
-        cross = vx * ry - vy * rx
-        side = 1.0 if cross > 0.0 else (-1.0 if cross < 0.0 else 0.0)
-        out_lane[p] = int(table[_LANE, best])
-        out_s[p] = table[_S0, best] + u * table[_LEN, best]
-        out_t[p] = side * math.hypot(rx - u * vx, ry - u * vy)
-        out_heading[p] = table[_HEADING, best]
-        out_distance[p] = dist
+        h = heading[p] if use_heading else 0.0
+        lane, s, t, lane_heading, distance = project_point(
+            grids, point_map[min(p, last_map)], xy[p, 0], xy[p, 1], h, use_heading
+        )
+        out_lane[p], out_s[p], out_t[p], out_heading[p], out_distance[p] = lane, s, t, lane_heading, distance
+
+
+@numba.njit(cache=True, nogil=True)
+def project_point(grids, m, x, y, heading, use_heading):  # pragma: no cover - compiled
+    """``(lane, s, t, lane_heading, distance)`` of one point on map ``m`` of ``grids`` (a
+    ``Grids`` tuple): the projection of ``project`` (lane -1 and distance inf where no lane is
+    near). Compiled callers project their own points with it (``smarts.core.settle``)."""
+    table, offsets, grid_segs = grids.table, grids.offsets, grids.segs
+    origin, inv_cell, cell_max = grids.origin, grids.inv_cell, grids.cell_max
+    gx = min(max((x - origin[m, 0]) * inv_cell[m], 0.0), cell_max[m, 0])  # NaN -> empty border cell
+    gy = min(max((y - origin[m, 1]) * inv_cell[m], 0.0), cell_max[m, 1])
+    cell = grids.cell_base[m] + int(gx) * grids.ny[m] + int(gy)
+    ch = cs = 0.0
+    if use_heading:
+        ch, cs = math.cos(heading), math.sin(heading)
+    best, best_key = -1, np.inf
+    first, last = offsets[cell], offsets[cell + 1]
+    if x != x or y != y or (use_heading and heading != heading):
+        last = first  # NaN: no lane
+    for k in range(first, last):
+        seg = grid_segs[k]
+        rx = x - table[_AX, seg]
+        ry = y - table[_AY, seg]
+        vx, vy = table[_VX, seg], table[_VY, seg]
+        u = min(max((rx * vx + ry * vy) * table[_INV_LEN2, seg], 0.0), 1.0)
+        dx, dy = rx - u * vx, ry - u * vy
+        dist2 = dx * dx + dy * dy
+        if not use_heading:
+            key = dist2
+        elif dist2 > table[_HALF_W2, seg]:
+            key = dist2 + _OFF_LANE_RANK
+        else:
+            key = 1.0 - (ch * table[_COS, seg] + cs * table[_SIN, seg])
+            key += ALIGNMENT_DISTANCE_WEIGHT * math.sqrt(dist2)
+        if key < best_key:
+            best, best_key = seg, key
+    if best < 0:
+        return -1, 0.0, 0.0, 0.0, np.inf
+    rx = x - table[_AX, best]
+    ry = y - table[_AY, best]
+    vx, vy = table[_VX, best], table[_VY, best]
+    raw_u = (rx * vx + ry * vy) * table[_INV_LEN2, best]
+    u = min(max(raw_u, 0.0), 1.0)
+    dist = math.hypot(rx - u * vx, ry - u * vy)
+    # Before a lane's first point or past its last, continue the end segment's line so s keeps
+    # growing and t stays the lateral offset rather than a distance to the end point.
+    if (raw_u < 0.0 and table[_FIRST, best] > 0.0) or (raw_u > 1.0 and table[_LAST, best] > 0.0):
+        u = raw_u
+    cross = vx * ry - vy * rx
+    side = 1.0 if cross > 0.0 else (-1.0 if cross < 0.0 else 0.0)
+    return (
+        int(table[_LANE, best]), table[_S0, best] + u * table[_LEN, best],
+        side * math.hypot(rx - u * vx, ry - u * vy), table[_HEADING, best], dist,
+    )  # fmt: skip
 
 
