@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 from smarts import exit_codes
+from smarts.command_line import Command, HelpFormatter, add_commands
 
 
 def _benchmark(args: argparse.Namespace) -> int:
@@ -124,7 +125,7 @@ def _given(argv: list[str], option: str) -> str | None:
     return None
 
 
-def _benchmark_options(parser: argparse.ArgumentParser, agent_required: bool) -> None:
+def _benchmark_options(parser: argparse.ArgumentParser, agent_required: bool = False) -> None:
     """The options of ``benchmark`` and ``eval`` (which must name its agents: evaluating only the
     reference rows is never what ``eval`` means)."""
     parser.add_argument("--agent", action="append", required=agent_required,
@@ -133,7 +134,7 @@ def _benchmark_options(parser: argparse.ArgumentParser, agent_required: bool) ->
                              "and zoo:stand-still are always benchmarked beside them")  # fmt: skip
     parser.add_argument("--suite", default="collaborative", help="collaborative | adaptive | path to a suite YAML")
     parser.add_argument("--episodes", type=int, default=None, help="episodes per scenario (default: the suite's)")
-    parser.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+    parser.add_argument("--workers", type=int, default=2, help="worker processes")
     parser.add_argument("--seed", type=int, default=None, help="first episode seed (default: the suite's)")
     parser.add_argument("--out", type=Path, default=None,
                         help="output folder, which must not hold another run (default: the next numbered folder "
@@ -150,16 +151,8 @@ def _benchmark_options(parser: argparse.ArgumentParser, agent_required: bool) ->
     parser.set_defaults(run=_benchmark)
 
 
-def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m train", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
-    bench = sub.add_parser("benchmark", help="run agents through a benchmark suite and write a report")
-    _benchmark_options(bench, agent_required=False)
-    evaluate = sub.add_parser("eval", help="benchmark checkpoints or zoo agents on a suite (benchmark with --agent required)")
-    _benchmark_options(evaluate, agent_required=True)
-
-    ppo = sub.add_parser("ppo", help="train a PPO driving policy (torchrl collectors, GAE, ClipPPOLoss)",
-                         epilog=PPO_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+def _ppo_parser(ppo: argparse.ArgumentParser, argv: list[str] | None) -> None:
+    ppo.epilog = PPO_EPILOG
     ppo.add_argument("--config", default=None, help="a training config YAML (or a run's config.json) instead of the task's")
     ppo.add_argument("--quiet", action="store_true", help="no progress bar")
     ppo.add_argument("--resume", default=None,
@@ -168,20 +161,40 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     _ppo_options(ppo, argv)
     ppo.set_defaults(run=_ppo)
 
-    from train import aid_predictor, tf_bc, trajectories, vcr_classifier
 
-    trajectories.add_parser(sub)
-    aid_predictor.add_parser(sub)
-    tf_bc.add_parser(sub)
-    vcr_classifier.add_parser(sub)
+COMMANDS = (
+    Command("benchmark", "run agents through a benchmark suite and write a report",
+            lambda parser, argv: _benchmark_options(parser)),
+    Command("eval", "benchmark checkpoints or zoo agents on a suite (benchmark with --agent required)",
+            lambda parser, argv: _benchmark_options(parser, agent_required=True)),
+    Command("ppo", "train a PPO driving policy (torchrl collectors, GAE, ClipPPOLoss)", _ppo_parser),
+    Command("trajectories", "log every vehicle's track in the suites' scenarios (data sets)",
+            "train.trajectories:add_options"),
+    Command("aid-predictor", "train AID's motion predictor on logged trajectories", "train.aid_predictor:add_options"),
+    Command("tf-bc", "behaviour-clone TF's stop/move network (keep-lane demonstrations, hindsight stops)",
+            "train.tf_bc:add_options"),
+    Command("vcr-classifier", "generate VCR's exploration data and train its event classifier",
+            "train.vcr_classifier:add_options"),
+    Command("enjoy", "watch a policy drive a scenario (browser, video or TensorBoard)", "train.enjoy:add_options"),
+)  # fmt: skip
+"""The commands, in the order ``--help`` lists them; a command's module is imported only when it is
+the one named (see ``smarts.command_line``)."""
 
-    from train.enjoy import add_parser as add_enjoy
 
-    add_enjoy(sub)
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser of ``argv``'s command (and the list of every command); ``argv`` None: a parser
+    with every command's options."""
+    summary, _, examples = __doc__.partition("\n\n")
+    summary = summary.split(": ", 1)[-1]  # the docstring's first line without its markup
+    parser = argparse.ArgumentParser(prog="python -m train", description=summary[:1].upper() + summary[1:],
+                                     epilog=f"examples:\n{examples.rstrip()}", formatter_class=HelpFormatter)  # fmt: skip
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add_commands(sub, COMMANDS, argv)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser(argv)
     args = parser.parse_args(argv)
     if args.command in ("benchmark", "eval"):

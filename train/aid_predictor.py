@@ -16,9 +16,12 @@ import argparse
 import json
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
+
+if TYPE_CHECKING:
+    import torch
 
 from train.heldout import add_run_options, apply_run_options, split_held_out
 
@@ -77,6 +80,8 @@ def samples_from_episode(ep: np.ndarray, count: int, rng: np.random.Generator) -
 
 
 def build_set(files: list[Path], per_episode: int, seed: int) -> dict[str, torch.Tensor]:
+    import torch
+
     rng = np.random.default_rng(seed)
     rows: list[tuple[np.ndarray, ...]] = []
     for path in files:
@@ -90,6 +95,8 @@ def build_set(files: list[Path], per_episode: int, seed: int) -> dict[str, torch
 
 
 def loss_fn(trajs: torch.Tensor, scores: torch.Tensor, future: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    import torch
+
     valid = mask.sum(-1) > 0  # [B, N]
     idx = torch.arange(4, FUT, 5)
     err = torch.linalg.norm(trajs[..., idx, :2] - future[:, :, None, idx, :2], dim=-1)  # [B, N, M, 6]
@@ -103,40 +110,43 @@ def loss_fn(trajs: torch.Tensor, scores: torch.Tensor, future: torch.Tensor, mas
     return reg + 0.5 * ce
 
 
-@torch.no_grad()
 def evaluate(net, data: dict[str, torch.Tensor], batch: int = 256) -> dict[str, float]:
     """FDE and ADE (m) of the highest-scored mode and of constant velocity, over neighbours seen 3 s later."""
-    net.eval()
-    sums = {"fde": 0.0, "ade": 0.0, "cv_fde": 0.0, "cv_ade": 0.0, "min_fde": 0.0}
-    count, points = 0, 0
-    t = torch.arange(1, FUT + 1, dtype=torch.float32) * 0.1
-    for i in range(0, len(data["ego"]), batch):
-        ego, nb, fut, mask = (data[k][i : i + batch] for k in ("ego", "neighbours", "future", "mask"))
-        trajs, scores = net(ego, nb)
-        top = torch.gather(trajs, 2, scores.argmax(-1)[:, :, None, None, None].expand(-1, -1, 1, FUT, 3))[:, :, 0, :, :2]
-        cur = nb[:, :, -1]
-        cv = cur[:, :, None, :2] + cur[:, :, None, 3:5] * t[None, None, :, None]
-        end = mask[:, :, -1] > 0
-        end &= nb[:, :, -1].abs().sum(-1) > 0
-        err = torch.linalg.norm(top - fut[..., :2], dim=-1)
-        cv_err = torch.linalg.norm(cv - fut[..., :2], dim=-1)
-        all_err = torch.linalg.norm(trajs[..., -1, :2] - fut[:, :, None, -1, :2], dim=-1).min(-1).values
-        m = mask * end[..., None]
-        sums["fde"] += float(err[..., -1][end].sum())
-        sums["cv_fde"] += float(cv_err[..., -1][end].sum())
-        sums["min_fde"] += float(all_err[end].sum())
-        sums["ade"] += float((err * m).sum())
-        sums["cv_ade"] += float((cv_err * m).sum())
-        count += int(end.sum())
-        points += int(m.sum())
-    net.train()
-    out = {k: v / max(count, 1) for k, v in sums.items() if "fde" in k}
-    out.update({k: v / max(points, 1) for k, v in sums.items() if "ade" in k})
-    out["neighbours"] = count
-    return out
+    import torch
+
+    with torch.no_grad():
+        net.eval()
+        sums = {"fde": 0.0, "ade": 0.0, "cv_fde": 0.0, "cv_ade": 0.0, "min_fde": 0.0}
+        count, points = 0, 0
+        t = torch.arange(1, FUT + 1, dtype=torch.float32) * 0.1
+        for i in range(0, len(data["ego"]), batch):
+            ego, nb, fut, mask = (data[k][i : i + batch] for k in ("ego", "neighbours", "future", "mask"))
+            trajs, scores = net(ego, nb)
+            top = torch.gather(trajs, 2, scores.argmax(-1)[:, :, None, None, None].expand(-1, -1, 1, FUT, 3))[:, :, 0, :, :2]
+            cur = nb[:, :, -1]
+            cv = cur[:, :, None, :2] + cur[:, :, None, 3:5] * t[None, None, :, None]
+            end = mask[:, :, -1] > 0
+            end &= nb[:, :, -1].abs().sum(-1) > 0
+            err = torch.linalg.norm(top - fut[..., :2], dim=-1)
+            cv_err = torch.linalg.norm(cv - fut[..., :2], dim=-1)
+            all_err = torch.linalg.norm(trajs[..., -1, :2] - fut[:, :, None, -1, :2], dim=-1).min(-1).values
+            m = mask * end[..., None]
+            sums["fde"] += float(err[..., -1][end].sum())
+            sums["cv_fde"] += float(cv_err[..., -1][end].sum())
+            sums["min_fde"] += float(all_err[end].sum())
+            sums["ade"] += float((err * m).sum())
+            sums["cv_ade"] += float((cv_err * m).sum())
+            count += int(end.sum())
+            points += int(m.sum())
+        net.train()
+        out = {k: v / max(count, 1) for k, v in sums.items() if "fde" in k}
+        out.update({k: v / max(points, 1) for k, v in sums.items() if "ade" in k})
+        out["neighbours"] = count
+        return out
 
 
 def train(args: argparse.Namespace) -> dict:
+    import torch
     from torch.utils.tensorboard import SummaryWriter
     from train.run import Bar
 
@@ -199,9 +209,8 @@ def train(args: argparse.Namespace) -> dict:
     return summary
 
 
-def add_parser(sub) -> None:
-    p = sub.add_parser("aid-predictor", help="train AID's motion predictor on logged trajectories",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
+def add_options(p: argparse.ArgumentParser, argv: list[str] | None = None) -> None:
+    """The options of ``python -m train aid-predictor`` (its command is listed in ``train.__main__``)."""
     p.add_argument("--data", default="runs/data/trajectories", help="folder of `train trajectories` files")
     p.add_argument("--out", default="runs/train/aid-predictor", help="output folder (TensorBoard, best.pt, final.pt)")
     p.add_argument("--steps", type=int, default=2500, help="gradient steps")

@@ -36,7 +36,6 @@ from smarts.core.resources import config_path
 from smarts.core.schema import Schema, describe, load_yaml
 from smarts.core.spec import CONTROLLERS
 from smarts.dynamics.lane_relative import LaneRelativeParams
-from smarts.dynamics.pose_control_torch import check_device_name
 from smarts.env.task_rewards import RewardWeights
 
 CONFIG_DIR = config_path("train")
@@ -306,6 +305,8 @@ class TrainConfig(Schema):
     @field_validator("device", "sim_device")
     @classmethod
     def _device_name(cls, name: str) -> str:
+        from smarts.dynamics.pose_control_torch import check_device_name  # torch: not for --help
+
         check_device_name(name)  # whether the GPU is there is asked when the envs are built
         return name
 

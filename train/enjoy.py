@@ -360,23 +360,25 @@ def _wait_for_viewer(env, seconds: float) -> None:
         time.sleep(0.1)
 
 
-def add_parser(sub) -> None:
-    """Register ``enjoy`` on the ``python -m train`` command line."""
-    p = sub.add_parser("enjoy", help="watch a policy drive a scenario (browser, video or TensorBoard)",
-                       description=__doc__.split("\n\n")[0])  # fmt: skip
+def add_options(p: argparse.ArgumentParser, argv: list[str] | None = None) -> None:
+    """The options of ``python -m train enjoy`` (its command is listed in ``train.__main__``)."""
+    summary, examples = __doc__.split("\n\n")[:2]
+    p.description = summary.split(": ", 1)[-1]  # the docstring's first line without its markup
+    p.description = p.description[:1].upper() + p.description[1:]
+    p.epilog = f"examples:\n{examples}"
     p.add_argument("--agent", required=True, help="zoo:<name>, a checkpoint .pt or a training run folder (its best.pt)")
     p.add_argument("--scenario", required=True, help="suite:scenario (adaptive:a01_straight_free), a library name or a YAML file")
-    p.add_argument("--episodes", type=int, default=1, help="episodes to run (default 1)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
+    p.add_argument("--episodes", type=int, default=1, help="episodes to run")
+    p.add_argument("--seed", type=int, default=0, help="seed of the first episode")
     p.add_argument("--max-steps", type=int, default=None, help="stop an episode after this many steps (default: its end)")
     p.add_argument("--video", type=Path, default=None, help="write the episodes to this .mp4")
-    p.add_argument("--fps", type=int, default=DEFAULT_FPS, help=f"video frames per second (default {DEFAULT_FPS})")
+    p.add_argument("--fps", type=int, default=DEFAULT_FPS, help="video frames per second")
     p.add_argument("--tensorboard", type=Path, default=None, help="add each episode as a video to this TensorBoard log folder")
     p.add_argument("--viz", action="store_true", help="serve the viewer here (127.0.0.1) and stream the episodes to it")
-    p.add_argument("--port", type=int, default=8765, help="viewer port with --viz (default 8765)")
-    p.add_argument("--wait", type=float, default=60.0, help="with --viz: seconds to wait for a browser first (default 60)")
+    p.add_argument("--port", type=int, default=8765, help="viewer port with --viz")
+    p.add_argument("--wait", type=float, default=60.0, help="with --viz: seconds to wait for a browser first")
     p.add_argument("--realtime", action=argparse.BooleanOptionalAction, default=True,
-                   help="with --viz: run at the scenario's own step rate (default on)")  # fmt: skip
+                   help="with --viz: run at the scenario's own step rate")  # fmt: skip
     p.add_argument("--record", type=Path, default=None, help="also write viewer recordings of the episodes to this folder")
     p.add_argument("--task", choices=["platoon", "drive", "scenario"], default=None,
                    help="the reward told: a training task's, or the scenario's default (default: the run's own from "

@@ -25,7 +25,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from train.heldout import add_run_options, apply_run_options, road_car, situation_env, split_held_out, suite_scenarios
 
@@ -142,6 +141,7 @@ def hindsight(count: int, steps: int, horizon: int, progress: bool = True) -> di
 
 
 def train(args: argparse.Namespace) -> dict:
+    import torch
     from torch.utils.tensorboard import SummaryWriter
     from train.run import Bar
 
@@ -234,9 +234,8 @@ def train(args: argparse.Namespace) -> dict:
     return metrics
 
 
-def add_parser(sub) -> None:
-    p = sub.add_parser("tf-bc", help="behaviour-clone TF's stop/move network (keep-lane demonstrations, hindsight stops)",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
+def add_options(p: argparse.ArgumentParser, argv: list[str] | None = None) -> None:
+    """The options of ``python -m train tf-bc`` (its command is listed in ``train.__main__``)."""
     p.add_argument("--suite", action="append", default=None, help="suites whose scenarios give demonstrations (default: both)")
     p.add_argument("--seeds", type=int, default=3, help="episodes per scenario")
     p.add_argument("--out", default="runs/train/tf-bc", help="output folder (TensorBoard, final.pt)")

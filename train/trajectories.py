@@ -105,9 +105,8 @@ def log_suites(out: Path, suites: list[str], seeds: int, first_seed: int = 0, st
     return files
 
 
-def add_parser(sub) -> None:
-    p = sub.add_parser("trajectories", help="log every vehicle's track in the suites' scenarios (data sets)",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
+def add_options(p: argparse.ArgumentParser, argv: list[str] | None = None) -> None:
+    """The options of ``python -m train trajectories`` (its command is listed in ``train.__main__``)."""
     p.add_argument("--out", type=Path, default=Path("runs/data/trajectories"), help="output folder")
     p.add_argument("--suite", action="append", default=None, help="suites to log (default: collaborative and adaptive)")
     p.add_argument("--seeds", type=int, default=4, help="episodes per scenario")

@@ -28,7 +28,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from train.heldout import add_run_options, apply_run_options, road_car, situation_env, split_held_out, suite_scenarios
 
@@ -166,6 +165,7 @@ def generate_situations(count: int, steps: int, progress: bool = True) -> dict[s
 
 
 def train(args: argparse.Namespace) -> dict:
+    import torch
     from torch.utils.tensorboard import SummaryWriter
     from train.run import Bar
 
@@ -261,9 +261,8 @@ def train(args: argparse.Namespace) -> dict:
     return metrics
 
 
-def add_parser(sub) -> None:
-    p = sub.add_parser("vcr-classifier", help="generate VCR's exploration data and train its event classifier",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
+def add_options(p: argparse.ArgumentParser, argv: list[str] | None = None) -> None:
+    """The options of ``python -m train vcr-classifier`` (its command is listed in ``train.__main__``)."""
     p.add_argument("--suite", action="append", default=None, help="suites whose scenarios are explored (default: both)")
     p.add_argument("--seeds", type=int, default=3, help="episodes per scenario")
     p.add_argument("--out", default="runs/train/vcr-classifier", help="output folder (TensorBoard, final.pt)")

@@ -17,6 +17,7 @@ import numpy as np
 from pydantic import Field, ValidationError
 
 from smarts import exit_codes
+from smarts.command_line import HelpFormatter
 from smarts.core.errors import MapError, ReplayError, ScenarioError
 from smarts.core.schema import Schema, locate
 from smarts.core.spec.replay import COORDINATES, REACTIVE_MODES, REPLAY_FORMATS
@@ -70,18 +71,17 @@ def check_options(model: type[Schema], args: argparse.Namespace) -> Schema:
         raise ReplayError("\n".join(lines)) from None
 
 
-def add_commands(subparsers: argparse._SubParsersAction) -> None:
-    """Register the ``replay`` command group on the top-level parser."""
-    replay = subparsers.add_parser("replay", help="inspect and render recorded datasets (NGSIM, Argoverse 2, Waymo)")
+def add_replay_commands(replay: argparse.ArgumentParser, argv: list[str] | None = None) -> None:
+    """``smarts replay info|show|suite`` (the group is listed in ``smarts.__main__``)."""
     sub = replay.add_subparsers(dest="replay_command", metavar="COMMAND")
     sub.required = True
     p = sub.add_parser("info", help="road users, duration, frames, extent and map of a recording",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
+                       formatter_class=HelpFormatter)  # fmt: skip
     _recording_args(p)
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.set_defaults(run=_info)
     p = sub.add_parser("show", help="render a recording to an image (.png) or video (.gif, .mp4)",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)  # fmt: skip
+                       formatter_class=HelpFormatter)  # fmt: skip
     _recording_args(p)
     p.add_argument("--out", type=Path, required=True, help="output .png, .gif or .mp4 file")
     p.add_argument("--map", type=Path, default=None, help="map (.net.xml, .xodr) drawn under the road users")
@@ -99,7 +99,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         description="Each scenario file in DIR becomes a scenario in which an agent takes over the recorded ego "
         "(Waymo's self-driving car, Argoverse 2's AV) or --vehicle and drives to where it ended, among the other "
         "recorded road users. Run it with: python -m train benchmark --suite OUT --agent ...",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )  # fmt: skip
     p.add_argument("folder", type=Path, help="folder of NGSIM files, Waymo TFRecords or Argoverse 2 scenario folders")
     p.add_argument("--format", required=True, choices=REPLAY_FORMATS, help="dataset format")

@@ -9,19 +9,19 @@ from rich.console import Console
 from rich.table import Table
 
 from smarts import exit_codes
+from smarts.command_line import HelpFormatter
 from smarts.core.errors import NetconvertError, ScenarioError
 from smarts.scenario.builtin_maps import BUILTIN_MAPS, builtin_map_path
 from smarts.scenario.library import list_scenarios, load_scenario
 
 
-def add_commands(subparsers: argparse._SubParsersAction) -> None:
-    """Register the ``scenario`` and ``map`` command groups on the top-level parser."""
-    scenario = subparsers.add_parser("scenario", help="list and inspect scenarios")
+def add_scenario_commands(scenario: argparse.ArgumentParser, argv: list[str] | None = None) -> None:
+    """``smarts scenario list|show|validate`` (the group is listed in ``smarts.__main__``)."""
     scenario_sub = scenario.add_subparsers(dest="scenario_command", metavar="COMMAND")
     scenario_sub.required = True
-    p = scenario_sub.add_parser("list", help="list the built-in scenarios")
+    p = scenario_sub.add_parser("list", help="list the built-in scenarios", formatter_class=HelpFormatter)
     p.set_defaults(run=_scenario_list)
-    p = scenario_sub.add_parser("show", help="print a scenario's validated spec as YAML")
+    p = scenario_sub.add_parser("show", help="print a scenario's validated spec as YAML", formatter_class=HelpFormatter)
     p.add_argument("name", help="built-in scenario name or path to a scenario .yaml file")
     p.add_argument(
         "--build",
@@ -37,16 +37,19 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         "map, a route from start to goal) and every traffic flow and trip route. Prints one line "
         "per problem naming the file and field; exit code 0 when every scenario is valid, 2 when "
         "any is not.",
+        formatter_class=HelpFormatter,
     )
     p.add_argument("files", nargs="+", metavar="FILE", help="scenario .yaml file or built-in scenario name")
     p.set_defaults(run=_scenario_validate)
 
-    maps = subparsers.add_parser("map", help="list and build the built-in maps")
+
+def add_map_commands(maps: argparse.ArgumentParser, argv: list[str] | None = None) -> None:
+    """``smarts map list|build`` (the group is listed in ``smarts.__main__``)."""
     map_sub = maps.add_subparsers(dest="map_command", metavar="COMMAND")
     map_sub.required = True
-    p = map_sub.add_parser("list", help="list the built-in maps")
+    p = map_sub.add_parser("list", help="list the built-in maps", formatter_class=HelpFormatter)
     p.set_defaults(run=_map_list)
-    p = map_sub.add_parser("build", help="build a built-in map with netconvert; print its path")
+    p = map_sub.add_parser("build", help="build a built-in map with netconvert; print its path", formatter_class=HelpFormatter)
     p.add_argument("name", help="built-in map name")
     p.set_defaults(run=_map_build)
 

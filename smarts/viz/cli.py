@@ -42,10 +42,9 @@ def run(args: argparse.Namespace) -> int:
     return exit_codes.OK
 
 
-def add_commands(subparsers) -> None:
-    """Register ``viz`` on the ``smarts`` command line."""
-    parser = subparsers.add_parser("viz", help="the diagnostic web viewer (recorded and live episodes)",
-                                   description=DESCRIPTION)  # fmt: skip
+def add_viz_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) -> None:
+    """``smarts viz`` (listed in ``smarts.__main__``)."""
+    parser.description = DESCRIPTION
     add_arguments(parser)
     parser.set_defaults(run=run)
 
