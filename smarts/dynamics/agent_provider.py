@@ -30,7 +30,13 @@ from smarts.dynamics.bicycle import wheelbase_for_length
 from smarts.dynamics.lane_control import lane_control_step
 from smarts.dynamics.lane_relative import LaneRelativeController, LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
-from smarts.dynamics.pose_control import apply_relative_pose, apply_target_pose
+from smarts.dynamics.pose_control import (
+    all_finite,
+    apply_relative_pose,
+    apply_target_pose,
+    limit_params,
+    move_to_poses,
+)
 
 LANE_LOOKAHEAD_TIME = 1.0  # s of travel to the pure-pursuit point of the lane controller
 LANE_MIN_LOOKAHEAD = 6.0  # m
@@ -99,6 +105,8 @@ class AgentProvider(ProviderBase):
         self._taking: int | None = None  # agent whose take-over is in progress
         self._group_commanded = {kind: bool(self.commanded[m].any()) for kind, m in self.groups.items()}
         self._planned: tuple[object, list] | None = None  # (actions, plans) of the last full check
+        self._layout_of: tuple[np.ndarray, list] | None = None  # (active agents, their group layout)
+        self._limit_params = limit_params(limits)  # the pose kernels' form of ``limits``
 
     # ------------------------------------------------------------------ episode
     def reset_episode(self, sim: Simulation, b: int, agents: np.ndarray) -> None:
@@ -202,7 +210,44 @@ class AgentProvider(ProviderBase):
         plans = []
         problems: list[str] = []
         bad: list[str] = []
+        for kind, members, commanded, parts in self._layout(sim, agents):
+            arrays = []
+            for part in parts:
+                if part is None:
+                    arrays.append(None)
+                    continue
+                controller, group_ids, width = part
+                arr = _stack(actions, group_ids, width)
+                if arr is None:  # something is wrong, or unusual (tensors): look at each agent
+                    found = len(problems)
+                    for a in group_ids:
+                        problem = (
+                            action_problem(kind, actions[a], a, controller)
+                            if a in actions
+                            else f"{a}: no {action_label(kind, controller)} action given this step"
+                        )
+                        if problem is not None:
+                            problems.append(problem)
+                            bad.append(a)
+                    if len(problems) == found:  # each one is fine on its own
+                        arr = np.stack([np.asarray(actions[a], dtype=np.float64) for a in group_ids])
+                arrays.append(arr)
+            plans.append((kind, members, commanded, *arrays))
+        if problems:
+            raise ActionError("; ".join(problems), bad)
+        return plans
+
+    def _layout(self, sim: Simulation, agents: np.ndarray | None) -> list:
+        """Per action-space group with active agents (among ``agents``, None: all): ``(kind,
+        members, commanded, parts)``, ``parts`` the direct and lane-relative ``(controller, ids,
+        action width)``
+        (None where none). Kept while the simulation's active agents stay the same (``step``
+        then does no per-group array work to find them)."""
+        active = sim.active_agents
+        if agents is None and self._layout_of is not None and self._layout_of[0] is active:
+            return self._layout_of[1]
         ids = sim.agent_ids
+        layout = []
         for kind, members in self.groups.items():
             members = members[sim.agent_active[members]]
             if agents is not None:
@@ -218,27 +263,13 @@ class AgentProvider(ProviderBase):
                     chosen = members[~commanded if controller == "direct" else commanded]
                 if chosen is None or chosen.size == 0:
                     parts.append(None)
-                    continue
-                group_ids = [ids[i] for i in chosen.tolist()]
-                arr = _stack(kind, actions, group_ids, controller)
-                if arr is None:  # something is wrong, or unusual (tensors): look at each agent
-                    found = len(problems)
-                    for a in group_ids:
-                        problem = (
-                            action_problem(kind, actions[a], a, controller)
-                            if a in actions
-                            else f"{a}: no {action_label(kind, controller)} action given this step"
-                        )
-                        if problem is not None:
-                            problems.append(problem)
-                            bad.append(a)
-                    if len(problems) == found:  # each one is fine on its own
-                        arr = np.stack([np.asarray(actions[a], dtype=np.float64) for a in group_ids])
-                parts.append(arr)
-            plans.append((kind, members, commanded, *parts))
-        if problems:
-            raise ActionError("; ".join(problems), bad)
-        return plans
+                else:
+                    width = len(action_components(kind, controller))
+                    parts.append((controller, [ids[i] for i in chosen.tolist()], width))
+            layout.append((kind, members, commanded, parts))
+        if agents is None:
+            self._layout_of = (active, layout)
+        return layout
 
     def _plan_array(self, sim: Simulation, actions: np.ndarray, agents: np.ndarray | None) -> list:
         """``_plan`` of an array: row ``a`` agent ``a``'s action, each group reads its first
@@ -296,7 +327,7 @@ class AgentProvider(ProviderBase):
                     actions[commanded] = self._from_commands(
                         kind, sim, members[commanded], rows[commanded], commands, dt
                     )
-            self._drive(kind, sim, members, rows, actions, dt)
+            self._drive(kind, sim, members, rows, actions, dt, checked=commanded is None)
 
     def _from_commands(self, kind, sim, members, rows, commands, dt) -> np.ndarray:
         ctl = self.lane_relative
@@ -307,11 +338,15 @@ class AgentProvider(ProviderBase):
         world = next(iter(self.worlds.values()))  # the car model's constants (every world has the same)
         return ctl.continuous_actions(sim, members, rows, commands, dt, world, self.mass[members], self.wheelbase[members])
 
-    def _drive(self, kind, sim, members, rows, actions, dt) -> None:
+    def _drive(self, kind, sim, members, rows, actions, dt, checked: bool = False) -> None:
+        """Move ``rows`` by ``actions`` of ``kind``; ``checked``: the actions are the plan's
+        own float64 arrays, already checked (the pose kernel then runs without a second guard)."""
         if kind in (ActionSpaceType.RELATIVE_TARGET_POSE, ActionSpaceType.TARGET_POSE) and self.device is not None:
             from smarts.dynamics.pose_control_torch import apply_pose_torch
 
             apply_pose_torch(sim.table, rows, actions, kind is ActionSpaceType.TARGET_POSE, dt, self.limits, self.device)
+        elif checked and kind in (ActionSpaceType.RELATIVE_TARGET_POSE, ActionSpaceType.TARGET_POSE):
+            move_to_poses(sim.table, rows, actions, kind is ActionSpaceType.TARGET_POSE, dt, self._limit_params)
         elif kind is ActionSpaceType.RELATIVE_TARGET_POSE:
             apply_relative_pose(sim.table, rows, actions, dt, self.limits)
         elif kind is ActionSpaceType.TARGET_POSE:
@@ -345,16 +380,16 @@ class AgentProvider(ProviderBase):
 
 
 
-def _stack(kind: ActionSpaceType, actions: dict, ids: list[str], controller: str) -> np.ndarray | None:
-    """The ``[n, k]`` float64 array of the agents' actions, or None when any is missing, not real
-    numbers, wrongly shaped or not finite (checked on the stacked array: no work per agent)."""
+def _stack(actions: dict, ids: list[str], width: int) -> np.ndarray | None:
+    """The ``[n, width]`` float64 array of the agents' actions, or None when any is missing, not
+    real numbers, wrongly shaped or not finite (checked on the stacked array: no work per agent)."""
     try:
         arr = np.array([actions[a] for a in ids])
     except (KeyError, TypeError, ValueError):
         return None
-    if arr.dtype.kind not in REAL_KINDS or arr.shape != (len(ids), len(action_components(kind, controller))):
+    if arr.dtype.kind not in REAL_KINDS or arr.shape != (len(ids), width):
         return None
     arr = arr.astype(np.float64, copy=False)
-    if not np.isfinite(arr).all():
+    if not all_finite(arr):
         return None
     return arr
