@@ -37,6 +37,8 @@ from smarts.sensors.suite import Batch
 
 ObservationOption = AgentInterface | ObservationConfig
 RENDER_VIEWS = ("map", "ego")
+SMALL_BATCH = 4
+"""Up to this many agents in a batch, ``_split`` indexes each row (cheaper than iterating arrays)."""
 
 
 class DrivingParallelEnv(ParallelEnv):
@@ -92,6 +94,7 @@ class DrivingParallelEnv(ParallelEnv):
         self._obs_spaces = {a: self.driving.observation_space(index[a]) for a in self.possible_agents}
         self._act_spaces = {a: self.driving.action_space(index[a]) for a in self.possible_agents}
         self._live = np.zeros(0, dtype=np.int64)  # agent indices of ``self.agents``
+        self._ids_of: tuple[np.ndarray | None, list[str]] = (None, [])  # (agents, their ids)
         self._renderer = None
         self._started = False
         if render_view not in RENDER_VIEWS and not (
@@ -135,13 +138,14 @@ class DrivingParallelEnv(ParallelEnv):
         """``ActionError`` for actions of agents that are not live, or live agents without one."""
         if not self._started:
             raise RuntimeError("DrivingParallelEnv.step() before reset(): call reset() first")
+        if len(actions) == len(self.agents) and all(a in actions for a in self.agents):
+            return  # one action per live agent: nothing unknown, nothing missing
         live = set(self.agents)
         unknown = [a for a in actions if a not in live]
         if unknown:
             raise ActionError(f"actions given for agents that are not live: {unknown}; live agents: {self.agents}", unknown)
-        if len(actions) != len(live):
-            missing = [a for a in self.agents if a not in actions]
-            raise ActionError(f"no action given for live agents {missing}", missing)
+        missing = [a for a in self.agents if a not in actions]
+        raise ActionError(f"no action given for live agents {missing}", missing)
 
     def step(self, actions: dict[str, Any]):
         """One step of every live agent. Atomic: a missing, unknown or malformed action raises
@@ -149,10 +153,9 @@ class DrivingParallelEnv(ParallelEnv):
         controllers, traffic, messages, clock, step count and the next observation are as if the
         call had not been made)."""
         self._check_agents(actions)
-        sim = self.sim
         out = self.driving.step(actions)
         agents = out.agents
-        ids = [sim.agent_ids[i] for i in agents]
+        ids = self._ids(agents)
         obs = self._split(out.batches)
         infos: dict[str, dict] = {a: {} for a in ids}
         events = out.events
@@ -162,21 +165,22 @@ class DrivingParallelEnv(ParallelEnv):
         if out.messages is not None:
             for info, n in zip(infos.values(), out.messages.tolist()):
                 info["messages_received"] = n
-        sim.remove_done_agents()
-        done = out.terminated | out.truncated
-        if done.any():
+        self.sim.remove_done_agents()
+        terminated, truncated = out.terminated.tolist(), out.truncated.tolist()
+        if any(terminated) or any(truncated):
+            done = out.terminated | out.truncated
             self.agents = [a for a, d in zip(ids, done.tolist()) if not d]
             self._live = agents[~done]
         else:
             self.agents = ids
             self._live = agents
-        return (
-            obs,
-            dict(zip(ids, out.reward.tolist())),
-            dict(zip(ids, out.terminated.tolist())),
-            dict(zip(ids, out.truncated.tolist())),
-            infos,
-        )
+        return obs, dict(zip(ids, out.reward.tolist())), dict(zip(ids, terminated)), dict(zip(ids, truncated)), infos
+
+    def _ids(self, agents: np.ndarray) -> list[str]:
+        """The ids of ``agents`` (kept while the simulation hands out the same active-agent array)."""
+        if self._ids_of[0] is not agents:
+            self._ids_of = (agents, [self.sim.agent_ids[i] for i in agents.tolist()])
+        return list(self._ids_of[1])
 
     def add_step_listener(self, listener) -> None:
         """Call ``listener(sim)`` after every step, before agents that finished are removed (the
@@ -191,11 +195,15 @@ class DrivingParallelEnv(ParallelEnv):
             info["messages_received"] = n
 
     def _split(self, batches: list[Batch]) -> dict[str, dict[str, np.ndarray]]:
-        """Per-agent dicts of row views into the batch arrays (iterating an array is the cheap way
-        to get its row views)."""
+        """Per-agent dicts of row views into the batch arrays (for a few agents each row view is
+        taken by index; for more, iterating an array is the cheap way to get its row views)."""
         ids = self.sim.agent_ids
         out: dict[str, dict[str, np.ndarray]] = {}
         for agents, batch in batches:
+            if len(agents) <= SMALL_BATCH:
+                for k, i in enumerate(agents.tolist()):
+                    out[ids[i]] = {key: value[k] for key, value in batch.items()}
+                continue
             keys = list(batch)
             per_agent = zip(*[list(v) for v in batch.values()])
             out.update((ids[i], dict(zip(keys, values))) for i, values in zip(agents.tolist(), per_agent))

@@ -27,7 +27,7 @@ def default_rewards(sim: Simulation, agents: np.ndarray, weights) -> np.ndarray:
     """float64[n] rewards for ``agents`` this step. ``weights``: a ``RewardSpec`` (every agent's),
     or float64[5, n] (``reward_weights``: each agent's, in the order of ``agents``) or [5, 1]
     (every agent's). One compiled pass: progress * weight - collision - off road + goal - step."""
-    if hasattr(weights, "progress_weight"):
+    if not isinstance(weights, np.ndarray):
         weights = reward_weights([weights])
     agents = np.asarray(agents, dtype=np.int64)
     out = np.empty(len(agents))
