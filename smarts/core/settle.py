@@ -45,6 +45,15 @@ def settle(tables, agents, episode_time):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
+def advance_clocks(episode_step, episode_time, dt):  # pragma: no cover - compiled
+    """One more step on every episode's clock: ``time = step * dt`` (no drift from summing dt).
+    Compiled: two numpy operations on arrays of one episode cost more than a call."""
+    for b in range(episode_step.shape[0]):
+        episode_step[b] += 1
+        episode_time[b] = episode_step[b] * dt
+
+
+@numba.njit(cache=True, nogil=True)
 def project_rows(t, rows):  # pragma: no cover - compiled
     """Lane, s, t, lane heading and distance of ``rows``, each on its episode's map."""
     grids = Grids(t.grid_table, t.grid_offsets, t.grid_segs, t.grid_cell_base, t.grid_ny, t.grid_origin,

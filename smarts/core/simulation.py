@@ -39,7 +39,7 @@ import numpy as np
 from smarts.core.events import NUM_EVENTS, Event, NotMovingTracker, agent_events, events_by_episode
 from smarts.core.missions import MissionArrays, ResolvedMission, stack_missions
 from smarts.core.provider import Provider, ProviderBase
-from smarts.core.settle import ROUTE_WINDOW_AHEAD, ROUTE_WINDOW_BACK, route_progress, settle  # noqa: F401
+from smarts.core.settle import ROUTE_WINDOW_AHEAD, ROUTE_WINDOW_BACK, advance_clocks, route_progress, settle  # noqa: F401
 from smarts.core.sim_records import sim_tables
 from smarts.core.vehicle_table import Role, VehicleTable
 from smarts.maps import RoadMap, project
@@ -577,8 +577,7 @@ class Simulation:
         """
         self.check_actions(actions)
         self.actions = actions
-        self.episode_step += 1
-        np.multiply(self.episode_step, self.dt, out=self.episode_time)  # per episode; no drift from summing dt
+        advance_clocks(self.episode_step, self.episode_time, self.dt)
         for p in self.batch_providers:
             p.step(self, self.dt)
         for b, provs in enumerate(self._stepped):
@@ -598,6 +597,8 @@ class Simulation:
     def remove_done_agents(self) -> np.ndarray:
         """Remove the vehicles of agents that finished this step (or hand them to traffic, with
         ``on_end: traffic``); returns their agent indices."""
+        if not self.agent_done.any():  # the usual step: nobody finished
+            return np.zeros(0, dtype=np.int64)
         finished = np.flatnonzero(self.agent_active & self.agent_done)
         if finished.size:
             back = self.hands_back[finished]
