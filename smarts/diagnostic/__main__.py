@@ -216,6 +216,23 @@ def _cpu_rows(cases: list[str], steps: int, warmup: int, stages: bool, console) 
     return rows
 
 
+def _compare_rows(baseline: str, cases: list[str], steps: int, warmup: int, console) -> list[dict]:
+    """The CPU cases in ``baseline`` and in this tree, alternating (``cpu_step.compare``), as a table."""
+    from rich.table import Table
+
+    from smarts.diagnostic import cpu_step
+
+    rows = cpu_step.compare(baseline, cases, steps, warmup)
+    table = Table(title=f"Thread CPU time per step against {baseline} (us, median of 3 alternating rounds)", min_width=100)
+    for col in ("case", "baseline", "this tree", "this / baseline"):
+        table.add_column(col, justify="right", no_wrap=True)
+    for r in rows:
+        name = "1 agent, env step" if r["case"] == "1" else f"{r['case'][4:]} SUMO vehicles, simulation step"
+        table.add_row(name, f"{r['baseline_us']:.1f}", f"{r['this_us']:.1f}", f"{r['ratio']:.2f}")
+    console.print(table)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if "--batched" in argv:  # the batched backend's rows have their own options
@@ -248,6 +265,11 @@ def main(argv: list[str] | None = None) -> int:
         help="CPU-time rows: 1 (one agent, env step) and/or sumoN (N SUMO vehicles, simulation step); 'none' to skip",
     )
     parser.add_argument("--stages", action="store_true", help="split the CPU rows by stage")
+    parser.add_argument(
+        "--baseline", default=None, metavar="TREE",
+        help="also time the CPU rows with the smarts source tree TREE (e.g. a git worktree of an older commit), "
+        "alternating with this one in fresh interpreters, and print the ratios",
+    )
     parser.add_argument("--out", type=Path, default=Path("reports/diagnostic.json"), help="JSON output file")
     args = parser.parse_args(argv)
     try:
@@ -294,6 +316,7 @@ def main(argv: list[str] | None = None) -> int:
 
     console = Console(width=max(Console().width, 110))
     cpu_rows = _cpu_rows(cpu_cases, args.steps, args.warmup, args.stages, console) if cpu_cases else []
+    compare_rows = _compare_rows(args.baseline, cpu_cases, args.steps, args.warmup, console) if args.baseline else []
     rows = [time_case(n, args.steps, args.warmup) for n in track(counts, description="timing cases", console=console)]
 
     table = Table(title=f"Step time at full load, {args.steps} timed steps per case (ms per step)")
@@ -359,6 +382,7 @@ def main(argv: list[str] | None = None) -> int:
         "traffic_cases": traffic_rows,
         "replay_cases": replay_rows,
         "cpu_cases": cpu_rows,
+        "cpu_baseline": {"tree": args.baseline, "cases": compare_rows} if args.baseline else None,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(report, indent=2))

@@ -160,3 +160,46 @@ def sumo(n_vehicles: int = 50, steps: int = 300, stages: bool = False, seed: int
 
 def _summary(us: np.ndarray) -> dict:
     return {"cpu_us_median": float(np.median(us)), "cpu_us_mean": float(np.mean(us)), "steps": int(us.size)}
+
+
+_CHILD = """
+import json, sys
+from smarts.diagnostic import cpu_step
+case, steps, warmup = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+row = cpu_step.one_agent(steps, warmup) if case == "1" else cpu_step.sumo(int(case[4:]), steps)
+print(json.dumps(row))
+"""
+
+
+def run_in_tree(tree: str | None, case: str, steps: int, warmup: int) -> dict:
+    """One CPU case (``1`` or ``sumoN``) in a fresh interpreter importing ``smarts`` from the source
+    tree ``tree`` (None: this one), so two trees are timed by the same code in turn."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    env = dict(os.environ)
+    root = tree or str(Path(__file__).resolve().parents[2])
+    env["PYTHONPATH"] = os.pathsep.join([root, *filter(None, [env.get("PYTHONPATH")])])
+    out = subprocess.run(
+        [sys.executable, "-c", _CHILD, case, str(steps), str(warmup)], env=env, cwd=root,
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def compare(baseline: str, cases: list[str], steps: int, warmup: int, rounds: int = 3) -> list[dict]:
+    """Each case in ``baseline`` (another source tree) and in this tree, alternating for ``rounds``
+    rounds (so load on a shared machine hits both alike); per tree the median of the rounds'
+    medians, and this tree's over the baseline's."""
+    rows = []
+    for case in cases:
+        times: dict[str, list[float]] = {"baseline": [], "this": []}
+        for _ in range(rounds):
+            for name, tree in (("baseline", baseline), ("this", None)):
+                times[name].append(run_in_tree(tree, case, steps, warmup)["cpu_us_median"])
+        base, this = float(np.median(times["baseline"])), float(np.median(times["this"]))
+        rows.append({"case": case, "baseline_us": base, "this_us": this, "ratio": this / base, "rounds": times})
+    return rows

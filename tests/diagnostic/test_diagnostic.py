@@ -25,3 +25,14 @@ def test_diagnostic_writes_a_table_and_json(tmp_path, capsys):
         assert "map, route, events" in c["stages_us"] and "other" in c["stages_us"]
     printed = capsys.readouterr().out
     assert "agent-steps/s" in printed and "traffic provider" in printed and "CPU by stage" in printed
+
+
+def test_cpu_rows_against_a_baseline_tree_alternate_fresh_interpreters():
+    from pathlib import Path
+
+    from smarts.diagnostic import cpu_step
+
+    root = str(Path(cpu_step.__file__).resolve().parents[2])  # this tree as its own baseline
+    (row,) = cpu_step.compare(root, ["1"], steps=3, warmup=1, rounds=1)
+    assert row["case"] == "1" and row["baseline_us"] > 0 and row["this_us"] > 0
+    assert row["ratio"] == row["this_us"] / row["baseline_us"] and len(row["rounds"]["this"]) == 1
