@@ -246,6 +246,7 @@ class PPOCheckpoint(CheckpointSchema):
     hidden: Hidden
     interface: Any = None
     lane_relative: Any = None
+    comms: Any = None
     config: dict[str, Any] = {}
     step: Annotated[int, Field(ge=0)]
     metrics: dict[str, float] = {}
@@ -260,13 +261,14 @@ def save_checkpoint(path: Path, *, actor: Actor, critic: Critic, normalizer: Obs
                     layout: ObservationLayout, low: np.ndarray, high: np.ndarray,
                     action_space: str, config: dict, step: int, metrics: dict,
                     optimizer_state: dict | None = None, controller: str = "direct",
-                    interface: dict | None = None, lane_relative: dict | None = None) -> Path:  # fmt: skip
+                    interface: dict | None = None, lane_relative: dict | None = None,
+                    comms: dict | None = None) -> Path:  # fmt: skip
     """Write tensors + JSON-able metadata atomically (``weights_only`` loadable).
 
     ``action_space`` and ``controller`` say how the actions drive a vehicle and ``interface`` (the
     plain-data form of ``smarts.sensors.interface.AgentInterface``) which observation the policy
     reads, so evaluation and the benchmark build the env this policy was trained in (and validate
-    the interface and ``lane_relative`` settings there)."""
+    the interface, ``lane_relative`` and ``comms`` (V2V) settings there)."""
     blob = {
         "format": CHECKPOINT_FORMAT,
         # CPU tensors whatever device trained them: evaluation loads them anywhere.
@@ -278,6 +280,7 @@ def save_checkpoint(path: Path, *, actor: Actor, critic: Critic, normalizer: Obs
                    "low": [float(v) for v in low], "high": [float(v) for v in high]},
         "interface": interface,
         "lane_relative": lane_relative,
+        "comms": comms,
         "hidden": list(config.get("hidden", (128, 128))),
         "config": config,
         "step": int(step),
@@ -324,6 +327,7 @@ class PPOPolicy:
         # Plain data, validated by the simulator where it builds the env (agents import no simulator).
         self.interface = blob.get("interface")
         self.lane_relative = blob.get("lane_relative")
+        self.comms = blob.get("comms")
         self.source = source
         self.low = torch.tensor(blob["action"]["low"], dtype=torch.float32)
         self.high = torch.tensor(blob["action"]["high"], dtype=torch.float32)

@@ -41,6 +41,7 @@ class SB3Checkpoint(CheckpointSchema):
     net_arch: Hidden
     interface: Any = None
     lane_relative: Any = None
+    comms: Any = None
     config: dict[str, Any] = {}
     step: Annotated[int, Field(ge=0)]
     n_updates: Annotated[int, Field(ge=0)] = 0
@@ -82,6 +83,7 @@ class SB3Policy:
         self.controller = blob["action"].get("controller", "direct")
         self.interface = blob.get("interface")
         self.lane_relative = blob.get("lane_relative")
+        self.comms = blob.get("comms")
         act_space = gym.spaces.Box(-1.0, 1.0, self.low.shape, np.float32)
         self.policy = MultiInputActorCriticPolicy(obs_space, act_space, lambda _: 0.0, net_arch=blob["net_arch"])
         try:

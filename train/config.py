@@ -216,6 +216,12 @@ class TrainConfig(Schema):
         description="Initial log standard deviation of the Gaussian policy, in [-5, 1]: one value for every action "
         "component, or one per component (for lane-relative commands: speed, lane change).",
     )
+    comms: dict[str, Any] | None = Field(
+        None,
+        description="V2V messaging for every training scenario, as a scenario's comms section (smarts.comms.config; "
+        "e.g. {range: 50, latency: 1, penetration: 0.5}): agents then also observe messages and send a message "
+        "part with each action; recorded in the checkpoint so evaluation runs with it. null: each scenario's own.",
+    )
     obs_norm: bool = Field(True, description="Normalise observations by running statistics (kept in the checkpoint).")
     reward_scaling: bool = Field(True, description="Divide rewards by the running standard deviation of the discounted return.")
     obs_clip: Positive = Field(5.0, description="Normalised inputs are clipped to +-obs_clip.")
@@ -271,6 +277,18 @@ class TrainConfig(Schema):
         if not names or not all(names):
             raise ValueError("expected at least one training scenario")
         return names
+
+    @field_validator("comms")
+    @classmethod
+    def _comms(cls, data: dict[str, Any] | None) -> dict[str, Any] | None:
+        from smarts.comms.config import CommsConfig
+
+        if data is not None:
+            try:
+                CommsConfig.from_dict(data, "comms")
+            except ValueError as err:
+                raise ValueError(str(err).replace("comms.", "", 1)) from None
+        return data
 
     @field_validator("hidden")
     @classmethod
@@ -355,6 +373,12 @@ class TrainConfig(Schema):
 
         return interface_from_dict(self.interface)
 
+    def comms_config(self):
+        """The ``CommsConfig`` of ``comms`` (None: each scenario keeps its own)."""
+        from smarts.comms.config import CommsConfig
+
+        return None if self.comms is None else CommsConfig.from_dict(self.comms, "comms")
+
     def lane_relative_params(self) -> LaneRelativeParams:
         """The ``LaneRelativeParams`` of ``lane_relative``."""
         return LaneRelativeParams(**self.lane_relative.model_dump())
@@ -384,6 +408,13 @@ def _is_text(annotation: Any) -> bool:
     return False
 
 
+def _is_mapping(annotation: Any) -> bool:
+    """Whether a field holds a mapping (a dict, a section model, or an optional one)."""
+    if typing.get_origin(annotation) in (typing.Union, types.UnionType):
+        return any(_is_mapping(a) for a in typing.get_args(annotation) if a is not type(None))
+    return typing.get_origin(annotation) is dict or (isinstance(annotation, type) and issubclass(annotation, BaseModel))
+
+
 def _yaml(text: str) -> Any:
     try:
         return yaml.safe_load(text)
@@ -408,9 +439,11 @@ def from_command_line(name: str, text: str) -> Any:
         value = _yaml(stripped) if stripped.startswith("[") else [v for v in re.split(r"[,\s]+", stripped) if v]
         if _is_text(typing.get_args(kind)[0]) or not isinstance(value, list):
             return value
-    elif typing.get_origin(kind) is dict or (isinstance(kind, type) and issubclass(kind, BaseModel)):
+    elif _is_mapping(kind):
         value = _yaml(text)
-        return {} if value is None else value
+        if value is None:
+            return None if type(None) in typing.get_args(kind) else {}
+        return value
     else:
         value = text
     try:

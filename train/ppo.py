@@ -72,6 +72,8 @@ from train.run import (
     Progress,
     Run,
     check_resume,
+    comms_dict,
+    initial_log_std,
     interface_dict,
     lane_relative_dict,
     training_specs,
@@ -254,10 +256,7 @@ def build_parts(space: gym.spaces.Dict, low: np.ndarray, high: np.ndarray, cfg: 
     normalizer = ObsNormalizer(layout.size, clip=cfg.obs_clip, std_floor=cfg.obs_std_floor,
                                raw=raw_features(layout, space))  # fmt: skip
     size = len(low)
-    if len(cfg.init_log_std) not in (1, size):
-        raise ValueError(f"init_log_std: expected 1 or {size} values (one per action component), got {cfg.init_log_std}")
-    log_std = cfg.init_log_std if len(cfg.init_log_std) == size else cfg.init_log_std[:1] * size
-    actor_net = Actor(layout.size, size, tuple(cfg.hidden), init_log_std=log_std)
+    actor_net = Actor(layout.size, size, tuple(cfg.hidden), init_log_std=initial_log_std(cfg.init_log_std, size))
     critic_net = Critic(layout.size, tuple(cfg.hidden))
     head = _GaussianInActionUnits(actor_net, torch.as_tensor(low), torch.as_tensor(high))
     return PolicyParts(layout, normalizer, actor_net, critic_net, head, low, high)
@@ -796,7 +795,7 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
                                layout=parts.layout, low=parts.low, high=parts.high,
                                action_space=ACTION_SPACES[cfg.action_space], controller=cfg.controller,
                                interface=interface_dict(cfg), lane_relative=lane_relative_dict(cfg),
-                               config=cfg.model_dump(), step=step, metrics=metrics,
+                               comms=comms_dict(cfg), config=cfg.model_dump(), step=step, metrics=metrics,
                                optimizer_state=learner.optimizer.state_dict())  # fmt: skip
 
     bar = Progress(f"PPO {cfg.task}", cfg.total_steps, step, enabled=progress)

@@ -217,9 +217,10 @@ def scenario_names(names: list[str]) -> list[str]:
     return out
 
 
-def training_spec(name, action_space: str, controller: str = "direct"):
+def training_spec(name, action_space: str, controller: str = "direct", comms=None):
     """A scenario spec from ``suite:scenario``, a library name or a spec, every learning agent on
-    ``action_space`` driven through ``controller`` (social agents keep their own)."""
+    ``action_space`` driven through ``controller`` (social agents keep their own), with ``comms``
+    (a ``CommsConfig``) instead of the scenario's own V2V settings when given."""
     from smarts.benchmark.suites import load_suite
     from smarts.scenario import load_scenario
 
@@ -238,7 +239,8 @@ def training_spec(name, action_space: str, controller: str = "direct"):
         a if a.is_social else dataclasses.replace(a, action_space=ACTION_SPACES[action_space], controller=controller)
         for a in spec.agents
     ]
-    return dataclasses.replace(spec, agents=agents)
+    spec = dataclasses.replace(spec, agents=agents)
+    return spec if comms is None else dataclasses.replace(spec, comms=comms)
 
 
 def training_specs(cfg: TrainConfig) -> list:
@@ -250,9 +252,17 @@ def training_specs(cfg: TrainConfig) -> list:
     for i in range(cfg.envs):
         name = names[i % len(names)]
         if name not in built:
-            built[name] = training_spec(name, cfg.action_space, cfg.controller)
+            built[name] = training_spec(name, cfg.action_space, cfg.controller, cfg.comms_config())
         specs.append(copy.deepcopy(built[name]))
     return specs
+
+
+def initial_log_std(values: list[float], size: int) -> list[float]:
+    """One initial log std per action component: one value for all, one per component, or one per
+    driving component, the message part of a V2V action (which follows them) taking the last."""
+    if len(values) > size:
+        raise ValueError(f"init_log_std: expected at most {size} values (one per action component), got {values}")
+    return list(values) + [values[-1]] * (size - len(values))
 
 
 def interface_dict(cfg: TrainConfig) -> dict:
@@ -260,6 +270,12 @@ def interface_dict(cfg: TrainConfig) -> dict:
     from smarts.sensors.interface import interface_to_dict
 
     return interface_to_dict(cfg.observation_interface())
+
+
+def comms_dict(cfg: TrainConfig) -> dict | None:
+    """The V2V settings as checkpoints record them (None: the scenarios' own)."""
+    config = cfg.comms_config()
+    return None if config is None else {**dataclasses.asdict(config), "agent_channels": dict(config.agent_channels)}
 
 
 def lane_relative_dict(cfg: TrainConfig) -> dict | None:

@@ -28,7 +28,17 @@ from agents.checkpoint import CheckpointError, write_checkpoint, write_file_atom
 from agents.sb3_policy import SB3_FORMAT
 from smarts.dynamics.pose_control_torch import resolve_device
 from train.config import ACTION_SPACES, TrainConfig
-from train.run import BatchPlan, Progress, Run, check_resume, interface_dict, lane_relative_dict, training_specs
+from train.run import (
+    BatchPlan,
+    Progress,
+    Run,
+    check_resume,
+    comms_dict,
+    initial_log_std,
+    interface_dict,
+    lane_relative_dict,
+    training_specs,
+)
 
 if TYPE_CHECKING:
     from smarts.env.sb3_vec_env import SmartsVecEnv
@@ -187,10 +197,9 @@ def build_model(cfg: TrainConfig, vec: "SmartsVecEnv") -> BudgetPPO:
 
     vec.seed(training_seed(cfg))  # PPO(seed=...) seeded the env with the run seed: the training episodes keep theirs
     size = model.policy.log_std.numel()  # the same starting exploration as the torchrl trainer
-    if len(cfg.init_log_std) not in (1, size):
-        raise ValueError(f"init_log_std: expected 1 or {size} values (one per action component), got {cfg.init_log_std}")
+    log_std = initial_log_std(cfg.init_log_std, size)
     with torch.no_grad():
-        model.policy.log_std.copy_(torch.as_tensor(cfg.init_log_std, dtype=model.policy.log_std.dtype).expand(size))
+        model.policy.log_std.copy_(torch.as_tensor(log_std, dtype=model.policy.log_std.dtype))
     return model
 
 
@@ -254,6 +263,7 @@ def save_sb3(path: Path, model, vec, cfg: TrainConfig, metrics: dict | None = No
         "observation": {k: list(s.shape) for k, s in spaces.items()},
         "interface": interface_dict(cfg),
         "lane_relative": lane_relative_dict(cfg),
+        "comms": comms_dict(cfg),
         "action": {
             "space": ACTION_SPACES[cfg.action_space],
             "controller": cfg.controller,

@@ -61,6 +61,7 @@ from typing import Any
 import numpy as np
 
 from smarts.benchmark.suites import Suite, SuiteScenario, load_suite
+from smarts.comms.config import CommsConfig
 from smarts.core.errors import AgentSetupError, OutputError
 from smarts.core.policies import Policy, PolicyResolver, resolve_policy
 from smarts.dynamics.lane_relative import LaneRelativeParams
@@ -136,6 +137,9 @@ class PolicySetup:
     interface: AgentInterface | None = None
     lane_relative: LaneRelativeParams | None = None
     """The settings the policy was trained with (lane-relative controller); None: defaults."""
+    comms: CommsConfig | None = None
+    """The V2V settings the policy was trained with (it observes messages and sends a message part
+    with each action); None: the scenario's own."""
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -143,6 +147,8 @@ class PolicySetup:
             "controller": self.controller,
             "interface": None if self.interface is None else interface_to_dict(self.interface),
             "lane_relative": None if self.lane_relative is None else dataclasses.asdict(self.lane_relative),
+            "comms": None if self.comms is None else {**dataclasses.asdict(self.comms),
+                                                      "agent_channels": dict(self.comms.agent_channels)},
         }
 
 
@@ -312,6 +318,17 @@ def _lane_relative(policy: Any, locator: str) -> LaneRelativeParams | None:
     raise AgentSetupError(f"{_who(policy, locator)}: recorded lane-relative settings are invalid ({problem})")
 
 
+def _comms(policy: Any, locator: str) -> CommsConfig | None:
+    """The policy's V2V settings: a ``CommsConfig``, or its plain data validated here."""
+    value = getattr(policy, "comms", None)
+    if value is None or isinstance(value, CommsConfig):
+        return value
+    try:
+        return CommsConfig.from_dict(value, "comms")
+    except (TypeError, ValueError) as err:
+        raise AgentSetupError(f"{_who(policy, locator)}: recorded V2V settings are invalid ({err})") from None
+
+
 def policy_setup(policy: Policy, locator: str) -> PolicySetup:
     """Read a policy's ``action_space``, ``controller`` (default ``direct``), ``interface`` and
     ``lane_relative`` (default None; objects or their plain data, validated here);
@@ -328,7 +345,8 @@ def policy_setup(policy: Policy, locator: str) -> PolicySetup:
         raise AgentSetupError(
             f"agent {locator!r}: the lane_relative controller drives {', '.join(LANE_RELATIVE_SPACES)}, not {space!r}"
         )
-    return PolicySetup(space, controller, _interface(policy, locator), _lane_relative(policy, locator))
+    return PolicySetup(space, controller, _interface(policy, locator), _lane_relative(policy, locator),
+                       _comms(policy, locator))  # fmt: skip
 
 
 def check_hosted(locator: str, setup: PolicySetup, suite: Suite) -> None:
@@ -371,12 +389,14 @@ def policy_files_digest(policy: Any) -> str:
 
 
 def scenario_for(spec: ScenarioSpec, setup: PolicySetup) -> ScenarioSpec:
-    """``spec`` with every learning (non-social) agent in the policy's action space and controller."""
+    """``spec`` with every learning (non-social) agent in the policy's action space and controller,
+    and the policy's V2V settings when it was trained with its own."""
     agents = [
         a if a.is_social else dataclasses.replace(a, action_space=setup.action_space, controller=setup.controller)
         for a in spec.agents
     ]
-    return dataclasses.replace(spec, agents=agents)
+    spec = dataclasses.replace(spec, agents=agents)
+    return spec if setup.comms is None else dataclasses.replace(spec, comms=setup.comms)
 
 
 def build_env(entry: SuiteScenario, setup: PolicySetup):

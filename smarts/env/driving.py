@@ -174,6 +174,7 @@ class Driving:
         senders = active[self.learner[active]] if social else active
         driving, payloads, channels = self._split(actions, senders) if self.comms else (actions, None, None)
         if social:
+            driving = self._as_wide_as_any(driving)
             sim.check_actions(driving, senders)  # the policies must not run on a refused step
             driving = self._with_social(driving, active)
         sim.step(driving)
@@ -263,6 +264,16 @@ class Driving:
         V2VLink.merge([(m, b) for m, b in batches if self.hears[m[0]]], hearing, received)
         count[np.isin(agents, hearing)] = received.count
         return count
+
+    def _as_wide_as_any(self, driving):
+        """An array of the learners' actions padded to the widest action of any agent: a social
+        agent's action (filled in after the check) may be wider than every learner's."""
+        width = int(self.driving_width.max()) if len(self.driving_width) else 0
+        if isinstance(driving, np.ndarray) and driving.ndim == 2 and driving.shape[1] < width:
+            full = np.zeros((driving.shape[0], width), dtype=np.float64)
+            full[:, : driving.shape[1]] = driving
+            return full
+        return driving
 
     def _with_social(self, driving, active: np.ndarray):
         """The learners' actions with the live social agents' own (from their last observations)."""

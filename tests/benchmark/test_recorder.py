@@ -123,7 +123,7 @@ def test_rows_start_after_the_first_step_and_end_at_the_time_limit(tmp_path):
     np.testing.assert_allclose(trace.route_distance_to_goal, 140.0 - driven, atol=0.01)
     assert log.info == {"agent": "zoo:keep-lane", "inputs": job_inputs(job), "suite": "short",
                         "suite_source": suite.source, "action_space": "relative_target_pose",
-                        "controller": "direct", "interface": None, "lane_relative": None}  # fmt: skip
+                        "controller": "direct", "interface": None, "lane_relative": None, "comms": None}  # fmt: skip
     assert log.end_time == pytest.approx(2.0)
 
 

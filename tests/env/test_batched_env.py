@@ -127,3 +127,18 @@ def test_a_bad_action_in_one_copy_steps_no_copy():
     with pytest.raises(ActionError, match=r"SmartsBatchedEnv: actions: expected shape \(3, 3\)"):
         env.step(td.set("action", torch.zeros(3, 2)))
     assert sim.episode_step.tolist() == [1, 1]
+
+
+def test_learners_with_narrower_actions_than_a_social_agent_step():
+    """A social agent on direct RelativeTargetPose (3 components) beside learners giving
+    lane-relative commands (2): the learners' array is as wide as their own actions."""
+    from smarts.env.batched import BatchedDriving
+    from train.run import training_spec
+
+    spec = training_spec("t_junction_social", "rtp", "lane_relative")
+    driving = BatchedDriving([spec, spec])
+    driving.reset(seeds=[1, 2])
+    assert driving.action_width == 2
+    for _ in range(3):
+        out = driving.step(np.zeros((len(driving.slots), 2), dtype=np.float32))
+    assert np.isfinite(out.reward).all()

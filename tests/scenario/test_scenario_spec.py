@@ -114,7 +114,14 @@ def _set(data: dict, dotted: str, value) -> dict:
     return data
 
 
-_DELETE = object()
+class _Delete:
+    """Marks a field to remove (its repr names it, so test ids are the same in every process)."""
+
+    def __repr__(self) -> str:
+        return "<deleted>"
+
+
+_DELETE = _Delete()
 
 BAD_SPECS = [
     # (field to set, value, dotted path expected in the message, fragment expected)

@@ -89,7 +89,14 @@ BASE = {
     },
 }
 
-_DELETE = object()
+class _Delete:
+    """Marks a field to remove (its repr names it, so test ids are the same in every process)."""
+
+    def __repr__(self) -> str:
+        return "<deleted>"
+
+
+_DELETE = _Delete()
 
 
 def _set(data: dict, dotted: str, value) -> dict:

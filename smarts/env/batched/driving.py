@@ -184,7 +184,8 @@ class BatchedDriving:
                 copy, aid = self.slots[j]
                 raise BatchedSetupError(
                     f"{self.specs[copy].source}: {aid}'s observation space differs from {first.source}'s "
-                    f"{self.slots[0][1]}; give one interface (observation=...) for all"
+                    f"{self.slots[0][1]} ({_space_difference(obs, space)}); give one interface (observation=...) "
+                    "and one V2V setting (a comms section, or none) for all"
                 )
         width = max(b.shape[0] for b in boxes)
         self.action_low = np.zeros((len(boxes), width), dtype=np.float32)
@@ -568,3 +569,15 @@ def _serve(conn, specs: list, copy_ids: list[int], options: dict) -> None:
                 conn.send(("ok", None))
         except Exception as exc:  # noqa: BLE001 - reported to the parent
             conn.send(("error", traceback.format_exc(), exc))
+
+
+def _space_difference(first: gym.spaces.Dict, other: gym.spaces.Dict) -> str:
+    """The keys one observation space has and the other lacks, or the first key whose shape differs."""
+    only_first, only_other = sorted(set(first.spaces) - set(other.spaces)), sorted(set(other.spaces) - set(first.spaces))
+    if only_first or only_other:
+        parts = [f"{', '.join(keys)} only in {where}" for keys, where in ((only_first, "the first"), (only_other, "this one")) if keys]
+        return "; ".join(parts)
+    for key in first.spaces:
+        if first.spaces[key] != other.spaces[key]:
+            return f"{key}: {first.spaces[key].shape} against {other.spaces[key].shape}"
+    return "the spaces' bounds"
