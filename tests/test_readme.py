@@ -109,6 +109,16 @@ COMMANDS: dict[str, tuple[str, str]] = {
         PARSE, "the whole suite on a private Ray instance, minutes",
     ),
     "ray start --head": (NOT_RUN, "starts a Ray cluster head on this machine, left running"),
+    'python -m train ppo --task drive --interface "{neighbours: {extended: true}, occlusion: {enabled: true}, '
+    'lidar: {rays: 32}, rasters: {size: 32, layers: [drivable, occupancy, occlusion]}, ahead: true}" --comms '
+    '"{range: 60, latency: 1, message_size: 4, penetration: 0.5}"': (
+        PARSE, "a full training run; tests/test_train_every_scenario.py runs one batch with every sensor and V2V",
+    ),
+    "ray start --head --port 6379": (NOT_RUN, "starts a Ray cluster head on this machine, left running"),
+    "ray start --address HEAD_IP:6379": (NOT_RUN, "joins another machine's Ray cluster, left running"),
+    "python -m train ppo --task platoon --envs 512 --workers 32 --frames-per-batch 65536 --ray-address HEAD_IP:6379": (
+        PARSE, "needs a Ray cluster at HEAD_IP; a full training run",
+    ),
     "python -m train eval --agent runs/train/platoon/latest/final.pt --suite adaptive --ray-address auto": (
         PARSE, "needs a trained checkpoint and the cluster started by `ray start --head`",
     ),
