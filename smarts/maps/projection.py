@@ -160,7 +160,7 @@ def _project_kernel(
         out_lane[p], out_s[p], out_t[p], out_heading[p], out_distance[p] = lane, s, t, lane_heading, distance
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def project_point(grids, m, x, y, heading, use_heading):  # pragma: no cover - compiled
     """``(lane, s, t, lane_heading, distance)`` of one point on map ``m`` of ``grids`` (a
     ``Grids`` tuple): the projection of ``project`` (lane -1 and distance inf where no lane is
