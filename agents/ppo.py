@@ -317,6 +317,8 @@ class PPOPolicy:
     ``interface`` and ``lane_relative`` are the recorded plain data (None: the scenario's
     interface, the default settings); ``source`` names the file for error messages."""
 
+    batching = "episodes"  # no state, but a matrix product rounds by batch size: one call per episode
+
     def __init__(self, blob: dict, source: str = "<checkpoint>"):
         check_checkpoint(blob, source)  # every field, and the network's size, before it is built
         layout = ObservationLayout(tuple(blob["layout"]["keys"]), tuple(tuple(s) for s in blob["layout"]["shapes"]))
@@ -354,6 +356,18 @@ class PPOPolicy:
     @torch.no_grad()
     def act(self, obs: dict) -> np.ndarray:
         x = self.normalizer(self.layout.flatten(obs))
+        return self._actions(x).numpy()
+
+    def _actions(self, x: torch.Tensor) -> torch.Tensor:
         loc, _ = self.actor(x)
         action = scale_action(loc, self.low, self.high, self.mean_map)
-        return torch.minimum(torch.maximum(action, self.low), self.high).numpy()
+        return torch.minimum(torch.maximum(action, self.low), self.high)
+
+    @torch.no_grad()
+    def act_episodes(self, obs: dict, counts: list[int]) -> np.ndarray:
+        """``act`` of several episodes at once, bit for bit: ``obs`` holds their rows stacked
+        (``counts[i]`` rows of episode ``i``, in order). Flattening and normalising go element by
+        element, so they run on all rows together; the network then sees each episode's rows as
+        ``act`` would (a matrix product's rounding depends on how many rows it holds)."""
+        x = self.normalizer(self.layout.flatten(obs))
+        return torch.cat([self._actions(part) for part in torch.split(x, list(counts))]).numpy()

@@ -8,6 +8,8 @@ import numpy as np
 class RandomPolicy:
     """Batched uniform random actions; seeded so benchmark runs repeat exactly."""
 
+    batching = "instances"  # draws from its own generator: one seeded instance per benchmark episode
+
     def __init__(self, action_space: str = "relative_target_pose", low=None, high=None, seed: int = 0):
         self.action_space = action_space
         if low is None or high is None:

@@ -68,6 +68,8 @@ class SB3Policy:
     ``interface`` and ``lane_relative`` are the recorded plain data (None: the scenario's
     interface, the default settings); the simulator validates them when it builds the env."""
 
+    batching = "episodes"  # no state, but a matrix product rounds by batch size: one call per episode
+
     def __init__(self, blob: dict[str, Any], source: str = "<checkpoint>"):
         import gymnasium as gym
         from stable_baselines3.common.policies import MultiInputActorCriticPolicy

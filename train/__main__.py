@@ -50,7 +50,8 @@ def _benchmark(args: argparse.Namespace) -> int:
           f"({', '.join(shown)}; references always included) -> {out}")  # fmt: skip
     try:
         results = run_jobs(jobs, workers=args.workers, progress=not args.quiet, ray_address=args.ray_address,
-                           resume=args.resume, episode_timeout=args.episode_timeout)  # fmt: skip
+                           resume=args.resume, episode_timeout=args.episode_timeout,
+                           batch=not args.per_episode)  # fmt: skip
     except BenchmarkInterrupted as stop:  # Ctrl-C: report what finished, no traceback
         write_report(out, suite, agents, stop.finished, not_run=stop.not_run)
         print(f"interrupted: {len(stop.finished)} of {len(jobs)} episodes finished, reported in {out}; "
@@ -148,6 +149,9 @@ def _benchmark_options(parser: argparse.ArgumentParser, agent_required: bool = F
     parser.add_argument("--resume", action="store_true",
                         help="finish an interrupted run: the suite's latest run (or --out); episodes whose logs are "
                              "there and valid are not run again")  # fmt: skip
+    parser.add_argument("--per-episode", action="store_true",
+                        help="one env per episode instead of a few simulations of many episodes each (the same "
+                             "logs and numbers, several times slower; for comparison)")  # fmt: skip
     parser.set_defaults(run=_benchmark)
 
 

@@ -453,6 +453,12 @@ def write_failed_episode(job: Job, reason: str, info: dict[str, Any] | None = No
     return _summary(job, entry.name, log.failure, info)
 
 
+def _episode_info(job: Job, suite: Suite) -> dict[str, Any]:
+    """The start of an episode log's ``info`` (the policy's setup follows). The suite travels with
+    the log, so a viewer finds the scenario's map wherever the log is."""
+    return {"agent": job.agent, "inputs": job_inputs(job), "suite": suite.name, "suite_source": suite.source}
+
+
 def run_episode(job: Job, policy_resolver: PolicyResolver | None = None) -> dict:
     """Run one episode and write its log; returns a short summary (never raises for agent faults)."""
     from smarts.benchmark.metrics import write_episode
@@ -460,9 +466,7 @@ def run_episode(job: Job, policy_resolver: PolicyResolver | None = None) -> dict
 
     suite = load_suite(job.suite_source)
     entry = suite.scenarios[job.scenario_index]
-    # The suite travels with the log, so a viewer finds the scenario's map wherever the log is.
-    info: dict[str, Any] = {"agent": job.agent, "inputs": job_inputs(job), "suite": suite.name,
-                            "suite_source": suite.source}  # fmt: skip
+    info = _episode_info(job, suite)
     try:
         policy = load_policy(job.agent, job.seed, policy_resolver)
         setup = policy_setup(policy, job.agent)
@@ -589,9 +593,17 @@ def run_jobs(
     *,
     resume: bool = False,
     episode_timeout: float | None = None,
+    batch: bool = True,
 ) -> list[dict]:
     """Run jobs in ``workers`` processes (inline when 1), or as Ray tasks when ``ray_address`` is
     given (``auto``, ``local`` or ``HOST:PORT``); results in job order either way.
+
+    ``batch``: the episodes of an agent whose policy declares how it may be shared
+    (``policy.batching``, :mod:`smarts.benchmark.batched`) run as a few simulations of many
+    episodes each (:func:`plan_units`: a unit is one job for a worker or a Ray task), with the
+    same logs, bit for bit, as one env per episode; episodes that cannot share a simulation (SUMO
+    traffic) and agents without that declaration run one episode per unit. False: every episode
+    alone, as the per-episode runner always did.
     ``policy_resolver`` (None: the installed default) goes to every worker, so it must pickle:
     a module-level function or an instance of a module-level class.
 
@@ -605,7 +617,10 @@ def run_jobs(
 
     ``episode_timeout`` (seconds, None: no limit): a worker still on one episode after that long
     is killed and the episode recorded as failed, once (a hang would only repeat); the other
-    episodes go on. With it, even ``workers`` 1 runs in a worker process. Not for Ray tasks."""
+    episodes go on. A unit of several episodes (which all start together) past that long has its
+    unfinished episodes run again, each alone under the same limit. With it, even ``workers`` 1
+    runs in a worker process. Not for Ray tasks. A unit whose worker dies likewise keeps the
+    episodes it finished and runs the others again, each alone."""
     if episode_timeout is not None and not episode_timeout > 0:
         raise ValueError(f"episode_timeout: expected a positive number of seconds, got {episode_timeout!r}")
     if episode_timeout is not None and ray_address:
@@ -630,15 +645,16 @@ def run_jobs(
             else:
                 todo.append(k)
         try:
-            if not todo:
+            units = plan_units(jobs, todo, workers, policy_resolver) if batch else [[k] for k in todo]
+            if not units:
                 pass
             elif ray_address:
-                _run_on_ray(jobs, todo, ray_address, workers, policy_resolver, done)
+                _run_on_ray(jobs, units, ray_address, workers, policy_resolver, done)
             elif workers <= 1 and episode_timeout is None:
-                for k in todo:
-                    done(k, run_episode_guarded(jobs[k], policy_resolver))
+                for unit in units:
+                    run_unit([jobs[k] for k in unit], policy_resolver, lambda i, r, unit=unit: done(unit[i], r))
             else:
-                _run_in_processes(jobs, todo, max(workers, 1), policy_resolver, done, episode_timeout)
+                _run_in_processes(jobs, units, max(workers, 1), policy_resolver, done, episode_timeout)
         except KeyboardInterrupt:
             raise BenchmarkInterrupted(results) from None
     return results  # type: ignore[return-value]
@@ -724,7 +740,9 @@ def _sigint_deferred() -> Iterator[None]:
 
 
 def _worker_loop(conn, policy_resolver: PolicyResolver | None) -> None:
-    """A worker process: run the jobs it is sent, one at a time, until told to stop."""
+    """A worker process: run the units it is sent, one at a time, until told to stop; each
+    finished episode is sent at once (``("episode", k, summary)``, so a unit whose process dies
+    loses only the episodes it had not finished), then ``("unit", None, None)``."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if hasattr(signal, "pthread_sigmask"):
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked by the parent for the start
@@ -735,12 +753,14 @@ def _worker_loop(conn, policy_resolver: PolicyResolver | None) -> None:
             return  # the parent is gone
         if message is None:
             return
-        k, job = message
-        conn.send((k, run_episode_guarded(job, policy_resolver)))
+        ks, jobs = message
+        run_unit(jobs, policy_resolver, lambda i, result: conn.send(("episode", ks[i], result)))
+        conn.send(("unit", None, None))
 
 
 class _Worker:
-    """One worker process and the pipe to it; ``job`` is the index of the job it is running."""
+    """One worker process and the pipe to it; ``unit`` is the job indices it is running (None:
+    idle) and ``pending`` those of them not reported yet."""
 
     def __init__(self, ctx, policy_resolver: PolicyResolver | None):
         self.conn, child = ctx.Pipe()
@@ -748,26 +768,35 @@ class _Worker:
         with _sigint_deferred():
             self.process.start()
         child.close()
-        self.job: int | None = None
-        self.since = 0.0  # time.monotonic() when it was given its job
+        self.unit: list[int] | None = None
+        self.pending: list[int] = []
+        self.broken = False
+        self.since = 0.0  # time.monotonic() when it was given its unit
 
-    def give(self, k: int, job: Job) -> bool:
+    def give(self, unit: list[int], jobs: list[Job]) -> bool:
         try:
-            self.conn.send((k, job))
+            self.conn.send((unit, [jobs[k] for k in unit]))
         except OSError:  # it died while idle
             return False
-        self.job = k
+        self.unit, self.pending = unit, list(unit)
         self.since = time.monotonic()
         return True
 
-    def receive(self) -> tuple[int, dict] | None:
-        """The finished job's (index, summary), or None when the process died instead."""
+    def drain(self) -> list[tuple[int, dict]]:
+        """The finished episodes waiting in the pipe, as ``(k, summary)``; the unit is over
+        (``unit`` None) once its end arrives; ``broken`` once the pipe is (the process died)."""
+        out = []
         try:
-            if self.conn.poll():
-                return self.conn.recv()
+            while self.unit is not None and self.conn.poll():
+                kind, k, result = self.conn.recv()
+                if kind == "unit":
+                    self.unit, self.pending = None, []
+                else:
+                    self.pending.remove(k)
+                    out.append((k, result))
         except Exception:  # EOF, or a message cut short by the process dying
-            pass
-        return None
+            self.broken = True
+        return out
 
     def exit_code(self) -> int | None:
         self.process.join(timeout=10)
@@ -787,104 +816,179 @@ class _Worker:
         self.conn.close()
 
 
+class _Pool:
+    """Worker processes running units (:func:`_run_in_processes`)."""
+
+    def __init__(self, jobs: list[Job], units: list[list[int]], workers: int, policy_resolver: PolicyResolver | None,
+                 done: Callable[[int, dict], None], timeout: float | None):  # fmt: skip
+        self.jobs, self.resolver, self.done, self.timeout = jobs, policy_resolver, done, timeout
+        self.ctx = multiprocessing.get_context("spawn")
+        self.queue = deque(units)
+        self.reasons: dict[int, list[str]] = {}
+        self.workers: list[_Worker] = []
+        self.workers = [_Worker(self.ctx, policy_resolver) for _ in range(min(workers, len(units)))]
+
+    def replace(self, i: int) -> None:
+        self.workers[i].stop(graceful=False)
+        self.workers[i] = _Worker(self.ctx, self.resolver)
+
+    def assign(self, i: int, unit: list[int]) -> None:
+        if not self.workers[i].give(unit, self.jobs):  # it died while idle: its unit never started
+            self.replace(i)
+            if not self.workers[i].give(unit, self.jobs):
+                raise RuntimeError(f"a new benchmark worker process died at once ({_death(self.workers[i].exit_code())})")
+
+    def report(self, k: int, result: dict) -> None:
+        self.done(k, {**result, "retried": self.reasons[k]} if k in self.reasons else result)
+
+    def run(self) -> None:
+        while self.queue or any(w.unit is not None for w in self.workers):
+            for i, w in enumerate(self.workers):
+                if w.unit is None and self.queue:
+                    self.assign(i, self.queue.popleft())
+            busy = [w for w in self.workers if w.unit is not None]
+            wait_s = None if self.timeout is None else max(0.0, min(w.since for w in busy) + self.timeout - time.monotonic())
+            ready = set(multiprocessing.connection.wait([w.conn for w in busy] + [w.process.sentinel for w in busy],
+                                                        timeout=wait_s))  # fmt: skip
+            for i, w in enumerate(self.workers):
+                if w.unit is not None and (w.conn in ready or w.process.sentinel in ready):
+                    self.collect(i)
+                elif w.unit is not None and self.timeout is not None and time.monotonic() - w.since >= self.timeout:
+                    self.time_out(i)
+
+    def collect(self, i: int) -> None:
+        """Report what worker ``i`` finished; if its process died meanwhile, its unfinished
+        episodes run again (a unit's each alone; one episode in the fresh worker at once), at
+        most :data:`RETRIES` times, then fail with how the process ended."""
+        w = self.workers[i]
+        for k, result in w.drain():
+            self.report(k, result)
+        if w.unit is None or (not w.broken and w.process.is_alive()):
+            return
+        unit, pending, why = w.unit, w.pending, _death(w.exit_code())
+        self.replace(i)
+        again = []
+        for k in pending:
+            self.reasons.setdefault(k, []).append(why)
+            if len(self.reasons[k]) <= RETRIES:
+                again.append(k)
+            else:
+                self.done(k, _lost(self.jobs[k], self.reasons[k]))
+        if len(unit) == 1 and again:
+            self.assign(i, again)  # again, in the fresh worker
+        else:
+            self.queue.extendleft([k] for k in reversed(again))
+
+    def time_out(self, i: int) -> None:
+        """Worker ``i``'s unit ran past the timeout: one episode fails (a hang would only
+        repeat); a unit of several runs its unfinished episodes again, each alone."""
+        w = self.workers[i]
+        for k, result in w.drain():
+            self.report(k, result)
+        if w.unit is None:
+            return
+        unit, pending = w.unit, w.pending
+        self.replace(i)
+        if len(unit) > 1:
+            self.queue.extendleft([k] for k in reversed(pending))
+            return
+        for k in pending:
+            self.done(k, _lost(self.jobs[k], [f"timed out: still running after {self.timeout:g} s (episode timeout)"],
+                               {"timed_out": True}))  # fmt: skip
+
+
 def _run_in_processes(
     jobs: list[Job],
-    todo: list[int],
+    units: list[list[int]],
     workers: int,
     policy_resolver: PolicyResolver | None,
     done: Callable[[int, dict], None],
     timeout: float | None = None,
 ) -> None:
-    """Run ``todo`` on ``workers`` spawned processes. A process that dies is replaced; the job
-    it was running runs again in the replacement (:data:`RETRIES` times), then fails. A job
-    running longer than ``timeout`` seconds fails at once and its process is replaced."""
-    ctx = multiprocessing.get_context("spawn")
-    queue = deque(todo)
-    reasons: dict[int, list[str]] = {}
-    pool: list[_Worker] = []
+    """Run ``units`` on ``workers`` spawned processes. A process that dies is replaced; the
+    episodes it had not finished run again (:data:`RETRIES` times), then fail. A unit running
+    longer than ``timeout`` seconds is stopped: one episode fails at once, a unit of several runs
+    its unfinished episodes again, each alone."""
+    pool = None
     graceful = False
     try:
-        pool = [_Worker(ctx, policy_resolver) for _ in range(min(workers, len(queue)))]
-
-        def assign(i: int, k: int) -> None:
-            if not pool[i].give(k, jobs[k]):  # it died while idle: its job never started
-                pool[i].stop(graceful=False)
-                pool[i] = _Worker(ctx, policy_resolver)
-                if not pool[i].give(k, jobs[k]):
-                    raise RuntimeError(f"a new benchmark worker process died at once ({_death(pool[i].exit_code())})")
-
-        while queue or any(w.job is not None for w in pool):
-            for i, w in enumerate(pool):
-                if w.job is None and queue:
-                    assign(i, queue.popleft())
-            busy = [w for w in pool if w.job is not None]
-            wait_s = None if timeout is None else max(0.0, min(w.since for w in busy) + timeout - time.monotonic())
-            ready = set(multiprocessing.connection.wait([w.conn for w in busy] + [w.process.sentinel for w in busy],
-                                                        timeout=wait_s))  # fmt: skip
-            for i, w in enumerate(pool):
-                if w.job is not None and timeout is not None and w.conn not in ready and w.process.sentinel not in ready \
-                        and time.monotonic() - w.since >= timeout:  # fmt: skip
-                    k = w.job
-                    w.stop(graceful=False)
-                    pool[i] = _Worker(ctx, policy_resolver)
-                    done(k, _lost(jobs[k], [f"timed out: still running after {timeout:g} s (episode timeout)"],
-                                  {"timed_out": True}))  # fmt: skip
-            for i, w in enumerate(pool):
-                if w.job is None or (w.conn not in ready and w.process.sentinel not in ready):
-                    continue
-                message = w.receive()
-                if message is not None:
-                    k, result = message
-                    w.job = None
-                    done(k, {**result, "retried": reasons[k]} if k in reasons else result)
-                    continue
-                k = w.job
-                reasons.setdefault(k, []).append(_death(w.exit_code()))
-                w.stop(graceful=False)
-                pool[i] = _Worker(ctx, policy_resolver)
-                if len(reasons[k]) <= RETRIES:
-                    assign(i, k)  # again, in the fresh worker
-                else:
-                    done(k, _lost(jobs[k], reasons[k]))
+        pool = _Pool(jobs, units, workers, policy_resolver, done, timeout)
+        pool.run()
         graceful = True
     finally:
-        for w in pool:
+        for w in pool.workers if pool is not None else []:
             w.stop(graceful)
 
 
 def _run_on_ray(
     jobs: list[Job],
-    todo: list[int],
+    units: list[list[int]],
     ray_address: str,
     workers: int,
     policy_resolver: PolicyResolver | None,
     done: Callable[[int, dict], None],
 ) -> None:
-    """Run ``todo`` as Ray tasks. Ray runs a task whose worker died again (``max_retries``); a
-    task that still fails becomes a failed episode with Ray's reason."""
+    """Run ``units`` as Ray tasks. Ray runs a one-episode task whose worker died again
+    (``max_retries``); one that still fails becomes a failed episode with Ray's reason. A unit of
+    several that fails keeps the episodes whose logs it wrote and runs the others as tasks of one."""
     from smarts.ray_session import ray_session
 
     with ray_session(ray_address, num_cpus=max(2, workers)) as ray:
-        remote = ray.remote(max_retries=RETRIES)(run_episode_guarded)
-        pending = {remote.remote(jobs[k], policy_resolver): k for k in todo}
+        single = ray.remote(max_retries=RETRIES)(run_unit_collected)
+        several = ray.remote(max_retries=0)(run_unit_collected)
+        pending: dict = {}
+        reasons: dict[int, list[str]] = {}
+
+        def submit(unit: list[int]) -> None:
+            pending[(single if len(unit) == 1 else several).remote([jobs[k] for k in unit], policy_resolver)] = unit
+
+        for unit in units:
+            submit(unit)
         try:
             while pending:
                 ready, _ = ray.wait(list(pending), num_returns=1)
                 for ref in ready:
-                    k = pending.pop(ref)
+                    unit = pending.pop(ref)
                     try:
-                        result = ray.get(ref)
+                        results = ray.get(ref)
                     except ray.exceptions.RayError as err:  # its worker died (Ray's retries used up) or Ray failed
                         text = str(err).strip().splitlines()
                         reason = f"Ray task failed ({type(err).__name__}: {text[0] if text else 'no message'})"
-                        result = _lost(jobs[k], [reason])
-                        result["attempts"] = RETRIES + 1
-                    done(k, result)
+                        results = _ray_lost(jobs, unit, reason, reasons, submit)
+                    for k, result in zip(unit, results):
+                        if result is not None:
+                            done(k, {**result, "retried": reasons[k]} if k in reasons and "attempts" not in result else result)
         except KeyboardInterrupt:
             for ref in pending:
                 with contextlib.suppress(Exception):
                     ray.cancel(ref, force=True)
             raise
+
+
+def _ray_lost(jobs: list[Job], unit: list[int], reason: str, reasons: dict[int, list[str]],
+              submit: Callable[[list[int]], None]) -> list[dict | None]:  # fmt: skip
+    """The results of a Ray task that failed: a one-episode task's episode fails; a unit of
+    several keeps the episodes whose logs it wrote and submits the others alone (None here)."""
+    if len(unit) == 1:
+        return [{**_lost(jobs[unit[0]], [reason]), "attempts": RETRIES + 1 + len(reasons.get(unit[0], []))}]
+    out: list[dict | None] = []
+    for k in unit:
+        out.append(finished_episode(jobs[k]))  # written before the task failed
+        if out[-1] is None:
+            reasons[k] = [reason]
+            submit([k])
+    return out
+
+
+def run_unit_collected(jobs: list[Job], policy_resolver: PolicyResolver | None = None) -> list[dict]:
+    """:func:`run_unit`'s summaries in job order (a Ray task's result)."""
+    results: list[dict | None] = [None] * len(jobs)
+
+    def report(i: int, result: dict) -> None:
+        results[i] = result
+
+    run_unit(jobs, policy_resolver, report)
+    return results  # type: ignore[return-value]
 
 
 def run_episode_guarded(job: Job, policy_resolver: PolicyResolver | None = None) -> dict:
@@ -904,3 +1008,145 @@ def run_episode_guarded(job: Job, policy_resolver: PolicyResolver | None = None)
             pass
         return {"agent": job.agent, "scenario": scenario, "episode": job.episode, "seed": job.seed,
                 "failure": f"{type(err).__name__}: {err}", "log": None, "traceback": traceback.format_exc()}  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------- batched units
+MAX_BATCH = 64
+"""Most episodes in one unit (one simulation): past a few dozen, a bigger batch gains little per
+step while it waits longer for its longest episode."""
+
+
+def plan_units(jobs: list[Job], todo: list[int], workers: int = 1, policy_resolver: PolicyResolver | None = None) -> list[list[int]]:
+    """``todo`` (job indices) as units: the episodes of one agent (and step length) that can share
+    a simulation, in job order, at most :data:`MAX_BATCH` each, split further until there are
+    ``workers`` units to run at once; every other episode a unit of its own."""
+    from smarts.benchmark.batched import batching_mode, solo_reason
+
+    groups: dict[tuple, list[int]] = {}
+    units: list[list[int]] = []
+    for (agent, source), ks in _by_agent(jobs, todo).items():
+        try:
+            policy = load_policy(agent, policy_resolver=policy_resolver)
+            setup = policy_setup(policy, agent)
+            suite = load_suite(source)
+        except Exception:  # noqa: BLE001 - each episode reports it
+            units += [[k] for k in ks]
+            continue
+        if batching_mode(policy) is None:
+            units += [[k] for k in ks]
+            continue
+        for k in ks:
+            spec = scenario_for(suite.scenarios[jobs[k].scenario_index].spec, setup)
+            if solo_reason(spec, setup.interface) is None:
+                groups.setdefault((agent, source, spec.step_length), []).append(k)
+            else:
+                units.append([k])
+    batches = [ks[i : i + MAX_BATCH] for ks in groups.values() for i in range(0, len(ks), MAX_BATCH)]
+    while batches and len(units) + len(batches) < workers and max(map(len, batches)) > 1:
+        big = max(batches, key=len)
+        batches.remove(big)
+        batches += [big[: len(big) // 2], big[len(big) // 2 :]]
+    return sorted(batches + units, key=lambda unit: unit[0])
+
+
+def _by_agent(jobs: list[Job], todo: list[int]) -> dict[tuple[str, str], list[int]]:
+    out: dict[tuple[str, str], list[int]] = {}
+    for k in todo:
+        out.setdefault((jobs[k].agent, jobs[k].suite_source), []).append(k)
+    return out
+
+
+def run_unit(jobs: list[Job], policy_resolver: PolicyResolver | None, report: Callable[[int, dict], None]) -> None:
+    """Run a unit of jobs (:func:`plan_units`), calling ``report(i, summary)`` as ``jobs[i]``
+    finishes (its log is on disk by then): one job alone, several as one simulation, where those
+    that leave the batch run alone after it."""
+    with _one_torch_thread():
+        if len(jobs) == 1:
+            report(0, run_episode_guarded(jobs[0], policy_resolver))
+            return
+        _run_several(jobs, policy_resolver, report)
+
+
+@contextlib.contextmanager
+def _one_torch_thread() -> Iterator[None]:
+    """Policies' networks on one thread while episodes run: their batches are a few rows, where
+    more threads only wait for each other (on a busy machine a call took 30 times as long), and
+    the benchmark's parallelism is its worker processes. (The results are the same: measured
+    bit for bit on the whole adaptive suite.)"""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+def _run_several(jobs: list[Job], policy_resolver: PolicyResolver | None, report: Callable[[int, dict], None]) -> None:
+    todo = []
+    for i, job in enumerate(jobs):
+        kept = finished_episode(job) if job.reuse else None
+        if kept is not None:
+            report(i, kept)
+        else:
+            todo.append(i)
+    for i in _run_batched(jobs, todo, policy_resolver, report) if todo else []:
+        report(i, run_episode_guarded(jobs[i], policy_resolver))
+
+
+def _run_batched(jobs: list[Job], todo: list[int], policy_resolver: PolicyResolver | None,
+                 report: Callable[[int, dict], None]) -> list[int]:  # fmt: skip
+    """Run ``jobs[todo]`` (one agent) in simulations of many episodes (one per step length);
+    returns those that must run alone."""
+    from smarts.benchmark.batched import BatchEpisode, batching_mode, run_batch, solo_reason
+
+    first = jobs[todo[0]]
+    try:
+        suite = load_suite(first.suite_source)
+        policy = load_policy(first.agent, first.seed, policy_resolver)
+        setup = policy_setup(policy, first.agent)
+        check_hosted(first.agent, setup, suite)
+        mode = batching_mode(policy)
+    except Exception:  # noqa: BLE001 - alone, each episode records why
+        return todo
+    if mode is None:
+        return todo
+    alone, by_step = [], {}
+    for i in todo:
+        job = jobs[i]
+        entry = suite.scenarios[job.scenario_index]
+        spec = scenario_for(entry.spec, setup)
+        if solo_reason(spec, setup.interface) is not None:
+            alone.append(i)
+            continue
+        try:
+            own = load_policy(job.agent, job.seed, policy_resolver) if mode == "instances" else None
+        except Exception:  # noqa: BLE001
+            alone.append(i)
+            continue
+        meta = dict(scenario=entry.name, task=suite.task, episode=job.episode, seed=job.seed,
+                    time_limit=entry.time_limit, follow=entry.follow, info={**_episode_info(job, suite), **setup.to_dict()})  # fmt: skip
+        by_step.setdefault(spec.step_length, []).append((i, BatchEpisode(spec, job.seed, meta, own)))
+    for members in by_step.values():
+        index = [i for i, _ in members]
+
+        def finished(b: int, log, index=index) -> None:
+            report(index[b], _write_batched(jobs[index[b]], log))
+
+        alone += [index[b] for b in run_batch([e for _, e in members], policy, mode, setup.interface,
+                                              setup.lane_relative, finished)]  # fmt: skip
+    return sorted(alone)
+
+
+def _write_batched(job: Job, log) -> dict:
+    """Write a batched episode's log (as :func:`run_episode` writes its own) and return its summary."""
+    from smarts.benchmark.metrics import write_episode
+
+    try:
+        Path(job.log_path).parent.mkdir(parents=True, exist_ok=True)
+        write_episode(log, Path(job.log_path))
+    except Exception as err:  # noqa: BLE001 - as run_episode_guarded reports a crash
+        return {"agent": job.agent, "scenario": log.scenario, "episode": job.episode, "seed": job.seed,
+                "failure": f"{type(err).__name__}: {err}", "log": None, "traceback": traceback.format_exc()}  # fmt: skip
+    return _summary(job, log.scenario, log.failure, log.info)

@@ -39,7 +39,11 @@ class Policy(Protocol):
     settings the policy was trained with, as the simulator's objects or their plain-data form,
     validated where the env is built), ``dt`` (set to the scenario's step), ``seed(int)``,
     ``source`` (the checkpoint file it was loaded from: errors name it, and the benchmark's resume
-    keys its episodes by that file's contents)."""
+    keys its episodes by that file's contents), ``batching`` (how the benchmark may share it
+    between episodes stepped together: ``rows``, ``episodes`` or ``instances``, see
+    ``smarts.benchmark.batched.BATCHING``; absent: each of its episodes runs alone) and, with
+    ``episodes``, ``act_episodes(obs, counts)`` (``act`` of several episodes' stacked rows in one
+    call, equal bit for bit to one ``act`` per episode)."""
 
     action_space: str
 

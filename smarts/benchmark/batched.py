@@ -1,0 +1,329 @@
+"""Benchmark episodes of one policy stepped together in one simulation of the batched core.
+
+The per-episode runner (``smarts.benchmark.runner.run_episode``) builds an env per episode and
+steps it alone. Here the episodes of one agent (any scenarios of a suite, each with its own seed)
+are the B episodes of one ``smarts.env.driving.Driving``: one simulation step, one observation pass
+and, for a policy that allows it, one ``act`` call per step for all of them. Each episode is
+recorded by its own ``EpisodeRecorder`` on ``sim.episode_sim(b)`` and follows the per-episode
+loop's rules exactly (it acts while it has agents and time; a following task ends when a lead
+leaves the map and otherwise runs on to its time limit after its agents are gone), so, as the core
+steps an episode to the same bits whatever it runs beside, its log equals the per-episode one.
+
+Only the normal flow runs here. An episode that meets anything else (its policy raises or returns
+a malformed action, its observation space does not suit the policy, its recorder fails) leaves the
+batch at once, untouched, and is returned to the caller to run alone, where the per-episode loop
+records exactly what it always did. Episodes that cannot share a simulation at all
+(:func:`solo_reason`: SUMO traffic, social agents whose policies cannot be shared) are never
+given here.
+
+How a policy may be shared is its own declaration, ``policy.batching`` (:data:`BATCHING`); a
+policy without one runs every episode alone, as before.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from smarts.benchmark.metrics.log import EpisodeLog
+from smarts.benchmark.recorder import EpisodeRecorder, EpisodeRecorders
+from smarts.core.errors import ActionError
+from smarts.core.policies import Policy, resolve_policy
+from smarts.dynamics.lane_relative import LaneRelativeParams
+from smarts.scenario.spec import ScenarioSpec
+from smarts.sensors.interface import AgentInterface
+
+BATCHING = {
+    "rows": "act is row by row and keeps no state: one instance, one call per step for the rows of "
+    "every episode stacked (a row's action does not depend on the other rows, bit for bit)",
+    "episodes": "keeps no state, but a call's results may depend on which rows it holds (a network "
+    "whose matrix products round differently by batch size): one instance, one call per episode",
+    "instances": "keeps state across calls (or draws random numbers): an instance per episode, "
+    "loaded and seeded as for a lone episode, one call per episode",
+}
+"""``policy.batching`` values: how the benchmark may share a policy between the episodes of a batch."""
+
+
+def batching_mode(policy: Any) -> str | None:
+    """The policy's declared ``batching`` (:data:`BATCHING`), or None (run its episodes alone)."""
+    mode = getattr(policy, "batching", None)
+    return mode if mode in BATCHING else None
+
+
+_SOCIAL_MODES: dict[str, str | None] = {}
+
+
+def _social_mode(locator: str) -> str | None:
+    """A social agent's policy's batching (resolved as the env resolves it: the installed default)."""
+    if locator not in _SOCIAL_MODES:
+        try:
+            _SOCIAL_MODES[locator] = batching_mode(resolve_policy(locator))
+        except Exception:  # noqa: BLE001 - the lone episode reports it
+            _SOCIAL_MODES[locator] = None
+    return _SOCIAL_MODES[locator]
+
+
+def solo_reason(spec: ScenarioSpec, observation: AgentInterface | None) -> str | None:
+    """Why an episode of ``spec`` (already in the policy's action space) cannot share a simulation
+    with others, or None when it can."""
+    if spec.traffic is not None and spec.traffic.engine == "sumo":
+        return "SUMO traffic (libsumo holds one simulation per process)"
+    social = [a.policy for a in spec.agents if a.is_social]
+    if any(_social_mode(locator) != "rows" for locator in social):
+        return "a social agent's policy cannot be shared between episodes"
+    if observation is None:
+        interfaces = {repr(a.interface) for a in spec.agents if not a.is_social}
+        if len(interfaces) > 1:
+            return "its learning agents observe through different interfaces"
+    return None
+
+
+@dataclass
+class BatchEpisode:
+    """One episode of a batch: what the per-episode runner would build and record for it."""
+
+    spec: ScenarioSpec
+    """The suite scenario with the policy's action space and controller (``scenario_for``)."""
+    seed: int
+    recorder: dict[str, Any]
+    """``EpisodeRecorder`` keywords: scenario, task, episode, seed, time_limit, follow, info."""
+    policy: Policy | None = None
+    """Its own policy instance (``instances`` batching); None: the batch's shared one."""
+    leads: frozenset[str] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.leads = frozenset((self.recorder.get("follow") or {}).values())
+
+
+ACT, COAST, DONE = 0, 1, 2
+"""Phases of an episode in a batch: its agents act; its agents are gone and it runs on for the
+lead (following tasks); over."""
+
+
+class _Batch:
+    """The loop over one simulation of B benchmark episodes (see the module's docstring)."""
+
+    def __init__(self, episodes: Sequence[BatchEpisode], policy: Policy, mode: str,
+                 observation: AgentInterface | None, lane_relative: LaneRelativeParams | None):  # fmt: skip
+        from smarts.env.driving import Driving
+
+        self.episodes, self.policy, self.mode = list(episodes), policy, mode
+        self.driving = Driving([e.spec for e in episodes], observation=observation, lane_relative=lane_relative)
+        self.sim = self.driving.sim
+        sim, learner = self.sim, self.driving.learner
+        self.learners = [sim.views[b].agents[learner[sim.views[b].agents]] for b in range(len(episodes))]
+        self.phase = np.full(len(episodes), ACT, dtype=np.int8)
+        self.alone: list[int] = []
+        self.last = {a: np.zeros(self.driving.action_space(a).shape, dtype=np.float32)
+                     for a in np.flatnonzero(learner).tolist()}  # fmt: skip
+        """Each learner's last action: what agents of episodes that left the batch keep sending."""
+        self.recorders: list[EpisodeRecorder | None] = [None] * len(episodes)
+        self.views = [sim.episode_sim(b) for b in range(len(episodes))]
+        self.batches: list = []
+        self.obs_group = np.full(len(sim.agent_ids), -1, dtype=np.int64)
+        self.obs_row = np.full(len(sim.agent_ids), -1, dtype=np.int64)
+
+    def eject(self, b: int) -> None:
+        """Episode ``b`` leaves the batch, to run alone."""
+        if self.phase[b] != DONE:
+            self.phase[b] = DONE
+            self.alone.append(b)
+
+    def start(self) -> None:
+        """Reset every episode with its seed, start its recorder and check the policy's space."""
+        sim = self.sim
+        _, batches, _ = self.driving.reset(np.arange(len(self.episodes)), [e.seed for e in self.episodes])
+        self.keep(_learner_batches(batches, self.driving.learner))
+        ids = sim.local_agent_ids
+        for b, episode in enumerate(self.episodes):
+            agents = [ids[a] for a in self.learners[b].tolist()]
+            try:
+                self.recorders[b] = EpisodeRecorder(self.views[b], agents, **episode.recorder)
+                policy = episode.policy or self.policy
+                if hasattr(policy, "check_space"):
+                    policy.check_space(self.driving.observation_space(int(self.learners[b][0])))
+            except Exception:  # noqa: BLE001 - alone, it is recorded as it always was
+                self.eject(b)
+        kept = [b for b in range(len(self.episodes)) if self.phase[b] != DONE]
+        self.place = {b: i for i, b in enumerate(kept)}
+        self.group = EpisodeRecorders(sim, [self.recorders[b] for b in kept], kept) if kept else None
+
+    def run(self, finished: Callable[[int, EpisodeLog], None]) -> None:
+        """Step until every episode is over, handing each finished log to ``finished(b, log)``."""
+        while (self.phase != DONE).any():
+            actions = self.actions()
+            if not self.step(actions):
+                return
+            self.group.record([self.place[b] for b in np.flatnonzero(self.phase != DONE).tolist()])
+            self.sim.remove_done_agents()
+            for b in np.flatnonzero(self.phase != DONE).tolist():
+                self.phase[b] = self.next_phase(b)
+                if self.phase[b] == DONE:
+                    finished(b, self.recorders[b].finish())
+
+    def next_phase(self, b: int) -> int:
+        """The per-episode loop's rule for what episode ``b`` does after a step."""
+        sim, episode = self.sim, self.episodes[b]
+        in_time = float(sim.episode_time[b]) < episode.recorder["time_limit"] - 1e-9
+        row_of = self.views[b].table.row_of
+        leads_here = all(lead in row_of for lead in episode.leads)
+        if episode.leads and not leads_here:
+            return DONE  # the lead left the map: the following task is over
+        live = sim.agent_active[self.learners[b]].any()
+        if self.phase[b] == ACT and live and in_time:
+            return ACT
+        if not live and episode.leads and in_time:
+            return COAST  # its agents are gone; it runs on to where the lead gets to
+        return DONE
+
+    def acting(self) -> list[int]:
+        return np.flatnonzero(self.phase == ACT).tolist()
+
+    def actions(self) -> dict[str, np.ndarray]:
+        """Every active learner's action by agent id: the policy's for the acting episodes, the
+        last one for the agents of episodes that are over."""
+        sim = self.sim
+        chosen: dict[int, np.ndarray] = {}
+        if self.mode == "rows" or (self.mode == "episodes" and hasattr(self.policy, "act_episodes")):
+            self._act_stacked(chosen)
+        else:
+            for b in self.acting():
+                self._act_one(b, chosen)
+        ids = sim.agent_ids
+        out = {}
+        for a in sim.active_agents[self.driving.learner[sim.active_agents]].tolist():
+            if a in chosen:
+                self.last[a] = chosen[a]
+            out[ids[a]] = self.last[a]
+        return out
+
+    def _rows(self, agents: np.ndarray) -> dict[str, np.ndarray]:
+        """The observations of ``agents`` (ascending, one observation group), stacked as the
+        per-episode loop stacks them."""
+        group, at = self.obs_group[agents[0]], self.obs_row[agents]
+        if (self.obs_group[agents] != group).any() or (at < 0).any():
+            raise ValueError("agents without an observation, or of different observation groups")
+        return {k: v[at] for k, v in self.batches[group][1].items()}
+
+    def keep(self, batches: list) -> None:
+        """The learners' observations after a step (or the reset), and where each agent's is."""
+        self.batches = list(batches)
+        self.obs_group[:] = -1
+        self.obs_row[:] = -1
+        for g, (members, _) in enumerate(self.batches):
+            self.obs_group[members] = g
+            self.obs_row[members] = np.arange(len(members))
+
+    def _live(self, b: int) -> np.ndarray:
+        agents = self.learners[b]
+        return agents[self.sim.agent_active[agents]]
+
+    def _act_one(self, b: int, chosen: dict[int, np.ndarray]) -> None:
+        """One call of episode ``b``'s policy for its live agents; anything odd sends it alone."""
+        agents = self._live(b)
+        policy = self.episodes[b].policy or self.policy
+        try:
+            actions = np.asarray(policy.act(self._rows(agents)))
+            if actions.ndim != 2 or len(actions) != len(agents):
+                raise ValueError("malformed actions")
+        except Exception:  # noqa: BLE001 - alone, it fails the way it always did
+            self.eject(b)
+            return
+        chosen.update(zip(agents.tolist(), actions))
+
+    def _act_stacked(self, chosen: dict[int, np.ndarray]) -> None:
+        """One call for the live agents of every acting episode, per observation group (``act``
+        of ``rows`` batching, or ``act_episodes`` of a policy of ``episodes`` batching that has
+        it); a call that fails is made again episode by episode, so only the episodes at fault
+        leave."""
+        acting = self.acting()
+        if not acting:
+            return
+        live = {b: self._live(b) for b in acting}
+        by_group: dict[int, list[int]] = {}
+        for b in acting:
+            by_group.setdefault(int(self.obs_group[live[b][0]]), []).append(b)
+        for members in by_group.values():
+            agents = np.concatenate([live[b] for b in members])
+            try:
+                if self.mode == "rows":
+                    actions = np.asarray(self.policy.act(self._rows(agents)))
+                else:  # one call, each episode's rows apart where it matters (act_episodes)
+                    actions = np.asarray(self.policy.act_episodes(self._rows(agents), [len(live[b]) for b in members]))
+                if actions.ndim != 2 or len(actions) != len(agents):
+                    raise ValueError("malformed actions")
+            except Exception:  # noqa: BLE001
+                for b in members:
+                    self._act_one(b, chosen)
+                continue
+            chosen.update(zip(agents.tolist(), actions))
+
+    def step(self, actions: dict[str, np.ndarray]) -> bool:
+        """One step of the simulation; an action the simulation refuses (nothing moved) sends its
+        episode alone and the step is made again without it. False when the batch cannot go on
+        (every episode still in it then runs alone)."""
+        while (self.phase == ACT).any() or (self.phase == COAST).any():
+            try:
+                self.keep(self.driving.step(actions).batches)
+                return True
+            except ActionError as err:
+                bad = self._episodes_of(err.agent_ids) or set(self.acting())
+                if not bad:
+                    break
+                for b in bad:
+                    self.eject(b)
+                    for a in self._live(b).tolist():
+                        actions[self.sim.agent_ids[a]] = self.last[a]
+            except Exception:  # noqa: BLE001 - the simulation itself failed
+                break
+        for b in np.flatnonzero(self.phase != DONE).tolist():
+            self.eject(b)
+        return False
+
+    def _episodes_of(self, agent_ids: Sequence[str]) -> set[int]:
+        """The acting episodes of agents named in an ``ActionError`` (empty when one is unknown)."""
+        index = self.sim.agent_index
+        out = set()
+        for name in agent_ids:
+            a = index.get(name)
+            if a is None or self.phase[int(self.sim.agent_episode[a])] != ACT:
+                return set()
+            out.add(int(self.sim.agent_episode[a]))
+        return out
+
+
+def _learner_batches(batches: list, learner: np.ndarray) -> list:
+    from smarts.env.driving import learner_batches
+
+    return learner_batches(batches, learner)
+
+
+def run_batch(
+    episodes: Sequence[BatchEpisode],
+    policy: Policy,
+    mode: str,
+    observation: AgentInterface | None,
+    lane_relative: LaneRelativeParams | None,
+    finished: Callable[[int, EpisodeLog], None],
+) -> list[int]:
+    """Step ``episodes`` (each :func:`solo_reason`-free) as one simulation, calling
+    ``finished(i, log)`` as episode ``i`` ends; returns the episodes to run alone instead (they
+    left the batch untouched, or the batch could not be built)."""
+    if mode not in BATCHING:
+        raise ValueError(f"batching {mode!r}: expected one of {', '.join(BATCHING)}")
+    try:
+        batch = _Batch(episodes, policy, mode, observation, lane_relative)
+    except Exception:  # noqa: BLE001 - alone, each episode reports what is wrong with it
+        return list(range(len(episodes)))
+    try:
+        batch.start()
+        batch.run(finished)
+    except Exception:  # noqa: BLE001
+        for b in np.flatnonzero(batch.phase != DONE).tolist():
+            batch.eject(b)
+    finally:
+        batch.driving.close()
+    return sorted(batch.alone)
