@@ -13,6 +13,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+import smarts.maps.drivable as _drivable
+from smarts.core.records import cache_depends_on
 from smarts.core.vehicle_table import COLUMN
 from smarts.maps.drivable import on_road_at
 
@@ -199,12 +201,14 @@ def event_tables(tables):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_drivable)
 def agent_events(tables, alive, agents, rows, b, time):  # pragma: no cover - compiled
     """``episode_events`` from a frozen ``SimTables`` (the entry from Python)."""
     episode_events(event_tables(tables), alive, agents, rows, b, time)
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_drivable)
 def events_by_episode(
     tables, alive, agents, rows, episodes, alive_lo, alive_hi, agent_lo, agent_hi, episode_time,
 ):  # pragma: no cover - compiled
@@ -225,6 +229,7 @@ def events_by_episode(
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_drivable)
 def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - compiled
     """Every event of ``Event`` for the agents ``agents`` (rows ``rows``) of episode ``b`` at its
     clock ``time``, from and into ``et`` (``EventTables``): its ``agent_events`` and

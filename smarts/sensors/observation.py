@@ -50,10 +50,11 @@ import gymnasium as gym
 import numba
 import numpy as np
 
+import smarts.core.geometry as _geometry
 from smarts.core.events import NUM_EVENTS
 from smarts.core.following import ahead_state, lead_state
 from smarts.core.geometry import wrap_scalar
-from smarts.core.records import declare, freeze_fields
+from smarts.core.records import cache_depends_on, declare, freeze_fields
 from smarts.core.sim_records import sim_tables
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import COLUMN, Role, VehicleType
@@ -307,6 +308,7 @@ def lead_features(sim: Simulation, agents: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_geometry)
 def _observe(tables, setup, alive, alive_lo, alive_hi, row_base, agents, rows, visible, out):  # pragma: no cover - compiled
     """The basic observation of each agent ``agents[i]`` (row ``rows[i]``) among the live rows of
     its own episode (``alive[alive_lo[i]:alive_hi[i]]``; ``visible`` is indexed by the row within

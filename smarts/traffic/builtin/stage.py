@@ -23,7 +23,8 @@ import numba
 import numpy as np
 
 import smarts.traffic.builtin.kernels as K
-from smarts.core.records import declare, freeze_fields, view
+import smarts.traffic.builtin.junctions as _junctions
+from smarts.core.records import cache_depends_on, declare, freeze_fields, view
 from smarts.core.simulation import Simulation
 
 
@@ -196,6 +197,7 @@ class _RouteSets:
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(K, _junctions)
 def _step_episodes(
     frozen_state, frozen_lanes, frozen_sets, data, via_colour, episode_step, dt, foreign, f_lane, f_s, f_t, f_dh,
 ):  # pragma: no cover - compiled
