@@ -162,7 +162,12 @@ class _Batch:
             for b in np.flatnonzero(self.phase != DONE).tolist():
                 self.phase[b] = self.next_phase(b)
                 if self.phase[b] == DONE:
-                    finished(b, self.recorders[b].finish())
+                    try:
+                        log = self.recorders[b].finish()
+                    except Exception:  # noqa: BLE001 - alone, it ends as it always did
+                        self.alone.append(b)
+                        continue
+                    finished(b, log)
 
     def next_phase(self, b: int) -> int:
         """The per-episode loop's rule for what episode ``b`` does after a step."""

@@ -1084,15 +1084,27 @@ def _one_torch_thread() -> Iterator[None]:
 
 
 def _run_several(jobs: list[Job], policy_resolver: PolicyResolver | None, report: Callable[[int, dict], None]) -> None:
-    todo = []
+    """:func:`run_unit` of several jobs: reused logs, then one simulation (per step length) of
+    the rest, then alone whatever left it (or all that did not finish, should the batch itself
+    fail)."""
+    todo, reported = [], set()
+
+    def mark(i: int, result: dict) -> None:
+        reported.add(i)
+        report(i, result)
+
     for i, job in enumerate(jobs):
         kept = finished_episode(job) if job.reuse else None
         if kept is not None:
-            report(i, kept)
+            mark(i, kept)
         else:
             todo.append(i)
-    for i in _run_batched(jobs, todo, policy_resolver, report) if todo else []:
-        report(i, run_episode_guarded(jobs[i], policy_resolver))
+    try:
+        alone = _run_batched(jobs, todo, policy_resolver, mark) if todo else []
+    except Exception:  # noqa: BLE001 - alone, each episode records what happens to it
+        alone = [i for i in todo if i not in reported]
+    for i in alone:
+        mark(i, run_episode_guarded(jobs[i], policy_resolver))
 
 
 def _run_batched(jobs: list[Job], todo: list[int], policy_resolver: PolicyResolver | None,
