@@ -141,7 +141,8 @@ def test_periodic_evaluation_selects_best_by_s_bench_and_logs_it(tmp_path):
     out = tmp_path / "run"
     args = ["ppo", "--task", "drive", "--scenarios", "collaborative:c01_4way_1lane_left_free", "--total-steps", "256",
             "--frames-per-batch", "128", "--minibatch-size", "64", "--epochs", "1", "--envs", "1", "--eval-every", "128",
-            "--eval-episodes", "1", "--eval-suite", str(suite), "--out-dir", str(out), "--quiet"]  # fmt: skip
+            "--eval-episodes", "1", "--eval-suite", str(suite), "--eval-workers", "1", "--out-dir", str(out),
+            "--quiet"]  # fmt: skip
     assert main(args) == 0
     acc = EventAccumulator(str(out / "tensorboard"), size_guidance={"scalars": 0, "images": 0})
     acc.Reload()

@@ -2,11 +2,14 @@
 its copies are stepped in this process or spread over worker processes."""
 
 import json
+from pathlib import Path
 
 import pytest
 import torch
 
 from train.__main__ import main
+
+TINY = str(Path(__file__).parents[1] / "benchmark" / "tiny_suite.yaml")
 
 
 def _train(tmp_path, capsys, backend: str, workers: int, lib: str = "torchrl") -> tuple[dict, dict]:
@@ -14,7 +17,7 @@ def _train(tmp_path, capsys, backend: str, workers: int, lib: str = "torchrl") -
     out = tmp_path / backend
     args = ["ppo", "--task", "platoon", "--lib", lib, "--backend", backend, "--workers", str(workers), "--total-steps", "1536",
             "--frames-per-batch", "512", "--minibatch-size", "128", "--epochs", "2", "--envs", "4",
-            "--eval-episodes", "1", "--eval-workers", "1",
+            "--eval-episodes", "1", "--eval-workers", "1", "--eval-suite", TINY,
             "--scenarios", "adaptive:a01_straight_free,adaptive:a02_straight_two_followers_low,adaptive:a08_lead_turns_left_at_junction",
             "--out-dir", str(out), "--quiet"]  # fmt: skip
     capsys.readouterr()
