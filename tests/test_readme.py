@@ -70,7 +70,7 @@ CI = "ci"
 COMMANDS: dict[str, tuple[str, str]] = {
     "pip install -e .": (NOT_RUN, "installs the package; these tests run in the installed checkout"),
     'pip install -e ".[test]"': (NOT_RUN, "installs the package with its test extra, as .ci/run does"),
-    "python -m pytest -q": (CI, "the whole suite, this file included; .ci/run runs exactly this"),
+    "python -m pytest -q -n auto": (CI, "the whole suite, this file included; .ci/run runs exactly this"),
     "python -m train ppo --task platoon": (PARSE, "300k training steps, about 7 minutes"),
     "python -m train ppo --task drive": (PARSE, "a full PPO training run"),
     "python -m train ppo --task platoon --action-space continuous --init-from "
@@ -169,7 +169,7 @@ def test_every_block_is_checked():
 def test_ci_runs_the_readme_test_command():
     test_command = next(b.strip() for b, _ in _of("bash") if "pytest" in b)
     assert test_command in (ROOT / ".ci" / "run").read_text()
-    assert [c for c, (how, _) in COMMANDS.items() if how == CI] == ["python -m pytest -q"]
+    assert [c for c, (how, _) in COMMANDS.items() if how == CI] == ["python -m pytest -q -n auto"]
 
 
 def _train_argv(command: str) -> list[str]:
