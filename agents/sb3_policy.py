@@ -19,7 +19,6 @@ from agents.checkpoint import (
     CheckpointSchema,
     Label,
     Weights,
-    Width,
     check_size,
     mlp_size,
     validate_checkpoint,

@@ -8,7 +8,6 @@ import sys
 from smarts import __version__
 from smarts.command_line import Command, HelpFormatter, add_commands
 
-
 COMMANDS = (
     Command("scenario", "list and inspect scenarios", "smarts.scenario.cli:add_scenario_commands"),
     Command("map", "list and build the built-in maps", "smarts.scenario.cli:add_map_commands"),

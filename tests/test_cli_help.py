@@ -15,7 +15,7 @@ HEAVY = ("torch", "torchrl", "stable_baselines3", "tensorboard")
 
 def _modules_after(code: str) -> set[str]:
     """The modules imported by ``code`` run in a fresh interpreter (it prints nothing else)."""
-    script = f"import io, json, sys, contextlib\nwith contextlib.redirect_stdout(io.StringIO()):\n"
+    script = "import io, json, sys, contextlib\nwith contextlib.redirect_stdout(io.StringIO()):\n"
     script += "".join(f"    {line}\n" for line in code.splitlines())
     script += "print(json.dumps(sorted(sys.modules)))"
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)

@@ -7,7 +7,6 @@ import json
 import os
 from pathlib import Path
 
-import pytest
 import ray  # noqa: F401  (the test extra installs it: a missing Ray fails here instead of skipping)
 import torch
 
@@ -26,8 +25,8 @@ def test_benchmark_on_ray_scores_the_same_as_the_process_pool(tmp_path):
     assert main([*base, "--ray-address", "local", "--out", str(tmp_path / "ray")]) == 0
     assert len(list((tmp_path / "ray" / "logs" / "zoo_keep-lane").rglob("*.npz"))) == 2  # one episode per scenario
     assert len(list((tmp_path / "ray" / "logs").rglob("*.npz"))) == 3 * 2  # with the other reference agents
-    pool, ray = _overall(tmp_path / "pool"), _overall(tmp_path / "ray")
-    assert pool and ray == pool
+    pool, on_ray = _overall(tmp_path / "pool"), _overall(tmp_path / "ray")
+    assert pool and on_ray == pool
 
 
 def test_ppo_with_ray_collectors_writes_a_final_checkpoint(tmp_path):
@@ -121,10 +120,10 @@ def _descendants(pid: int) -> set[int]:
 def test_local_ray_listens_on_loopback_only():
     from smarts.ray_session import ray_session
 
-    with ray_session("local", num_cpus=1) as ray:
-        assert [n["NodeManagerAddress"] for n in ray.nodes()] == ["127.0.0.1"]
-        assert ray.get_runtime_context().gcs_address.startswith("127.0.0.1:")
-        assert ray.get(ray.remote(lambda: ray.util.get_node_ip_address()).remote()) == "127.0.0.1"
+    with ray_session("local", num_cpus=1) as session:
+        assert [n["NodeManagerAddress"] for n in session.nodes()] == ["127.0.0.1"]
+        assert session.get_runtime_context().gcs_address.startswith("127.0.0.1:")
+        assert session.get(session.remote(lambda: session.util.get_node_ip_address()).remote()) == "127.0.0.1"
         if Path("/proc/net/tcp").exists():
             addresses = _listening_addresses(_descendants(os.getpid()) | {os.getpid()})
             assert addresses, "found none of Ray's listening sockets"

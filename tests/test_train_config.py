@@ -51,7 +51,7 @@ def test_help_lists_every_field_with_the_task_defaults(capsys):
             main(["ppo", "--task", task, "--help"])
         text = " ".join(capsys.readouterr().out.split())
         assert f"(int; default: {steps} in {task}.yaml)" in text
-        assert f"--out-dir OUT_DIR, --out OUT_DIR" in text and f"'runs/train/{task}' in {task}.yaml" in text
+        assert "--out-dir OUT_DIR, --out OUT_DIR" in text and f"'runs/train/{task}' in {task}.yaml" in text
         assert "(float; default: 0.5)" in text  # max_grad_norm: not in the YAML, the schema's default
         for name in TrainConfig.model_fields:
             assert "--" + name.replace("_", "-") in text or name == "out"
@@ -125,10 +125,9 @@ def test_both_trainers_hand_the_sim_device_to_the_batched_backend():
     """``sim_device`` places the simulation's torch stages (``device`` is the learner's)."""
     import torch
 
+    from smarts.dynamics.agent_provider import AgentProvider
     from train.ppo import make_driving, make_env
     from train.sb3_ppo import make_vec_env
-
-    from smarts.dynamics.agent_provider import AgentProvider
 
     def agent_device(driving):
         return {p.device for group in driving.groups for p in group.sim.providers if isinstance(p, AgentProvider)}

@@ -2,7 +2,6 @@
 default observation and with every sensor and V2V on, and the checkpoint is then benchmarked on
 each of them in the settings it was trained with (short time limits keep the test quick)."""
 
-import json
 from pathlib import Path
 
 import pytest

@@ -1,6 +1,5 @@
 """The zoo: every locator builds a policy that acts on the env's observations."""
 
-import gymnasium
 import numpy as np
 import pytest
 

@@ -148,9 +148,9 @@ def evaluate(net, data: dict[str, torch.Tensor], batch: int = 256) -> dict[str, 
 def train(args: argparse.Namespace) -> dict:
     import torch
     from torch.utils.tensorboard import SummaryWriter
-    from train.run import Bar
 
     from agents.planners.nets import AIDPredictor, save_net
+    from train.run import Bar
 
     apply_run_options(args)
     files = sorted(Path(args.data).glob("*.npz"))

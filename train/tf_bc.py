@@ -31,13 +31,12 @@ from train.heldout import add_run_options, apply_run_options, road_car, situatio
 
 def demonstrations(scenarios, seeds: int, progress: bool = True) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """scenario name -> (features [n, 53], labels [n]) with TF's turn:cruise sampling."""
-    from train.run import Bar
-
     from agents.keep_lane import KeepLanePolicy
     from agents.planners.paths import valid_path
     from agents.planners.tf import INTERFACE, stop_move_features
     from smarts.env import DrivingParallelEnv
     from smarts.sensors.interface import interface_from_dict
+    from train.run import Bar
 
     interface = interface_from_dict(INTERFACE)
     driver = KeepLanePolicy()
@@ -104,11 +103,10 @@ def hindsight(count: int, steps: int, horizon: int, progress: bool = True) -> di
     grouped 10 to a key ``situations_<k>``: (features, labels, hindsight flags). Labels: stop (0)
     for every step from ``horizon`` steps before a collision on (moving on at the rules' speed
     led into it; flagged), else the rules' own decision (stop when they stopped the car)."""
-    from train.run import Bar
-
     from agents.planners.paths import valid_path
     from agents.planners.tf import INTERFACE, TFPlanner, stop_move_features
     from smarts.sensors.interface import interface_from_dict
+    from train.run import Bar
 
     interface = interface_from_dict(INTERFACE)
     rng = np.random.default_rng(2)
@@ -143,9 +141,9 @@ def hindsight(count: int, steps: int, horizon: int, progress: bool = True) -> di
 def train(args: argparse.Namespace) -> dict:
     import torch
     from torch.utils.tensorboard import SummaryWriter
-    from train.run import Bar
 
     from agents.planners.nets import StopMoveNet, save_net
+    from train.run import Bar
 
     apply_run_options(args)
     started = time.time()

@@ -78,9 +78,8 @@ def log_suites(out: Path, suites: list[str], seeds: int, first_seed: int = 0, st
     """Log ``seeds`` episodes of every scenario of the named suites into ``out``; returns the files."""
     import dataclasses
 
-    from train.run import Bar
-
     from smarts.benchmark.suites import load_suite
+    from train.run import Bar
 
     out.mkdir(parents=True, exist_ok=True)
     jobs = []

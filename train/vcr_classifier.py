@@ -99,11 +99,10 @@ def _cap_safe(rasters: list, numbers: list, labels: list, rng: np.random.Generat
 
 def generate(scenarios, seeds: int, progress: bool = True) -> dict[str, dict[str, np.ndarray]]:
     """scenario name -> {"rasters" uint8 [n, 3, 64, 64], "numbers" [n, 24], "labels" [n]}."""
-    from train.run import Bar
-
     from agents.planners.vcr import LEARNED_INTERFACE
     from smarts.env import DrivingParallelEnv
     from smarts.sensors.interface import interface_from_dict
+    from train.run import Bar
 
     interface = interface_from_dict(LEARNED_INTERFACE)
     rng = np.random.default_rng(0)
@@ -147,10 +146,9 @@ def following_situation(rng: np.random.Generator) -> dict:
 def generate_situations(count: int, steps: int, progress: bool = True) -> dict[str, dict[str, np.ndarray]]:
     """``count`` scripted following situations (``following_situation``), each one episode of
     ``steps`` steps, grouped 10 to a key ``situations_<k>`` (the held-out split takes whole groups)."""
-    from train.run import Bar
-
     from agents.planners.vcr import LEARNED_INTERFACE
     from smarts.sensors.interface import interface_from_dict
+    from train.run import Bar
 
     interface = interface_from_dict(LEARNED_INTERFACE)
     rng = np.random.default_rng(1)
@@ -167,9 +165,9 @@ def generate_situations(count: int, steps: int, progress: bool = True) -> dict[s
 def train(args: argparse.Namespace) -> dict:
     import torch
     from torch.utils.tensorboard import SummaryWriter
-    from train.run import Bar
 
     from agents.planners.nets import VCRClassifier, save_net
+    from train.run import Bar
 
     apply_run_options(args)
     started = time.time()

@@ -29,7 +29,7 @@ from agents.obs_columns import GOAL_XY, NEIGHBOUR_XY, Ego, Goal, Neighbour
 from agents.planners.agent_state import AgentState, StatefulPlanner
 from agents.planners.frames import chain, wrap
 from agents.planners.geometry import cubic_coefficients, polyval, quintic_coefficients
-from agents.planners.paths import Reference, extend, heading_of, project, valid_path
+from agents.planners.paths import Reference, extend, project, valid_path
 from agents.planners.tracker import NeighbourTracker
 
 INTERFACE = {"waypoints": {"count": 51, "spacing": 1}, "neighbours": {"count": 8, "radius": 50.0}}

@@ -126,7 +126,7 @@ class TFPlanner(StatefulPlanner):
         return rows[hit]
 
     def decide(self, st: TFState, row: dict[str, np.ndarray]) -> np.ndarray:
-        ego, goal = row["ego"].astype(np.float64), row["goal"].astype(np.float64)
+        ego = row["ego"].astype(np.float64)
         speed, width = float(ego[Ego.SPEED]), max(float(ego[Ego.LANE_WIDTH]), 2.0)
         ids = st.tracker.update(st.odometry.pose, speed, row["neighbours"], row["neighbour_mask"])
         moved = speed * self.dt
@@ -263,7 +263,7 @@ class TFPlanner(StatefulPlanner):
     def lane_utility(self, st: TFState, row: dict[str, np.ndarray], lanes: LaneView, v: dict[str, float],
                      lane_of: np.ndarray, present: np.ndarray, v_lim: float, straight: bool) -> int:  # fmt: skip
         """-1 right, 0 keep, +1 left: argmax(v_R - thr_R, v_cur, v_L - thr_L)."""
-        ego, goal = row["ego"].astype(np.float64), row["goal"].astype(np.float64)
+        goal = row["goal"].astype(np.float64)
         thr = {"left": 1.0, "right": 1.0}
         route = WaypointPath.ROUTE if WaypointPath.ROUTE in lanes.paths else lanes.current
         route_side = lanes.side(route)

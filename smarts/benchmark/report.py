@@ -41,7 +41,6 @@ from smarts.benchmark.metrics.scores import CI_LEVEL, CI_RESAMPLES, CI_SEED, ci_
 from smarts.benchmark.suites import Suite
 from smarts.files import atomic_write_bytes, atomic_write_text
 
-
 ZERO_WIDTH = 1e-12
 """An interval narrower than this has no spread behind it and is shown as n/a."""
 NA_REASON = (

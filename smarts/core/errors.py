@@ -21,11 +21,11 @@ __all__ = [
     "AgentSetupError",
     "InterfaceError",
     "LogError",
-    "MapError",
+    "MapError",  # noqa: F822  (from smarts.maps.errors on first use: __getattr__ below)
     "MetricParamsError",
     "NetconvertError",
     "NoResolverError",
-    "NoRouteError",
+    "NoRouteError",  # noqa: F822
     "OutputError",
     "ReplayError",
     "ScenarioError",

@@ -31,8 +31,8 @@ def box_corners(x, y, heading, length, width) -> np.ndarray:
     rear-left."""
     c, s = np.cos(heading)[:, None], np.sin(heading)[:, None]
     f = (0.5 * length)[:, None] * _FORWARD
-    l = (0.5 * width)[:, None] * _LEFT
+    side = (0.5 * width)[:, None] * _LEFT
     out = np.empty((len(x), 4, 2))
-    out[..., 0] = c * f - s * l + x[:, None]
-    out[..., 1] = s * f + c * l + y[:, None]
+    out[..., 0] = c * f - s * side + x[:, None]
+    out[..., 1] = s * f + c * side + y[:, None]
     return out

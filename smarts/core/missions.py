@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from smarts.maps import RoadMap, extend_route, project, route_polyline, route_roads, shortest_route
 from smarts.core.errors import MapError
+from smarts.maps import RoadMap, extend_route, project, route_polyline, route_roads, shortest_route
 
 GOAL_NONE, GOAL_POSITION, GOAL_ROAD = 0, 1, 2
 ENDLESS_ROUTE_LENGTH = 2000.0  # metres of route planned ahead for missions without a goal

@@ -31,7 +31,6 @@ from pathlib import Path
 
 import numpy as np
 
-
 from smarts.diagnostic.scenarios import (  # noqa: F401  (names the diagnostic reports)
     CRUISE_SPEED,
     END_MARGIN,

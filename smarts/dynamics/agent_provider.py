@@ -21,8 +21,8 @@ from smarts.dynamics.action_spaces import (
     ACTION_COMPONENTS,
     REAL_KINDS,
     ActionSpaceType,
-    action_label,
     action_components,
+    action_label,
     action_problem,
     lane_command,
 )

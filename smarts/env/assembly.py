@@ -16,9 +16,9 @@ from smarts.core.errors import ScenarioError
 from smarts.core.events import NUM_EVENTS, event_from_name
 from smarts.core.missions import resolve_mission
 from smarts.core.provider import ProviderBase
+from smarts.core.simulation import EpisodeSetup, EventConfig, Simulation, check_seed
 from smarts.core.spec import REPLAY_MAP
 from smarts.core.spec import ScenarioSpec as PlainScenarioSpec
-from smarts.core.simulation import EpisodeSetup, EventConfig, Simulation, check_seed
 from smarts.core.vehicle_table import Role, VehicleType
 from smarts.dynamics.action_spaces import ActionSpaceType
 from smarts.dynamics.agent_provider import AgentProvider, AgentVehicle

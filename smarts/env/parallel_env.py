@@ -23,7 +23,6 @@ from smarts.core.errors import ActionError
 from smarts.core.events import EVENT_NAMES
 from smarts.core.policies import PolicyResolver
 from smarts.core.simulation import check_seed
-from smarts.dynamics.action_spaces import agent_action_space
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
 from smarts.env.assembly import as_spec

@@ -20,8 +20,8 @@ from typing import TYPE_CHECKING
 import numba
 import numpy as np
 
-from smarts.core.provider import ProviderBase
 from smarts.core.geometry import wrap_scalar
+from smarts.core.provider import ProviderBase
 from smarts.core.vehicle_table import COLUMN, Role, VehicleType
 from smarts.replay.recording import FRAME_EPS, ObjectKind, Recording, interpolate
 

@@ -24,6 +24,7 @@ from pydantic import AfterValidator, Field, PlainValidator, model_validator
 from smarts.comms.config import CommsFile
 from smarts.core.errors import ScenarioError
 from smarts.core.schema import Schema, field_errors, validate
+from smarts.core.spec.replay import REPLAY_MAP
 from smarts.core.spec.scenario import (
     ACTION_SPACES,
     BUILTIN_PREFIX,
@@ -55,7 +56,6 @@ from smarts.core.spec.traffic import (
     TripSpec,
     VehicleTypeSpec,
 )
-from smarts.core.spec.replay import REPLAY_MAP
 from smarts.scenario.builtin_maps import BUILTIN_MAPS
 from smarts.scenario.replay import ReplayFile
 from smarts.sensors.interface import InterfaceFile

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from smarts.core.spec import scenario as _core
+from smarts.core.spec.replay import REPLAY_MAP
 from smarts.core.spec.scenario import (
     ACTION_SPACES,
     BUILTIN_PREFIX,
@@ -34,7 +35,6 @@ from smarts.core.spec.scenario import (
     VehicleDimensions,
     VehicleSpec,
 )
-from smarts.core.spec.replay import REPLAY_MAP
 from smarts.core.spec.traffic import TRAFFIC_VEHICLE_BASES
 from smarts.scenario.builtin_maps import builtin_map_path
 from smarts.scenario.map_check import check_scenario_map

@@ -90,8 +90,8 @@ def box_interval(px, py, heading, bx, by, bh, half_length, half_width):  # pragm
     lo, hi = math.inf, -math.inf
     for k in range(4):
         f = half_length if k < 2 else -half_length
-        l = half_width if k == 0 or k == 3 else -half_width
-        cx, cy = bx + bc * f - bs * l, by + bs * f + bc * l
+        side = half_width if k == 0 or k == 3 else -half_width
+        cx, cy = bx + bc * f - bs * side, by + bs * f + bc * side
         a = math.atan2(cy - py, cx - px) - centre
         a -= _TWO_PI * math.floor((a + math.pi) / _TWO_PI)  # wrap to [-pi, pi)
         lo, hi = min(lo, a), max(hi, a)

@@ -235,7 +235,7 @@ def test_episode_recorder_logs_the_same_episode_on_both_backends():
         a, b = mine.finish(), theirs.finish()
         assert set(a.agents) == set(b.agents) and a.agents
         assert a.initial_route_distance == b.initial_route_distance and a.end_time == b.end_time
-        for agent in a.agents:
-            for field in dataclasses.fields(a.agents[agent]):
-                x, y = getattr(a.agents[agent], field.name), getattr(b.agents[agent], field.name)
-                np.testing.assert_array_equal(x, y, err_msg=f"{agent} {field.name}")
+        for aid in a.agents:
+            for field in dataclasses.fields(a.agents[aid]):
+                x, y = getattr(a.agents[aid], field.name), getattr(b.agents[aid], field.name)
+                np.testing.assert_array_equal(x, y, err_msg=f"{aid} {field.name}")

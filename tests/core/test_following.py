@@ -7,7 +7,7 @@ from smarts.core.following import LEAD_SIGHT, lead_state
 from smarts.env import DrivingParallelEnv
 from smarts.sensors.interface import AgentInterface
 from smarts.sensors.observation import LEAD_FEATURE_NAMES
-from tests.builders import agent, make_spec
+from tests.builders import make_spec
 
 
 def _place(env, vehicle_id, lane_id, s):

@@ -6,7 +6,12 @@ import pytest
 from agents.planners.agent_state import AgentState, align
 from agents.planners.frames import Odometry, chain, compose, relative, unchain, wrap
 from agents.planners.geometry import (
-    bezier_length, bezier_points, bezier_tangents, collision_forecast, cubic_coefficients, polyval,
+    bezier_length,
+    bezier_points,
+    bezier_tangents,
+    collision_forecast,
+    cubic_coefficients,
+    polyval,
     quintic_coefficients,
 )  # fmt: skip
 from agents.planners.paths import Reference, arc_length, extend, from_ego, project

@@ -11,7 +11,15 @@ import yaml
 
 from smarts.__main__ import main
 from smarts.benchmark.suites import load_suite
-from tests.replay.files import av2_tracks, three_vehicles, waymo_junction, waymo_scenario, write_av2, write_ngsim, write_waymo
+from tests.replay.files import (
+    av2_tracks,
+    three_vehicles,
+    waymo_junction,
+    waymo_scenario,
+    write_av2,
+    write_ngsim,
+    write_waymo,
+)
 
 
 def test_a_folder_of_waymo_files_becomes_a_suite_that_the_benchmark_runs(tmp_path, capsys):

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import yaml
 
-from smarts.core.errors import MapError
 from smarts.__main__ import main
+from smarts.core.errors import MapError
 from smarts.scenario.validate import validate_scenario
 from tests.maps.conftest import build_net
 

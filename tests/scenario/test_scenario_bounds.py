@@ -4,7 +4,6 @@ field."""
 
 from __future__ import annotations
 
-
 import pytest
 
 from smarts.scenario import ScenarioError, ScenarioSpec

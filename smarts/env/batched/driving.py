@@ -35,6 +35,7 @@ from smarts.scenario import ScenarioSpec
 from smarts.sensors.interface import AgentInterface
 from smarts.sensors.observation import ObservationConfig
 
+
 class BatchedSetupError(ScenarioError):
     """Scenarios (or options) that cannot be batched together; the message says what differs."""
 

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+import smarts.traffic.builtin.kernels as K
 from smarts.core.errors import ScenarioError
 from smarts.core.provider import ProviderBase
 from smarts.core.spec.traffic import (
@@ -29,7 +30,6 @@ from smarts.core.spec.traffic import (
 )
 from smarts.core.vehicle_table import COLUMN, VEHICLE_DIMENSIONS, Role, VehicleType
 from smarts.maps import RoadMap, project
-import smarts.traffic.builtin.kernels as K
 from smarts.traffic.builtin.junctions import junction_table
 from smarts.traffic.builtin.routes import NO_WAY, RouteTable
 from smarts.traffic.density import density_flows

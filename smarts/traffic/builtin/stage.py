@@ -22,8 +22,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-import smarts.traffic.builtin.kernels as K
 import smarts.traffic.builtin.junctions as _junctions
+import smarts.traffic.builtin.kernels as K
 from smarts.core.records import cache_depends_on, declare, freeze_fields, view
 from smarts.core.simulation import Simulation
 
