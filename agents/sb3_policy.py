@@ -90,7 +90,9 @@ class SB3Policy:
         try:
             self.policy.load_state_dict(blob["policy"])
         except RuntimeError as err:
-            raise CheckpointError(f"{source}: weights do not match the recorded observation and layers ({err})") from None
+            raise CheckpointError(
+                f"{source}: weights do not match the recorded observation and layers ({err})"
+            ) from None
         self.policy.eval()
         self.keys = list(blob["observation"])
 

@@ -92,7 +92,9 @@ def atomic_write(path: str | os.PathLike, *, mode: int | None = None, durable: b
         fsync_dir(path.parent)
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes | bytearray | memoryview, *, mode: int | None = None) -> Path:
+def atomic_write_bytes(
+    path: str | os.PathLike, data: bytes | bytearray | memoryview, *, mode: int | None = None
+) -> Path:
     """Write ``data`` to ``path`` with :func:`atomic_write`; returns the path."""
     with atomic_write(path, mode=mode) as fh:
         fh.write(data)

@@ -194,7 +194,9 @@ def _run(mutation: Mutation, copy: Path, full: bool, timeout: float) -> tuple[st
             [sys.executable, "-m", "pytest", "-x", "-q", "-rf", "-p", "no:cacheprovider", *tests],
             cwd=copy, env=env, capture_output=True, text=True, timeout=timeout,
         )  # fmt: skip
-        outcome = "missed" if done.returncode == 0 else "caught" if done.returncode == 1 else f"error({done.returncode})"
+        outcome = (
+            "missed" if done.returncode == 0 else "caught" if done.returncode == 1 else f"error({done.returncode})"
+        )
         failed = next((line.split(" - ")[0].removeprefix("FAILED ") for line in done.stdout.splitlines()
                        if line.startswith("FAILED ")), "")  # fmt: skip
     except subprocess.TimeoutExpired:

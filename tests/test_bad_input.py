@@ -64,41 +64,89 @@ CHECKPOINT_EDITS = {
 
 CASES = [
     # (name, command line with {file} placeholders, fragments the last stderr lines must hold)
-    ("checkpoint that is not one", ["-m", "train", "eval", "--agent", "{garbage.pt}", "--suite", "adaptive"],
-     ["garbage.pt: not a readable checkpoint"]),
-    ("resume from a non-checkpoint", ["-m", "train", "ppo", "--task", "platoon", "--resume", "{garbage.pt}",
-                                      "--out-dir", "{tmp}/resumed"], ["garbage.pt: not a readable checkpoint"]),
-    ("unknown action space flag", ["-m", "train", "ppo", "--task", "platoon", "--action-space", "warp",
-                                   "--out-dir", "{tmp}/warp"], ["--action-space: action_space:", "'warp'"]),
-    ("training YAML with a typo", ["-m", "train", "ppo", "--config", "{train.yaml}", "--out-dir", "{tmp}/typo"],
-     ["train.yaml: epochz: unknown field; did you mean 'epochs'?"]),
-    ("zero benchmark episodes", ["-m", "train", "benchmark", "--suite", "adaptive", "--episodes", "0"],
-     ["--episodes must be >= 1"]),
+    (
+        "checkpoint that is not one",
+        ["-m", "train", "eval", "--agent", "{garbage.pt}", "--suite", "adaptive"],
+        ["garbage.pt: not a readable checkpoint"],
+    ),
+    (
+        "resume from a non-checkpoint",
+        ["-m", "train", "ppo", "--task", "platoon", "--resume", "{garbage.pt}", "--out-dir", "{tmp}/resumed"],
+        ["garbage.pt: not a readable checkpoint"],
+    ),
+    (
+        "unknown action space flag",
+        ["-m", "train", "ppo", "--task", "platoon", "--action-space", "warp", "--out-dir", "{tmp}/warp"],
+        ["--action-space: action_space:", "'warp'"],
+    ),
+    (
+        "training YAML with a typo",
+        ["-m", "train", "ppo", "--config", "{train.yaml}", "--out-dir", "{tmp}/typo"],
+        ["train.yaml: epochz: unknown field; did you mean 'epochs'?"],
+    ),
+    (
+        "zero benchmark episodes",
+        ["-m", "train", "benchmark", "--suite", "adaptive", "--episodes", "0"],
+        ["--episodes must be >= 1"],
+    ),
     ("unknown suite", ["-m", "train", "benchmark", "--suite", "nope"], ["unknown benchmark suite 'nope'"]),
-    ("suite file with errors", ["-m", "train", "benchmark", "--suite", "{suite.yaml}"],
-     ["suite.yaml: episodes:", "scenarioz: unknown field; did you mean 'scenarios'?"]),
-    ("unknown agent locator", ["-m", "train", "benchmark", "--suite", "adaptive", "--agent", "zoo:nobody"],
-     ["zoo:nobody"]),
-    ("scenario with a misspelt field", ["-m", "smarts", "scenario", "show", "{typo.yaml}"],
-     ["typo.yaml: agents[0].mission.start.ofset: unknown field; did you mean 'offset'?"]),
-    ("scenario with a bool for a count", ["-m", "smarts", "scenario", "show", "{strict.yaml}"],
-     ["strict.yaml: episode_steps:"]),
-    ("scenario whose map file is missing", ["-m", "smarts", "scenario", "show", "--build", "{no_map.yaml}"],
-     ["missing.net.xml"]),
+    (
+        "suite file with errors",
+        ["-m", "train", "benchmark", "--suite", "{suite.yaml}"],
+        ["suite.yaml: episodes:", "scenarioz: unknown field; did you mean 'scenarios'?"],
+    ),
+    (
+        "unknown agent locator",
+        ["-m", "train", "benchmark", "--suite", "adaptive", "--agent", "zoo:nobody"],
+        ["zoo:nobody"],
+    ),
+    (
+        "scenario with a misspelt field",
+        ["-m", "smarts", "scenario", "show", "{typo.yaml}"],
+        ["typo.yaml: agents[0].mission.start.ofset: unknown field; did you mean 'offset'?"],
+    ),
+    (
+        "scenario with a bool for a count",
+        ["-m", "smarts", "scenario", "show", "{strict.yaml}"],
+        ["strict.yaml: episode_steps:"],
+    ),
+    (
+        "scenario whose map file is missing",
+        ["-m", "smarts", "scenario", "show", "--build", "{no_map.yaml}"],
+        ["missing.net.xml"],
+    ),
     ("scenario that is not YAML", ["-m", "smarts", "scenario", "show", "{not_yaml.yaml}"], ["not_yaml.yaml"]),
     ("episode log that is not one", ["-m", "smarts.benchmark.metrics", "{log.npz}"], ["log.npz"]),
-    ("checkpoint without its action space", ["-m", "train", "eval", "--agent", "{no_space.pt}", "--suite", "collaborative"],
-     ["no_space.pt: action.space: required field missing"]),
-    ("checkpoint asking for a 10**9-unit layer", ["-m", "train", "eval", "--agent", "{huge.pt}", "--suite", "collaborative"],
-     ["huge.pt: hidden[0]: input should be less than or equal to 8192, got 1000000000"]),
-    ("checkpoint with a NaN action bound", ["-m", "train", "eval", "--agent", "{nan_bounds.pt}", "--suite", "collaborative"],
-     ["nan_bounds.pt: action.low[0]: input should be a finite number, got nan"]),
-    ("goal behind the start on a one-way road", ["-m", "smarts", "scenario", "show", "--build", "{behind.yaml}"],
-     ["behind.yaml: agents[0].mission.goal: offset 10 on road 'main' is not ahead of the start (offset 50"]),
-    ("training into a folder that cannot be made", ["-m", "train", "ppo", "--task", "platoon", "--out-dir", "{garbage.pt}/run"],
-     ["run folder", "garbage.pt/run: cannot be made there"]),
-    ("benchmark into a folder that cannot be made", ["-m", "train", "benchmark", "--suite", "adaptive", "--out", "{garbage.pt}/b"],
-     ["output folder", "garbage.pt/b: cannot be made there"]),
+    (
+        "checkpoint without its action space",
+        ["-m", "train", "eval", "--agent", "{no_space.pt}", "--suite", "collaborative"],
+        ["no_space.pt: action.space: required field missing"],
+    ),
+    (
+        "checkpoint asking for a 10**9-unit layer",
+        ["-m", "train", "eval", "--agent", "{huge.pt}", "--suite", "collaborative"],
+        ["huge.pt: hidden[0]: input should be less than or equal to 8192, got 1000000000"],
+    ),
+    (
+        "checkpoint with a NaN action bound",
+        ["-m", "train", "eval", "--agent", "{nan_bounds.pt}", "--suite", "collaborative"],
+        ["nan_bounds.pt: action.low[0]: input should be a finite number, got nan"],
+    ),
+    (
+        "goal behind the start on a one-way road",
+        ["-m", "smarts", "scenario", "show", "--build", "{behind.yaml}"],
+        ["behind.yaml: agents[0].mission.goal: offset 10 on road 'main' is not ahead of the start (offset 50"],
+    ),
+    (
+        "training into a folder that cannot be made",
+        ["-m", "train", "ppo", "--task", "platoon", "--out-dir", "{garbage.pt}/run"],
+        ["run folder", "garbage.pt/run: cannot be made there"],
+    ),
+    (
+        "benchmark into a folder that cannot be made",
+        ["-m", "train", "benchmark", "--suite", "adaptive", "--out", "{garbage.pt}/b"],
+        ["output folder", "garbage.pt/b: cannot be made there"],
+    ),
 ]
 
 
@@ -170,20 +218,39 @@ REPLAY_CASES = [
     ("replay show --fps 1e9", [*SHOW, "--fps", "1e9"], ["--fps: input should be less than or equal to 120"]),
     ("replay show --duration -3", [*SHOW, "--duration", "-3"], ["--duration: input should be greater than 0"]),
     ("replay show --width 0", [*SHOW, "--width", "0"], ["--width: input should be greater than or equal to 16"]),
-    ("replay show --width 2000000", [*SHOW, "--width", "2000000"], ["--width: input should be less than or equal to 4096"]),
+    (
+        "replay show --width 2000000",
+        [*SHOW, "--width", "2000000"],
+        ["--width: input should be less than or equal to 4096"],
+    ),
     ("replay show --offset nan 0", [*SHOW, "--offset", "nan", "0"], ["--offset[0]: input should be a finite number"]),
-    ("replay info --offset inf 0", ["-m", "smarts", "replay", "info", "{traj.csv}", "--format", "ngsim", "--offset",
-                                    "inf", "0"], ["--offset[0]: input should be a finite number"]),
+    (
+        "replay info --offset inf 0",
+        ["-m", "smarts", "replay", "info", "{traj.csv}", "--format", "ngsim", "--offset", "inf", "0"],
+        ["--offset[0]: input should be a finite number"],
+    ),
     ("replay show --time nan", [*SHOW, "--time", "nan"], ["--time: input should be a finite number"]),
     ("replay show --time past the end", [*SHOW, "--time", "60"], ["--time: the recording lasts 8.9 s, got 60"]),
-    ("NGSIM rows with a frame gap", ["-m", "smarts", "replay", "info", "{gap.csv}", "--format", "ngsim"],
-     ["gap.csv: vehicle '1' has no samples from frame 102 to frame 300000000"]),
-    ("NGSIM inf in a non-ego row", ["-m", "smarts", "replay", "info", "{inf.csv}", "--format", "ngsim"],
-     ["inf.csv: column Local_Y: expected a finite number, got inf in data row 75"]),
-    ("TFRecord header claiming 2**62 bytes", ["-m", "smarts", "replay", "info", "{huge.tfrecord}", "--format", "waymo"],
-     ["huge.tfrecord: record 0 at byte 0: truncated (the header claims 4611686018427387904 data bytes"]),
-    ("a folder read as Waymo", ["-m", "smarts", "replay", "info", "{tmp}", "--format", "waymo"],
-     ["is a folder; --format waymo reads a TFRecord file of Scenario records"]),
+    (
+        "NGSIM rows with a frame gap",
+        ["-m", "smarts", "replay", "info", "{gap.csv}", "--format", "ngsim"],
+        ["gap.csv: vehicle '1' has no samples from frame 102 to frame 300000000"],
+    ),
+    (
+        "NGSIM inf in a non-ego row",
+        ["-m", "smarts", "replay", "info", "{inf.csv}", "--format", "ngsim"],
+        ["inf.csv: column Local_Y: expected a finite number, got inf in data row 75"],
+    ),
+    (
+        "TFRecord header claiming 2**62 bytes",
+        ["-m", "smarts", "replay", "info", "{huge.tfrecord}", "--format", "waymo"],
+        ["huge.tfrecord: record 0 at byte 0: truncated (the header claims 4611686018427387904 data bytes"],
+    ),
+    (
+        "a folder read as Waymo",
+        ["-m", "smarts", "replay", "info", "{tmp}", "--format", "waymo"],
+        ["is a folder; --format waymo reads a TFRecord file of Scenario records"],
+    ),
 ]
 
 
@@ -292,7 +359,10 @@ def test_sb3_vec_env_refuses_actions_that_only_reshape_into_place(copies, bad_sh
     try:
         vec.reset()
         slots = 2 * copies
-        with pytest.raises(ActionError, match=rf"SmartsVecEnv: actions: expected shape \({slots}, 3\) .* got shape {_escaped_shape(bad_shape)}"):
+        with pytest.raises(
+            ActionError,
+            match=rf"SmartsVecEnv: actions: expected shape \({slots}, 3\) .* got shape {_escaped_shape(bad_shape)}",
+        ):
             vec.step(np.zeros(bad_shape, dtype=np.float32))
         assert vec.driving.groups[0].sim.episode_step.tolist() == [0] * copies
         vec.step(np.zeros((slots, 3), dtype=np.float32))

@@ -107,9 +107,7 @@ def test_stale_temporaries_are_swept_and_fresh_ones_kept(tmp_path: Path) -> None
     assert sorted(os.listdir(tmp_path)) == sorted([fresh.name, entry.name])
 
 
-def test_unwritable_folder_falls_back_once_with_one_warning(
-    tmp_path: Path, fresh_fallback: None
-) -> None:
+def test_unwritable_folder_falls_back_once_with_one_warning(tmp_path: Path, fresh_fallback: None) -> None:
     wanted = unwritable_dir(tmp_path)
     with pytest.warns(cache.UnwritableCacheWarning) as record:
         got = cache.writable_dir(wanted / "netconvert", home=wanted)

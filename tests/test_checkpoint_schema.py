@@ -50,19 +50,51 @@ PPO_CASES = [
     ("action.space missing", lambda b: b["action"].pop("space"), "action.space: required field missing"),
     ("layout.keys missing", lambda b: b["layout"].pop("keys"), "layout.keys: required field missing"),
     ("actor missing", lambda b: b.pop("actor"), "actor: required field missing"),
-    ("hidden of 10**9 units", lambda b: b.update(hidden=[10**9]), "hidden[0]: input should be less than or equal to 8192"),
+    (
+        "hidden of 10**9 units",
+        lambda b: b.update(hidden=[10**9]),
+        "hidden[0]: input should be less than or equal to 8192",
+    ),
     ("hidden as text", lambda b: b.update(hidden="128"), "hidden: input should be a valid list"),
-    ("NaN action bound", lambda b: b["action"]["low"].__setitem__(0, math.nan), "action.low[0]: input should be a finite number"),
-    ("infinite action bound", lambda b: b["action"]["high"].__setitem__(1, math.inf), "action.high[1]: input should be a finite number"),
+    (
+        "NaN action bound",
+        lambda b: b["action"]["low"].__setitem__(0, math.nan),
+        "action.low[0]: input should be a finite number",
+    ),
+    (
+        "infinite action bound",
+        lambda b: b["action"]["high"].__setitem__(1, math.inf),
+        "action.high[1]: input should be a finite number",
+    ),
     ("bounds of two lengths", lambda b: b["action"].update(high=[1.0]), "action: low has 2 numbers, high 1"),
     ("low above high", lambda b: b["action"].update(low=[2.0, 2.0]), "action: low [2.0, 2.0] exceeds high [1.0, 1.0]"),
     ("layout keys and shapes disagree", lambda b: b["layout"]["shapes"].pop(), "layout: 10 keys but 9 shapes"),
-    ("a negative shape", lambda b: b["layout"]["shapes"].__setitem__(0, [-5]), "layout.shapes[0][0]: input should be greater than or equal to 1"),
-    ("a weight that is not a tensor", lambda b: b["actor"].update({"net.0.weight": [1.0]}), "actor['net.0.weight']: input should be a tensor"),
-    ("NaN weights", lambda b: b["actor"]["net.0.weight"].fill_(math.nan), "actor: tensor 'net.0.weight' holds NaN or infinite values"),
-    ("NaN observation statistics", lambda b: b["normalizer"]["var"].fill_(math.inf), "normalizer: tensor 'var' holds NaN"),
+    (
+        "a negative shape",
+        lambda b: b["layout"]["shapes"].__setitem__(0, [-5]),
+        "layout.shapes[0][0]: input should be greater than or equal to 1",
+    ),
+    (
+        "a weight that is not a tensor",
+        lambda b: b["actor"].update({"net.0.weight": [1.0]}),
+        "actor['net.0.weight']: input should be a tensor",
+    ),
+    (
+        "NaN weights",
+        lambda b: b["actor"]["net.0.weight"].fill_(math.nan),
+        "actor: tensor 'net.0.weight' holds NaN or infinite values",
+    ),
+    (
+        "NaN observation statistics",
+        lambda b: b["normalizer"]["var"].fill_(math.inf),
+        "normalizer: tensor 'var' holds NaN",
+    ),
     ("unknown field", lambda b: b.update(hiden=[128]), "hiden: unknown field"),
-    ("unknown mean map", lambda b: b["action"].update(mean="sigmoid"), "action.mean: input should be 'linear' or 'tanh'"),
+    (
+        "unknown mean map",
+        lambda b: b["action"].update(mean="sigmoid"),
+        "action.mean: input should be 'linear' or 'tanh'",
+    ),
     ("negative step", lambda b: b.update(step=-1), "step: input should be greater than or equal to 0"),
 ]
 
@@ -84,25 +116,67 @@ def test_a_network_too_large_is_refused_before_it_is_built(tmp_path):
 PLANNER_CASES = [
     ("state_dict missing", "tf-stop-move", lambda b: b.pop("state_dict"), "state_dict: required field missing"),
     ("config missing", "aid-predictor", lambda b: b.pop("config"), "config: required field missing"),
-    ("unknown config field", "tf-stop-move", lambda b: b["config"].update(dropout=0.5),
-     "config.dropout: unknown field (known: hidden, layers, inputs)"),
-    ("config that is a list", "vcr-classifier", lambda b: b.update(config=[3, 64, 24, 6]),
-     "config: input should be a mapping, got [3, 64, 24, 6]"),
+    (
+        "unknown config field",
+        "tf-stop-move",
+        lambda b: b["config"].update(dropout=0.5),
+        "config.dropout: unknown field (known: hidden, layers, inputs)",
+    ),
+    (
+        "config that is a list",
+        "vcr-classifier",
+        lambda b: b.update(config=[3, 64, 24, 6]),
+        "config: input should be a mapping, got [3, 64, 24, 6]",
+    ),
     ("config that is text", "aid-predictor", lambda b: b.update(config="d=64"), "config: input should be a mapping"),
-    ("a huge layer", "tf-stop-move", lambda b: b["config"].update(hidden=10**7),
-     "config.hidden: input should be less than or equal to 8192"),
-    ("a huge attention width", "aid-predictor", lambda b: b["config"].update(d=2**20), "config.d: input should be less"),
-    ("heads that do not divide the width", "aid-predictor", lambda b: b["config"].update(heads=3),
-     "config: d (64) must be even and a multiple of heads (3)"),
-    ("a NaN dropout", "aid-predictor", lambda b: b["config"].update(dropout=math.nan), "config.dropout: input should be"),
-    ("a raster too small for the convolutions", "vcr-classifier", lambda b: b["config"].update(size=8),
-     "config.size: input should be greater than or equal to 31"),
-    ("a bool for a count", "tf-stop-move", lambda b: b["config"].update(layers=True), "config.layers: input should be a valid integer"),
-    ("an all-NaN net", "tf-stop-move",
-     lambda b: b.update(state_dict={k: torch.full_like(v, math.nan) for k, v in b["state_dict"].items()}),
-     "state_dict: tensor 'net.0.weight' holds NaN or infinite values; weights must be finite"),
-    ("one infinite weight", "vcr-classifier", lambda b: b["state_dict"]["head.0.bias"].__setitem__(0, math.inf),
-     "state_dict: tensor 'head.0.bias' holds NaN"),
+    (
+        "a huge layer",
+        "tf-stop-move",
+        lambda b: b["config"].update(hidden=10**7),
+        "config.hidden: input should be less than or equal to 8192",
+    ),
+    (
+        "a huge attention width",
+        "aid-predictor",
+        lambda b: b["config"].update(d=2**20),
+        "config.d: input should be less",
+    ),
+    (
+        "heads that do not divide the width",
+        "aid-predictor",
+        lambda b: b["config"].update(heads=3),
+        "config: d (64) must be even and a multiple of heads (3)",
+    ),
+    (
+        "a NaN dropout",
+        "aid-predictor",
+        lambda b: b["config"].update(dropout=math.nan),
+        "config.dropout: input should be",
+    ),
+    (
+        "a raster too small for the convolutions",
+        "vcr-classifier",
+        lambda b: b["config"].update(size=8),
+        "config.size: input should be greater than or equal to 31",
+    ),
+    (
+        "a bool for a count",
+        "tf-stop-move",
+        lambda b: b["config"].update(layers=True),
+        "config.layers: input should be a valid integer",
+    ),
+    (
+        "an all-NaN net",
+        "tf-stop-move",
+        lambda b: b.update(state_dict={k: torch.full_like(v, math.nan) for k, v in b["state_dict"].items()}),
+        "state_dict: tensor 'net.0.weight' holds NaN or infinite values; weights must be finite",
+    ),
+    (
+        "one infinite weight",
+        "vcr-classifier",
+        lambda b: b["state_dict"]["head.0.bias"].__setitem__(0, math.inf),
+        "state_dict: tensor 'head.0.bias' holds NaN",
+    ),
 ]
 
 
@@ -187,7 +261,9 @@ def _sb3_export() -> dict:
 
     shapes = {"ego": [4], "lead": [2, 3]}
     space = gym.spaces.Dict({k: gym.spaces.Box(-np.inf, np.inf, tuple(v), np.float32) for k, v in shapes.items()})
-    policy = MultiInputActorCriticPolicy(space, gym.spaces.Box(-1.0, 1.0, (2,), np.float32), lambda _: 0.0, net_arch=[8])
+    policy = MultiInputActorCriticPolicy(
+        space, gym.spaces.Box(-1.0, 1.0, (2,), np.float32), lambda _: 0.0, net_arch=[8]
+    )
     return {"format": SB3_FORMAT, "policy": policy.state_dict(), "observation": shapes, "net_arch": [8], "step": 0,
             "action": {"space": "relative_target_pose", "low": [-1.0, -1.0], "high": [1.0, 1.0]}}  # fmt: skip
 
@@ -195,8 +271,16 @@ def _sb3_export() -> dict:
 SB3_CASES = [
     ("action missing", lambda b: b.pop("action"), "action: required field missing"),
     ("a huge layer", lambda b: b.update(net_arch=[10**9]), "net_arch[0]: input should be less than or equal to 8192"),
-    ("a NaN bound", lambda b: b["action"]["high"].__setitem__(0, math.nan), "action.high[0]: input should be a finite number"),
-    ("a shape that is text", lambda b: b["observation"].update(ego="4"), "observation['ego']: input should be a valid list"),
+    (
+        "a NaN bound",
+        lambda b: b["action"]["high"].__setitem__(0, math.nan),
+        "action.high[0]: input should be a finite number",
+    ),
+    (
+        "a shape that is text",
+        lambda b: b["observation"].update(ego="4"),
+        "observation['ego']: input should be a valid list",
+    ),
     ("NaN weights", lambda b: next(iter(b["policy"].values())).fill_(math.nan), "policy: tensor"),
 ]
 

@@ -24,7 +24,9 @@ def _modules_after(code: str) -> set[str]:
 
 
 def _help(module: str, argv: list[str]) -> str:
-    return f"try:\n    __import__('{module}', fromlist=['main']).main({argv!r} + ['--help'])\nexcept SystemExit:\n    pass"
+    return (
+        f"try:\n    __import__('{module}', fromlist=['main']).main({argv!r} + ['--help'])\nexcept SystemExit:\n    pass"
+    )
 
 
 @pytest.mark.parametrize("module", ["train.__main__", "smarts.__main__"])

@@ -26,7 +26,18 @@ TINY_SUITE = ROOT / "tests" / "benchmark" / "tiny_suite.yaml"
 TRAIN = ["ppo", "--task", "drive", "--scenarios", f"{TINY_SUITE}:t1_left", "--total-steps", "192",
          "--frames-per-batch", "64", "--minibatch-size", "32", "--epochs", "1", "--envs", "2", "--eval-episodes", "0",
          "--quiet"]  # fmt: skip
-BENCH = ["benchmark", "--suite", str(TINY_SUITE), "--agent", "zoo:keep-lane", "--episodes", "1", "--workers", "1", "--quiet"]
+BENCH = [
+    "benchmark",
+    "--suite",
+    str(TINY_SUITE),
+    "--agent",
+    "zoo:keep-lane",
+    "--episodes",
+    "1",
+    "--workers",
+    "1",
+    "--quiet",
+]
 
 
 class DiskFillsUp:

@@ -63,7 +63,9 @@ def test_the_env_drives_social_agents_with_the_resolver_it_is_given():
     assert asked == ["test:creep"] and isinstance(policy, CreepPolicy) and policy.calls == 5
     assert env.sim.table.x[row] > start + 1.0
     env.close()
-    with pytest.raises(ValueError, match=r"agents\[1\]\.policy: unknown agent locator 'test:creep'; known: zoo:keep-lane"):
+    with pytest.raises(
+        ValueError, match=r"agents\[1\]\.policy: unknown agent locator 'test:creep'; known: zoo:keep-lane"
+    ):
         DrivingParallelEnv(spec)  # the installed default does not know it
 
 
@@ -90,7 +92,9 @@ def test_the_runner_uses_the_resolver_it_is_given_in_worker_processes(tmp_path):
     suite = load_suite(TINY)
     with pytest.raises(ValueError, match="unknown agent locator 'test:creep'"):
         plan_jobs(["test:creep"], suite, 1, tmp_path / "a", references=False)  # refused before any episode
-    jobs = plan_jobs(["test:creep", "zoo:stand-still"], suite, 1, tmp_path, references=False, policy_resolver=creep_resolver)
+    jobs = plan_jobs(
+        ["test:creep", "zoo:stand-still"], suite, 1, tmp_path, references=False, policy_resolver=creep_resolver
+    )
     results = run_jobs(jobs, workers=2, progress=False, policy_resolver=creep_resolver)  # spawned workers
     assert [r["failure"] for r in results] == [None] * 4
     assert [r["agent"] for r in results] == ["test:creep"] * 2 + ["zoo:stand-still"] * 2
@@ -109,7 +113,9 @@ def test_checkpoints_and_zoo_agents_load_without_the_trainer_or_the_simulator(tm
 
     shapes = {"ego": [4], "lead": [2, 3]}
     space = gym.spaces.Dict({k: gym.spaces.Box(-np.inf, np.inf, tuple(v), np.float32) for k, v in shapes.items()})
-    sb3 = MultiInputActorCriticPolicy(space, gym.spaces.Box(-1.0, 1.0, (2,), np.float32), lambda _: 0.0, net_arch=[8, 8])
+    sb3 = MultiInputActorCriticPolicy(
+        space, gym.spaces.Box(-1.0, 1.0, (2,), np.float32), lambda _: 0.0, net_arch=[8, 8]
+    )
     low, high = [-1.0, -2.0], [1.0, 2.0]
     blob = {"format": SB3_FORMAT, "policy": sb3.state_dict(), "observation": shapes, "interface": {"lead": True},
             "lane_relative": {"max_jerk": 0.5}, "net_arch": [8, 8], "config": {}, "step": 0,

@@ -36,10 +36,7 @@ FENCE = re.compile(r"^```([^\n`]*)\n(.*?)^```[ \t]*$", re.S | re.M)
 
 def _blocks() -> list[tuple[str, str, int]]:
     """(language, text, line of the opening fence) of every fenced block."""
-    return [
-        (m.group(1).strip(), m.group(2), README.count("\n", 0, m.start()) + 1)
-        for m in FENCE.finditer(README)
-    ]
+    return [(m.group(1).strip(), m.group(2), README.count("\n", 0, m.start()) + 1) for m in FENCE.finditer(README)]
 
 
 def _of(language: str) -> list[tuple[str, int]]:
@@ -75,73 +72,93 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "python -m train ppo --task drive": (PARSE, "a full PPO training run"),
     "python -m train ppo --task platoon --action-space continuous --init-from "
     "runs/train/platoon/latest/best.pt --runs-dir runs/train/platoon-c": (
-        PARSE, "fine-tunes a trained checkpoint that only a finished run has",
+        PARSE,
+        "fine-tunes a trained checkpoint that only a finished run has",
     ),
     "python -m train ppo --task drive --lib sb3": (PARSE, "a full SB3 training run"),
     "python -m train ppo --task platoon --backend batched --envs 256 --frames-per-batch 16384 --minibatch-size 4096 --epochs 4": (
-        PARSE, "a full training run on the batched backend; tests/batched/test_batched_training.py runs a short one"
+        PARSE,
+        "a full training run on the batched backend; tests/batched/test_batched_training.py runs a short one",
     ),
     "python -m smarts.diagnostic --batched --ppo-steps 98304": (
-        NOT_RUN, "minutes of timing up to B = 1,024 and two PPO runs; tests/batched/test_batched_diagnostic.py runs it on a tiny budget"
+        NOT_RUN,
+        "minutes of timing up to B = 1,024 and two PPO runs; tests/batched/test_batched_diagnostic.py runs it on a tiny budget",
     ),
     "python -m train eval --agent runs/train/platoon/latest/best.pt --suite adaptive": (
-        PARSE, "needs a trained checkpoint; 11 scenarios x 3 episodes x 4 agents",
+        PARSE,
+        "needs a trained checkpoint; 11 scenarios x 3 episodes x 4 agents",
     ),
     "python -m train benchmark --suite collaborative --agent zoo:drive --workers 2": (
-        PARSE, "14 scenarios x 3 episodes x 4 agents, minutes",
+        PARSE,
+        "14 scenarios x 3 episodes x 4 agents, minutes",
     ),
     "python -m train benchmark --suite collaborative --agent zoo:tf --agent zoo:vcr --agent zoo:aid --episodes 3 "
     "--workers 2": (PARSE, "14 scenarios x 3 episodes x 6 agents, minutes"),
     "python -m train trajectories": (
-        NOT_RUN, "minutes of simulation; tests/planners/test_training.py runs it on a two-scenario suite",
+        NOT_RUN,
+        "minutes of simulation; tests/planners/test_training.py runs it on a two-scenario suite",
     ),
     "python -m train aid-predictor": (
-        NOT_RUN, "tens of minutes on 2 cores; tests/planners/test_training.py trains a few steps",
+        NOT_RUN,
+        "tens of minutes on 2 cores; tests/planners/test_training.py trains a few steps",
     ),
     "python -m train tf-bc": (NOT_RUN, "minutes; tests/planners/test_training.py runs it on a two-scenario suite"),
     "python -m train vcr-classifier": (
-        NOT_RUN, "about 15 minutes; tests/planners/test_training.py runs it on a two-scenario suite",
+        NOT_RUN,
+        "about 15 minutes; tests/planners/test_training.py runs it on a two-scenario suite",
     ),
     "python -m smarts.benchmark.metrics runs/benchmark/collaborative/latest/logs": (
-        RUN, "on the logs of a one-scenario, one-episode collaborative benchmark of the reference agents",
+        RUN,
+        "on the logs of a one-scenario, one-episode collaborative benchmark of the reference agents",
     ),
     "python -m train benchmark --suite collaborative --ray-address local": (
-        PARSE, "the whole suite on a private Ray instance, minutes",
+        PARSE,
+        "the whole suite on a private Ray instance, minutes",
     ),
     "ray start --head": (NOT_RUN, "starts a Ray cluster head on this machine, left running"),
     'python -m train ppo --task drive --interface "{neighbours: {extended: true}, occlusion: {enabled: true}, '
     'lidar: {rays: 32}, rasters: {size: 32, layers: [drivable, occupancy, occlusion]}, ahead: true}" --comms '
     '"{range: 60, latency: 1, message_size: 4, penetration: 0.5}"': (
-        PARSE, "a full training run; tests/test_train_every_scenario.py runs one batch with every sensor and V2V",
+        PARSE,
+        "a full training run; tests/test_train_every_scenario.py runs one batch with every sensor and V2V",
     ),
     "ray start --head --port 6379": (NOT_RUN, "starts a Ray cluster head on this machine, left running"),
     "ray start --address HEAD_IP:6379": (NOT_RUN, "joins another machine's Ray cluster, left running"),
     "python -m train ppo --task platoon --envs 512 --workers 32 --frames-per-batch 65536 --ray-address HEAD_IP:6379": (
-        PARSE, "needs a Ray cluster at HEAD_IP; a full training run",
+        PARSE,
+        "needs a Ray cluster at HEAD_IP; a full training run",
     ),
     "python -m train eval --agent runs/train/platoon/latest/final.pt --suite adaptive --ray-address auto": (
-        PARSE, "needs a trained checkpoint and the cluster started by `ray start --head`",
+        PARSE,
+        "needs a trained checkpoint and the cluster started by `ray start --head`",
     ),
     "python -m train ppo --task platoon --envs 16 --workers 4 --ray-address HOST:6379": (
-        PARSE, "needs a Ray cluster at HOST; a full training run",
+        PARSE,
+        "needs a Ray cluster at HOST; a full training run",
     ),
     "python -m train benchmark --suite adaptive --agent zoo:keep-lane --episodes 1": (
-        PARSE, "11 scenarios x 4 agents, minutes",
+        PARSE,
+        "11 scenarios x 4 agents, minutes",
     ),
     "smarts viz runs/benchmark/adaptive/latest/logs": (
-        NOT_RUN, "serves until Ctrl-C; tests/viz/test_server.py and test_browser.py serve such a folder",
+        NOT_RUN,
+        "serves until Ctrl-C; tests/viz/test_server.py and test_browser.py serve such a folder",
     ),
     "python -m train enjoy --agent zoo:platoon-rtp --scenario adaptive:a08_lead_turns_left_at_junction --viz": (
-        NOT_RUN, "waits for a browser; tests/viz/test_browser.py streams a live env into chromium",
+        NOT_RUN,
+        "waits for a browser; tests/viz/test_browser.py streams a live env into chromium",
     ),
     "python -m train enjoy --agent zoo:keep-lane --scenario adaptive:a08_lead_turns_left_at_junction --video drive.mp4": (
-        NOT_RUN, "tests/viz/test_enjoy.py runs it on a01 with --max-steps 40 and reads the video back",
+        NOT_RUN,
+        "tests/viz/test_enjoy.py runs it on a01 with --max-steps 40 and reads the video back",
     ),
     "smarts replay info trajectories.csv --format ngsim --json": (
-        NOT_RUN, "needs the user's NGSIM file; tests/replay/test_replay_cli.py runs it on a CSV it writes",
+        NOT_RUN,
+        "needs the user's NGSIM file; tests/replay/test_replay_cli.py runs it on a CSV it writes",
     ),
     "smarts replay show trajectories.csv --format ngsim --swap-xy --flip-y --map road.net.xml --out replay.mp4": (
-        NOT_RUN, "needs the user's files; tests/replay/test_replay_cli.py renders a CSV it writes to .png, .gif and .mp4",
+        NOT_RUN,
+        "needs the user's files; tests/replay/test_replay_cli.py renders a CSV it writes to .png, .gif and .mp4",
     ),
 }
 

@@ -106,14 +106,18 @@ def test_device_and_sim_device_name_where_the_learner_and_the_torch_stages_run(t
     path = tmp_path / "config.json"
     path.write_text(json.dumps(cfg.model_dump()))
     assert load_config(path=path).device == "cuda:1"
-    with pytest.raises(ConfigError, match=r"--device: device: unknown device 'gpu'; expected one of cpu, torch-cpu, cuda, cuda:N"):
+    with pytest.raises(
+        ConfigError, match=r"--device: device: unknown device 'gpu'; expected one of cpu, torch-cpu, cuda, cuda:N"
+    ):
         load_config("platoon", overrides={"backend": "batched", "device": "gpu"})
     for device in ("cuda", "torch-cpu"):  # both backends build the one batched env, with its torch stages
         assert load_config("platoon", overrides={"backend": "per_env", "device": device}).device == device
     # ...but training refuses it, before any run folder is made, where torch sees no GPU.
     if not torch.cuda.is_available():
         out = tmp_path / "run"
-        assert main(["ppo", "--task", "platoon", "--backend", "batched", "--device", "cuda", "--out-dir", str(out)]) == 2
+        assert (
+            main(["ppo", "--task", "platoon", "--backend", "batched", "--device", "cuda", "--out-dir", str(out)]) == 2
+        )
         assert "device: 'cuda' asks for a GPU but no CUDA GPU is visible" in capsys.readouterr().err
         assert not out.exists()
         for lib in ("torchrl", "sb3"):

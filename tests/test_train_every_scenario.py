@@ -57,7 +57,9 @@ def train_and_benchmark(tmp_path: Path, task: str, suite: Path, options: list[st
 
 @pytest.mark.parametrize("task", ["platoon", "drive"])
 def test_every_scenario_trains_and_is_benchmarked_with_all_sensors_and_v2v(tmp_path, task):
-    blob = train_and_benchmark(tmp_path, task, short_suite(tmp_path, task), ["--interface", ALL_SENSORS, "--comms", V2V])
+    blob = train_and_benchmark(
+        tmp_path, task, short_suite(tmp_path, task), ["--interface", ALL_SENSORS, "--comms", V2V]
+    )
     assert blob["comms"]["message_size"] == 4 and blob["interface"]["lidar"]["rays"] == 16
     keys = set(blob["layout"]["keys"])
     assert {"messages", "message_mask"} <= keys and len(blob["action"]["low"]) == 2 + 4  # commands, then payload

@@ -402,7 +402,9 @@ def test_the_slot_collector_plays_what_the_torchrl_env_plays():
             td = env.step(td.set("action", batch.action[t].clone()))
             nxt = td["next"]
             assert torch.equal(nxt["reward"][:, 0], batch.reward[t]), t
-            assert torch.equal(nxt["done"][:, 0], batch.done[t]) and torch.equal(nxt["terminated"][:, 0], batch.terminated[t])
+            assert torch.equal(nxt["done"][:, 0], batch.done[t]) and torch.equal(
+                nxt["terminated"][:, 0], batch.terminated[t]
+            )
             next_obs.append(flat(dict(nxt["observation"].items())))
             td = env.step_mdp(td)
             if bool(td["done"].any()):
@@ -444,12 +446,12 @@ def test_the_update_reads_the_values_and_log_probabilities_of_the_acting_policy(
         following[batch.own_next] = parts.normalizer(batch.own_next_obs)
         expected_next = parts.critic_net(following).squeeze(-1)
         actor, _ = loss_modules(parts)
-        dist = actor.get_dist(TensorDict({FLAT_OBSERVATION: x.reshape(-1, x.shape[-1])}, batch_size=[x.shape[0] * x.shape[1]]))
+        dist = actor.get_dist(
+            TensorDict({FLAT_OBSERVATION: x.reshape(-1, x.shape[-1])}, batch_size=[x.shape[0] * x.shape[1]])
+        )
         log_prob = dist.log_prob(batch.action.reshape(-1, batch.action.shape[-1]))
     assert torch.allclose(value, expected, atol=1e-5) and torch.allclose(next_value, expected_next, atol=1e-5)
     assert torch.allclose(log_prob, batch.log_prob.reshape(-1), atol=1e-4)
-
-
 
 
 @pytest.mark.parametrize("lib", ["torchrl", "sb3"])

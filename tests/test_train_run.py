@@ -137,7 +137,9 @@ def test_resume_continues_from_the_saved_step_and_the_folder_is_otherwise_never_
         ("sb3", "sb3", ["--controller", "direct"], "controller"),
     ],
 )
-def test_resume_refuses_another_library_or_setup_before_touching_the_run(tmp_path, capsys, trained, resumed, flags, what):
+def test_resume_refuses_another_library_or_setup_before_touching_the_run(
+    tmp_path, capsys, trained, resumed, flags, what
+):
     base = ["ppo", "--task", "platoon", "--scenarios", "adaptive:a01_straight_free", *SMALL, "--eval-episodes", "0"]
     assert main([*base, "--lib", trained, "--total-steps", "64", "--out-dir", str(tmp_path / "first")]) == 0
     second = tmp_path / "second"

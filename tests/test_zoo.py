@@ -59,8 +59,12 @@ def test_stand_still_brakes_gently_to_a_stop_in_its_lane(tmp_path):
     )
     result = run_episode(Job("zoo:stand-still", str(suite), 0, 0, 0, str(tmp_path / "log.npz")))
     straight_road = tmp_path / "straight.yaml"
-    straight_road.write_text(suite.read_text().replace("builtin:highway_merge_exit", "builtin:straight_2lane")
-                             .replace("road: ramp, offset: 80", "road: main, offset: 10").replace("main_4, offset: 50", "main, offset: 250"))
+    straight_road.write_text(
+        suite.read_text()
+        .replace("builtin:highway_merge_exit", "builtin:straight_2lane")
+        .replace("road: ramp, offset: 80", "road: main, offset: 10")
+        .replace("main_4, offset: 50", "main, offset: 250")
+    )
     run_episode(Job("zoo:stand-still", str(straight_road), 0, 0, 0, str(tmp_path / "straight.npz")))
     assert score_episode(read_episode(tmp_path / "straight.npz"))["cost.comfort"] == 0.0
     assert result["failure"] is None and result["action_space"] == "relative_target_pose"
@@ -72,6 +76,6 @@ def test_stand_still_brakes_gently_to_a_stop_in_its_lane(tmp_path):
     stopped = np.flatnonzero(trace.speed == 0.0)
     straight = trace.time < 2.0  # before the ramp's polyline corner (a lateral spike for any lane follower)
     assert np.abs(trace.accel_lat[straight]).max() <= 1.47 and np.abs(trace.jerk_lat[straight]).max() <= 0.9
-    assert stopped.size and (trace.speed[stopped[0]:] == 0.0).all() and trace.time[stopped[0]] < 10.5
+    assert stopped.size and (trace.speed[stopped[0] :] == 0.0).all() and trace.time[stopped[0]] < 10.5
     assert np.abs(trace.lane_offset).max() < 0.3 and not trace.off_road.any()
     assert np.ptp(trace.heading[: stopped[0]]) > 0.01  # the ramp curves: it steered along it

@@ -1,13 +1,13 @@
 """``python -m train <command>``: train PPO, evaluate checkpoints, run the benchmark.
 
-    python -m train ppo --task platoon [--action-space rtp|continuous] [--total-steps N] [--envs E]
-    python -m train ppo --task platoon --lib sb3 --resume runs/train/platoon/last.pt
-    python -m train eval --agent runs/train/platoon/latest --suite adaptive     (a run folder: its best.pt)
-    python -m train benchmark --agent zoo:keep-lane --agent zoo:random --suite collaborative
-        (each run in a new folder runs/benchmark/<suite>/001, 002, ...; latest -> the newest)
-    python -m train enjoy --agent zoo:keep-lane --scenario adaptive:a01_straight_free --video out.mp4 [--viz]
-    add --ray-address auto|local|HOST:PORT to run episodes (benchmark, eval) or collectors (ppo) on Ray
-    python -m train trajectories | aid-predictor | tf-bc | vcr-classifier   (the planners' learned parts)
+python -m train ppo --task platoon [--action-space rtp|continuous] [--total-steps N] [--envs E]
+python -m train ppo --task platoon --lib sb3 --resume runs/train/platoon/last.pt
+python -m train eval --agent runs/train/platoon/latest --suite adaptive     (a run folder: its best.pt)
+python -m train benchmark --agent zoo:keep-lane --agent zoo:random --suite collaborative
+    (each run in a new folder runs/benchmark/<suite>/001, 002, ...; latest -> the newest)
+python -m train enjoy --agent zoo:keep-lane --scenario adaptive:a01_straight_free --video out.mp4 [--viz]
+add --ray-address auto|local|HOST:PORT to run episodes (benchmark, eval) or collectors (ppo) on Ray
+python -m train trajectories | aid-predictor | tf-bc | vcr-classifier   (the planners' learned parts)
 """
 
 from __future__ import annotations
@@ -157,7 +157,9 @@ def _benchmark_options(parser: argparse.ArgumentParser, agent_required: bool = F
 
 def _ppo_parser(ppo: argparse.ArgumentParser, argv: list[str] | None) -> None:
     ppo.epilog = PPO_EPILOG
-    ppo.add_argument("--config", default=None, help="a training config YAML (or a run's config.json) instead of the task's")
+    ppo.add_argument(
+        "--config", default=None, help="a training config YAML (or a run's config.json) instead of the task's"
+    )
     ppo.add_argument("--quiet", action="store_true", help="no progress bar")
     ppo.add_argument("--resume", default=None,
                      help="continue a run from one of its .pt checkpoints (e.g. runs/train/platoon/last.pt), "

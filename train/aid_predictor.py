@@ -122,7 +122,9 @@ def evaluate(net, data: dict[str, torch.Tensor], batch: int = 256) -> dict[str, 
         for i in range(0, len(data["ego"]), batch):
             ego, nb, fut, mask = (data[k][i : i + batch] for k in ("ego", "neighbours", "future", "mask"))
             trajs, scores = net(ego, nb)
-            top = torch.gather(trajs, 2, scores.argmax(-1)[:, :, None, None, None].expand(-1, -1, 1, FUT, 3))[:, :, 0, :, :2]
+            top = torch.gather(trajs, 2, scores.argmax(-1)[:, :, None, None, None].expand(-1, -1, 1, FUT, 3))[
+                :, :, 0, :, :2
+            ]
             cur = nb[:, :, -1]
             cv = cur[:, :, None, :2] + cur[:, :, None, 3:5] * t[None, None, :, None]
             end = mask[:, :, -1] > 0

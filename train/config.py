@@ -87,8 +87,7 @@ class Section(Schema):
 def _section(settings: type, name: str, doc: str, kinds: dict[str, Any], default: Any) -> type[Section]:
     """A section model with the fields (and defaults) of the dataclass ``settings``."""
     fields = {
-        f.name: kinds[f.name] if f.name in kinds else (default, Field(f.default))
-        for f in dataclasses.fields(settings)
+        f.name: kinds[f.name] if f.name in kinds else (default, Field(f.default)) for f in dataclasses.fields(settings)
     }
     return create_model(name, __base__=Section, __doc__=doc, __module__=__name__, **fields)
 
@@ -99,8 +98,10 @@ RewardSection = _section(
     "Task reward weights and limits (``smarts.env.task_rewards.RewardWeights`` fields).",
     {
         "task": (Task | None, Field(None, description="The task whose reward terms count; None: the config's task.")),
-        **{name: (Positive, Field(getattr(RewardWeights, name)))
-           for name in ("headway", "max_time_gap", "jerk_long_max", "jerk_lat_max", "accel_long_max", "accel_lat_max")},
+        **{
+            name: (Positive, Field(getattr(RewardWeights, name)))
+            for name in ("headway", "max_time_gap", "jerk_long_max", "jerk_lat_max", "accel_long_max", "accel_lat_max")
+        },
     },  # fmt: skip
     NonNegative,
 )
@@ -108,8 +109,12 @@ LaneRelativeSection = _section(
     LaneRelativeParams,
     "LaneRelativeSection",
     "How lane-relative commands drive (``smarts.dynamics.lane_relative.LaneRelativeParams`` fields).",
-    {"threshold": (Annotated[float, _rule(lambda v: 0 < v < 1, "expected a number in (0, 1)")],
-                   Field(LaneRelativeParams.threshold))},  # fmt: skip
+    {
+        "threshold": (
+            Annotated[float, _rule(lambda v: 0 < v < 1, "expected a number in (0, 1)")],
+            Field(LaneRelativeParams.threshold),
+        )
+    },  # fmt: skip
     Positive,
 )
 
@@ -118,7 +123,9 @@ LaneRelativeSection = _section(
 class TrainConfig(Schema):
     """A training run's settings (``configs/train/<task>.yaml``, recorded in its config.json)."""
 
-    task: Task = Field("platoon", description="platoon (follow a lead vehicle) | drive (turn at intersections, reach the exit).")
+    task: Task = Field(
+        "platoon", description="platoon (follow a lead vehicle) | drive (turn at intersections, reach the exit)."
+    )
     scenarios: list[str] = Field(
         default_factory=list,
         description="suite:scenario names (e.g. adaptive:a01_straight_free), suite:* for every scenario of a suite, "
@@ -143,7 +150,8 @@ class TrainConfig(Schema):
         "{max_jerk: 2.0}); recorded in checkpoints so evaluation drives the same.",
     )
     interface: dict[str, Any] = Field(
-        default_factory=dict, description="The observation interface (smarts.sensors.interface fields, e.g. {lead: true})."
+        default_factory=dict,
+        description="The observation interface (smarts.sensors.interface fields, e.g. {lead: true}).",
     )
     reward: RewardSection = Field(
         default_factory=RewardSection,
@@ -208,7 +216,8 @@ class TrainConfig(Schema):
         "(0: never).",
     )
     action_bound_coeff: NonNegative = Field(
-        1.0, description="Weight of the loss on the Gaussian's mean outside the action box (train.ppo.action_bound_loss)."
+        1.0,
+        description="Weight of the loss on the Gaussian's mean outside the action box (train.ppo.action_bound_loss).",
     )
     hidden: list[int] = Field(default_factory=lambda: [128, 128], description="Hidden layer sizes of actor and critic.")
     init_log_std: list[float] = Field(
@@ -223,7 +232,9 @@ class TrainConfig(Schema):
         "part with each action; recorded in the checkpoint so evaluation runs with it. null: each scenario's own.",
     )
     obs_norm: bool = Field(True, description="Normalise observations by running statistics (kept in the checkpoint).")
-    reward_scaling: bool = Field(True, description="Divide rewards by the running standard deviation of the discounted return.")
+    reward_scaling: bool = Field(
+        True, description="Divide rewards by the running standard deviation of the discounted return."
+    )
     obs_clip: Positive = Field(5.0, description="Normalised inputs are clipped to +-obs_clip.")
     obs_std_floor: Positive = Field(0.1, description="No feature is divided by less than this.")
     eval_every: NonNegativeInt = Field(
@@ -231,7 +242,9 @@ class TrainConfig(Schema):
         description="Env steps between benchmark evaluations on held-out seeds (0: only at the end); best.pt is the "
         "checkpoint with the highest S_bench among them.",
     )
-    eval_episodes: NonNegativeInt = Field(1, description="Episodes per scenario of each benchmark evaluation (0: none).")
+    eval_episodes: NonNegativeInt = Field(
+        1, description="Episodes per scenario of each benchmark evaluation (0: none)."
+    )
     eval_suite: str | None = Field(
         None,
         description="The benchmark suite of the evaluations (a name or a YAML path); null: the task's own (adaptive "
@@ -267,7 +280,8 @@ class TrainConfig(Schema):
         "refused. null: a new numbered folder under runs_dir (or, with --resume, the checkpoint's own folder).",
     )
     ray_address: str | None = Field(
-        None, description="Run the collectors as Ray actors: auto | local | HOST:PORT (needs the ray extra); null: no Ray."
+        None,
+        description="Run the collectors as Ray actors: auto | local | HOST:PORT (needs the ray extra); null: no Ray.",
     )
 
     # ------------------------------------------------------------------ cross-field and nested checks
@@ -351,7 +365,9 @@ class TrainConfig(Schema):
             interface_from_dict(data)
         except ValueError as err:  # InterfaceError names the dotted field: keep the part below interface
             path, problem = getattr(err, "path", ""), getattr(err, "problem", str(err))
-            raise ValueError(f"{path[len('interface.'):]}: {problem}" if path.startswith("interface.") else problem) from None
+            raise ValueError(
+                f"{path[len('interface.') :]}: {problem}" if path.startswith("interface.") else problem
+            ) from None
         return data
 
     @field_validator("reward", "lane_relative")
@@ -479,7 +495,9 @@ def load_config(task: str | None = None, path: str | Path | None = None, overrid
     try:
         return TrainConfig.model_validate(values)
     except ValidationError as exc:
-        lines = [describe(TrainConfig, p, origin.get(p["loc"][0], source) if p["loc"] else source) for p in exc.errors()]
+        lines = [
+            describe(TrainConfig, p, origin.get(p["loc"][0], source) if p["loc"] else source) for p in exc.errors()
+        ]
         raise ConfigError("\n".join(lines)) from None
 
 

@@ -367,23 +367,33 @@ def add_options(p: argparse.ArgumentParser, argv: list[str] | None = None) -> No
     p.description = p.description[:1].upper() + p.description[1:]
     p.epilog = f"examples:\n{examples}"
     p.add_argument("--agent", required=True, help="zoo:<name>, a checkpoint .pt or a training run folder (its best.pt)")
-    p.add_argument("--scenario", required=True, help="suite:scenario (adaptive:a01_straight_free), a library name or a YAML file")
+    p.add_argument(
+        "--scenario", required=True, help="suite:scenario (adaptive:a01_straight_free), a library name or a YAML file"
+    )
     p.add_argument("--episodes", type=int, default=1, help="episodes to run")
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode")
-    p.add_argument("--max-steps", type=int, default=None, help="stop an episode after this many steps (default: its end)")
+    p.add_argument(
+        "--max-steps", type=int, default=None, help="stop an episode after this many steps (default: its end)"
+    )
     p.add_argument("--video", type=Path, default=None, help="write the episodes to this .mp4")
     p.add_argument("--fps", type=int, default=DEFAULT_FPS, help="video frames per second")
-    p.add_argument("--tensorboard", type=Path, default=None, help="add each episode as a video to this TensorBoard log folder")
+    p.add_argument(
+        "--tensorboard", type=Path, default=None, help="add each episode as a video to this TensorBoard log folder"
+    )
     p.add_argument("--viz", action="store_true", help="serve the viewer here (127.0.0.1) and stream the episodes to it")
     p.add_argument("--port", type=int, default=8765, help="viewer port with --viz")
     p.add_argument("--wait", type=float, default=60.0, help="with --viz: seconds to wait for a browser first")
     p.add_argument("--realtime", action=argparse.BooleanOptionalAction, default=True,
                    help="with --viz: run at the scenario's own step rate")  # fmt: skip
-    p.add_argument("--record", type=Path, default=None, help="also write viewer recordings of the episodes to this folder")
+    p.add_argument(
+        "--record", type=Path, default=None, help="also write viewer recordings of the episodes to this folder"
+    )
     p.add_argument("--task", choices=["platoon", "drive", "scenario"], default=None,
                    help="the reward told: a training task's, or the scenario's default (default: the run's own from "
                         "the config.json beside a checkpoint, else the suite's task)")  # fmt: skip
-    p.add_argument("--follow", default=None, metavar="AGENT", help="the agent the video camera follows (default: the first)")
+    p.add_argument(
+        "--follow", default=None, metavar="AGENT", help="the agent the video camera follows (default: the first)"
+    )
     p.set_defaults(run=_run)
 
 

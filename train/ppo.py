@@ -607,7 +607,9 @@ class Learner:
             for minibatch in self.minibatches(flat_valid, columns):
                 losses = self.loss(minibatch)
                 mean, scale = parts.head.take_last()  # the actor's pass inside the loss
-                kl = float(kl_estimate(mean.detach(), scale.detach(), minibatch["action"], minibatch["action_log_prob"]))
+                kl = float(
+                    kl_estimate(mean.detach(), scale.detach(), minibatch["action"], minibatch["action_log_prob"])
+                )
                 if cfg.target_kl and kl > cfg.target_kl:
                     stop = True  # the policy has moved far enough on this batch (as SB3 does)
                     break

@@ -336,7 +336,9 @@ def check_resume(path: Path, cfg: TrainConfig) -> dict:
     library = LIBRARY_OF_FORMAT.get(checkpoint_format(blob))
     if library is None:
         found = checkpoint_format(blob) or type(blob).__name__
-        raise CheckpointError(f"{path}: expected a checkpoint of format {' or '.join(LIBRARY_OF_FORMAT)}, found {found!r}")
+        raise CheckpointError(
+            f"{path}: expected a checkpoint of format {' or '.join(LIBRARY_OF_FORMAT)}, found {found!r}"
+        )
     if library != cfg.lib:
         raise CheckpointError(f"{path}: trained with library {library!r}; this run uses {cfg.lib!r}")
     if library == "torchrl":
@@ -475,7 +477,7 @@ def _evaluate(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int, 
             writer.add_scalar(f"eval/{name}", value, step)
     for figure in sorted((out / "plots").glob("trajectories_*.png"))[:3]:
         image = np.asarray(Image.open(figure).convert("RGB"))
-        writer.add_image(f"eval_trajectories/{figure.stem[len('trajectories_'):]}", image, step, dataformats="HWC")
+        writer.add_image(f"eval_trajectories/{figure.stem[len('trajectories_') :]}", image, step, dataformats="HWC")
     # A follow-camera video (HUD, legend) of an informative scenario (a junction, a merge or an exit;
     # or the config's eval_video_scenario once it has one) at its first held-out seed, played by
     # TensorBoard's Images tab.

@@ -159,7 +159,9 @@ def train(args: argparse.Namespace) -> dict:
         situations = {n: tuple(v) for n, v in loaded.items() if n.startswith("situations_")}
     else:
         data = demonstrations(scenarios, args.seeds, not args.quiet)
-        situations = hindsight(args.situations, args.situation_steps, args.horizon, not args.quiet) if args.situations else {}
+        situations = (
+            hindsight(args.situations, args.situation_steps, args.horizon, not args.quiet) if args.situations else {}
+        )
         if cache is not None:
             cache.parent.mkdir(parents=True, exist_ok=True)
             np.savez_compressed(cache, **{f"{n}/{i}": v for part in (data, situations) for n, d in part.items()
@@ -177,7 +179,9 @@ def train(args: argparse.Namespace) -> dict:
     held_sets = {"suites": [n for n in held if n not in situations], "situations": [n for n in held if n in situations]}
     held_sets = {k: (torch.from_numpy(np.concatenate([data[n][0] for n in v])), torch.from_numpy(np.concatenate([data[n][1] for n in v])))
                  for k, v in held_sets.items() if v}  # fmt: skip
-    held_flags = torch.from_numpy(np.concatenate([situations[n][2] for n in held if n in situations] or [np.zeros(0, dtype=bool)]))
+    held_flags = torch.from_numpy(
+        np.concatenate([situations[n][2] for n in held if n in situations] or [np.zeros(0, dtype=bool)])
+    )
     train_hindsight = int(sum(situations[n][2].sum() for n in names if n in situations))
     print(f"samples: {len(train_y)} train ({float((train_y == 0).float().mean()):.1%} stop), held out "
           f"{ {k: len(v[1]) for k, v in held_sets.items()} } from {held}")  # fmt: skip
@@ -234,10 +238,17 @@ def train(args: argparse.Namespace) -> dict:
 
 def add_options(p: argparse.ArgumentParser, argv: list[str] | None = None) -> None:
     """The options of ``python -m train tf-bc`` (its command is listed in ``train.__main__``)."""
-    p.add_argument("--suite", action="append", default=None, help="suites whose scenarios give demonstrations (default: both)")
+    p.add_argument(
+        "--suite", action="append", default=None, help="suites whose scenarios give demonstrations (default: both)"
+    )
     p.add_argument("--seeds", type=int, default=3, help="episodes per scenario")
     p.add_argument("--out", default="runs/train/tf-bc", help="output folder (TensorBoard, final.pt)")
-    p.add_argument("--situations", type=int, default=1000, help="danger situations driven by TF's rules, labelled in hindsight (0: none)")
+    p.add_argument(
+        "--situations",
+        type=int,
+        default=1000,
+        help="danger situations driven by TF's rules, labelled in hindsight (0: none)",
+    )
     p.add_argument("--situation-steps", type=int, default=100, help="steps per danger situation")
     p.add_argument("--horizon", type=int, default=20, help="steps before a collision labelled stop")
     p.add_argument("--hindsight-weight", type=float, default=20.0, help="how much more often hindsight stops are drawn")

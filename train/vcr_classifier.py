@@ -87,7 +87,9 @@ def explore(env, obs: dict, steps: int, rng: np.random.Generator) -> tuple[list,
     return rasters, numbers, labels
 
 
-def _cap_safe(rasters: list, numbers: list, labels: list, rng: np.random.Generator, ratio: int) -> dict[str, np.ndarray]:
+def _cap_safe(
+    rasters: list, numbers: list, labels: list, rng: np.random.Generator, ratio: int
+) -> dict[str, np.ndarray]:
     """At most ``ratio`` safe samples per collision sample (at least 200)."""
     labels_a = np.array(labels, dtype=np.int64)
     safe, other = np.flatnonzero(labels_a == 5), np.flatnonzero(labels_a != 5)
@@ -133,7 +135,13 @@ def following_situation(rng: np.random.Generator) -> dict:
     cars = [road_car(lane, ego_at, ego_v)]
     gap = float(rng.uniform(4.0, 50.0))
     kind = rng.choice(["stopped", "braking", "driving"], p=[0.5, 0.3, 0.2])
-    lead_v = 0.0 if kind == "stopped" else float(rng.uniform(2.0, 8.0)) if kind == "braking" else float(rng.uniform(3.0, 12.0))
+    lead_v = (
+        0.0
+        if kind == "stopped"
+        else float(rng.uniform(2.0, 8.0))
+        if kind == "braking"
+        else float(rng.uniform(3.0, 12.0))
+    )
     cars.append(road_car(lane, ego_at + 5.0 + gap, lead_v, "zoo:keep-lane" if kind == "driving" else "zoo:stand-still"))
     for side in [s for s in (lane - 1, lane + 1) if 0 <= s < lanes]:
         if rng.random() < 0.6:
@@ -154,7 +162,9 @@ def generate_situations(count: int, steps: int, progress: bool = True) -> dict[s
     rng = np.random.default_rng(1)
     groups: dict[str, tuple[list, list, list]] = {}
     for k in Bar(range(count), desc="vcr situations", disable=not progress):
-        env, obs = situation_env(f"situation_{k}", following_situation(rng), interface, "vcr-classifier situations", seed=k)
+        env, obs = situation_env(
+            f"situation_{k}", following_situation(rng), interface, "vcr-classifier situations", seed=k
+        )
         parts = groups.setdefault(f"situations_{k // 10:03d}", ([], [], []))
         for part, new in zip(parts, explore(env, obs, steps, rng)):
             part.extend(new)
@@ -220,7 +230,9 @@ def train(args: argparse.Namespace) -> dict:
         metrics = {}
         with torch.no_grad():
             for which, (rasters, numbers, labels) in held_sets.items():
-                logits = torch.cat([net(rasters[i : i + 512], numbers[i : i + 512]) for i in range(0, len(labels), 512)])
+                logits = torch.cat(
+                    [net(rasters[i : i + 512], numbers[i : i + 512]) for i in range(0, len(labels), 512)]
+                )
                 p = torch.softmax(logits, -1)[:, 0]
                 pred = logits.argmax(-1)
                 truth = labels == 0

@@ -31,16 +31,36 @@ CHECKPOINT = "checkpoint"
 ZOO: dict[str, tuple[str, str, str]] = {
     "keep-lane": ("agents.keep_lane", "KeepLanePolicy", "IDM speed on the route's waypoints"),
     "random": ("agents.random_agent", "RandomPolicy", "uniform random relative-pose steps"),
-    "stand-still": ("agents.stand_still", "StandStillPolicy", "brakes gently to a stop and stays (the do-nothing floor)"),
+    "stand-still": (
+        "agents.stand_still",
+        "StandStillPolicy",
+        "brakes gently to a stop and stays (the do-nothing floor)",
+    ),
     "platoon-rtp": (CHECKPOINT, "checkpoints/platoon-rtp.pt", "PPO following, RelativeTargetPose (cards/)"),
     "drive": (CHECKPOINT, "checkpoints/drive.pt", "PPO turning at intersections, RelativeTargetPose (cards/)"),
     "platoon-c": (CHECKPOINT, "checkpoints/platoon-c.pt", "PPO following, Continuous on the pybullet car (cards/)"),
     "tf": ("zoo.planners", "tf", "TF driving rules with the behaviour-cloned stop/move veto (cards/tf.md)"),
-    "tf-rules": ("agents.planners.tf", "TFPlanner", "TF driving rules without the learned stop/move veto (cards/tf.md)"),
-    "vcr": ("zoo.planners", "vcr", "VCR Bezier follower, speed from the learned event classifier over rasters (cards/vcr.md)"),
-    "vcr-ttc": ("agents.planners.vcr", "VCRPlanner", "VCR Bezier follower, speed from a time-to-collision rule (cards/vcr.md)"),
+    "tf-rules": (
+        "agents.planners.tf",
+        "TFPlanner",
+        "TF driving rules without the learned stop/move veto (cards/tf.md)",
+    ),
+    "vcr": (
+        "zoo.planners",
+        "vcr",
+        "VCR Bezier follower, speed from the learned event classifier over rasters (cards/vcr.md)",
+    ),
+    "vcr-ttc": (
+        "agents.planners.vcr",
+        "VCRPlanner",
+        "VCR Bezier follower, speed from a time-to-collision rule (cards/vcr.md)",
+    ),
     "aid": ("zoo.planners", "aid", "AID Frenet sampling planner over its learned motion predictor (cards/aid.md)"),
-    "aid-cv": ("agents.planners.aid", "AIDPlanner", "AID Frenet sampling planner, constant-velocity prediction (cards/aid.md)"),
+    "aid-cv": (
+        "agents.planners.aid",
+        "AIDPlanner",
+        "AID Frenet sampling planner, constant-velocity prediction (cards/aid.md)",
+    ),
 }
 """name -> (module, class, one-line description)."""
 

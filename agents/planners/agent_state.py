@@ -60,7 +60,9 @@ class AgentState:
         travel = float(np.hypot(action[0], action[1]))
         # the speed the step asks for, as far as the vehicle's limits let it change in one step: a
         # stop commanded at speed is a brake, and the next observation still moves
-        self.expect_speed = float(np.clip(travel / dt, self.speed - SPEED_CHANGE[0] * dt, self.speed + SPEED_CHANGE[1] * dt))
+        self.expect_speed = float(
+            np.clip(travel / dt, self.speed - SPEED_CHANGE[0] * dt, self.speed + SPEED_CHANGE[1] * dt)
+        )
         self.expect_route = float(goal[Goal.ROUTE_LEFT]) - travel
         self.steps += 1
 

@@ -66,7 +66,9 @@ class AIDState(AgentState):
 class Candidate:
     """One sampled trajectory: poses [T, 3] in the ego frame, Frenet samples and its path."""
 
-    def __init__(self, path: int, accel: float, xy: np.ndarray, yaw: np.ndarray, s: np.ndarray, d: np.ndarray, v: np.ndarray):
+    def __init__(
+        self, path: int, accel: float, xy: np.ndarray, yaw: np.ndarray, s: np.ndarray, d: np.ndarray, v: np.ndarray
+    ):
         self.path, self.accel = path, accel
         self.xy, self.yaw, self.s, self.d, self.v = xy, yaw, s, d, v
 
@@ -193,7 +195,7 @@ class LearnedPredictor:
         pose = state.odometry.pose
         ego = np.zeros((HISTORY, 4))
         hist = np.array(state.ego_history)
-        ego[HISTORY - len(hist):] = hist
+        ego[HISTORY - len(hist) :] = hist
         nb = np.zeros((5, HISTORY, 4))
         for j, r in enumerate(picked[:5]):
             nb[j] = state.tracker.history(int(state.ids[r]), HISTORY)[:, :4]

@@ -44,9 +44,13 @@ def collision_forecast(
     t = np.arange(steps + 1) * dt  # [S]
     nx = nb_xy[:, 0:1] + np.cos(nb_heading)[:, None] * nb_speed[:, None] * t  # [N, S]
     ny = nb_xy[:, 1:2] + np.sin(nb_heading)[:, None] * nb_speed[:, None] * t
-    corners = box_corners(nx, ny, np.broadcast_to(np.asarray(nb_heading)[:, None], nx.shape),
-                          np.broadcast_to(np.asarray(nb_length)[:, None], nx.shape),
-                          np.broadcast_to(np.asarray(nb_width)[:, None], nx.shape))  # [N, S, 4, 2]
+    corners = box_corners(
+        nx,
+        ny,
+        np.broadcast_to(np.asarray(nb_heading)[:, None], nx.shape),
+        np.broadcast_to(np.asarray(nb_length)[:, None], nx.shape),
+        np.broadcast_to(np.asarray(nb_width)[:, None], nx.shape),
+    )  # [N, S, 4, 2]
     ex = ego_speed * t[None, :, None]  # ego centre moves along +x
     rel_x = corners[..., 0] - ex
     inside = (

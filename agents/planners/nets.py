@@ -63,7 +63,9 @@ class Block(nn.Module):
         super().__init__()
         self.self_attention = nn.MultiheadAttention(d, heads, dropout=dropout, batch_first=True)
         self.norm_1, self.norm_2 = nn.LayerNorm(d), nn.LayerNorm(d)
-        self.ffn = nn.Sequential(nn.Linear(d, ffn), nn.GELU(), nn.Dropout(dropout), nn.Linear(ffn, d), nn.Dropout(dropout))
+        self.ffn = nn.Sequential(
+            nn.Linear(d, ffn), nn.GELU(), nn.Dropout(dropout), nn.Linear(ffn, d), nn.Dropout(dropout)
+        )
 
     def forward(self, x: torch.Tensor, pad: torch.Tensor) -> torch.Tensor:
         attended, _ = self.self_attention(x, x, x, key_padding_mask=pad)
@@ -82,7 +84,8 @@ class AIDPredictor(nn.Module):
         self.time_blocks = nn.ModuleList(Block(d, heads, ffn, dropout) for _ in range(rounds))
         self.agent_blocks = nn.ModuleList(Block(d, heads, ffn, dropout) for _ in range(rounds))
         self.decoders = nn.ModuleList(
-            nn.Sequential(nn.Dropout(dropout), nn.Linear(d, d), nn.ELU(), nn.Linear(d, FUTURE * 3)) for _ in range(MODES)
+            nn.Sequential(nn.Dropout(dropout), nn.Linear(d, d), nn.ELU(), nn.Linear(d, FUTURE * 3))
+            for _ in range(MODES)
         )
         self.encode = nn.Linear(FUTURE * 3, d)
         self.scorers = nn.ModuleList(
@@ -107,8 +110,13 @@ class AIDPredictor(nn.Module):
         # (the original added them to its current pose); a small CPU budget learns the residual.
         last = neighbours[:, :, -1]  # [B, N, 5]: x, y, heading, vx, vy
         t = torch.arange(1, FUTURE + 1, dtype=last.dtype, device=last.device) * 0.1
-        base = torch.cat([last[:, :, None, :2] + last[:, :, None, 3:5] * t[:, None],
-                          last[:, :, None, 2:3].expand(-1, -1, FUTURE, 1)], dim=-1)  # [B, N, 30, 3]
+        base = torch.cat(
+            [
+                last[:, :, None, :2] + last[:, :, None, 3:5] * t[:, None],
+                last[:, :, None, 2:3].expand(-1, -1, FUTURE, 1),
+            ],
+            dim=-1,
+        )  # [B, N, 30, 3]
         trajs, scores = [], []
         for decoder, scorer in zip(self.decoders, self.scorers):
             offsets = decoder(feature)  # [B, N, 90]

@@ -109,7 +109,9 @@ class TFPlanner(StatefulPlanner):
         return TFState()
 
     # ------------------------------------------------------------------ rule forecast
-    def hits(self, row: dict[str, np.ndarray], rows: np.ndarray, l_front: float, w_left: float, w_right: float) -> np.ndarray:
+    def hits(
+        self, row: dict[str, np.ndarray], rows: np.ndarray, l_front: float, w_left: float, w_right: float
+    ) -> np.ndarray:
         ego = row["ego"].astype(np.float64)
         if rows.size == 0:
             return rows

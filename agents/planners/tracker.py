@@ -59,7 +59,9 @@ class NeighbourTracker:
         self.frame += 1
         present = np.flatnonzero(np.asarray(mask) > 0)
         ids = np.full(len(mask), -1, dtype=np.int64)
-        states = self.observed_states(pose, ego_speed, np.asarray(neighbours)[present]) if present.size else np.zeros((0, 6))
+        states = (
+            self.observed_states(pose, ego_speed, np.asarray(neighbours)[present]) if present.size else np.zeros((0, 6))
+        )
         live = list(self.tracks.values())
         pairs: list[tuple[float, int, int]] = []
         for ti, track in enumerate(live):

@@ -139,7 +139,9 @@ class EpisodeRecorder:
         point = sim.mission_arrays.paths[agents, sim.route_index[agents], 0]  # x, y, heading
         # Lateral (cross-track) distance to the matched route point's line; the along-track part
         # is already in the route progress.
-        off_route = np.abs(-(t.x[rows] - point[:, 0]) * np.sin(point[:, 2]) + (t.y[rows] - point[:, 1]) * np.cos(point[:, 2]))
+        off_route = np.abs(
+            -(t.x[rows] - point[:, 0]) * np.sin(point[:, 2]) + (t.y[rows] - point[:, 1]) * np.cos(point[:, 2])
+        )
         return np.maximum(self._goal_s[agents] - sim.route_progress[agents], 0.0) + off_route
 
     def _goal_along_route(self) -> np.ndarray:
@@ -180,7 +182,9 @@ class EpisodeRecorder:
                 out[k] = True
                 continue
             front = float(t.s[r]) + 0.5 * float(t.length[r])
-            out[k] = front >= float(rm.lane_length[lane]) - 1e-6 and abs(float(t.t[r])) <= 0.5 * float(rm.lane_width[lane])
+            out[k] = front >= float(rm.lane_length[lane]) - 1e-6 and abs(float(t.t[r])) <= 0.5 * float(
+                rm.lane_width[lane]
+            )
         return out
 
     def _red_light(self, agents: np.ndarray, lanes: np.ndarray) -> np.ndarray:
@@ -210,7 +214,9 @@ class EpisodeRecorder:
         others = rows[~np.isin(rows, agent_rows[agent_rows >= 0])]
         centres = np.concatenate([mine, leads])
         if centres.size and others.size:
-            d2 = (t.x[others][:, None] - t.x[centres][None, :]) ** 2 + (t.y[others][:, None] - t.y[centres][None, :]) ** 2
+            d2 = (t.x[others][:, None] - t.x[centres][None, :]) ** 2 + (
+                t.y[others][:, None] - t.y[centres][None, :]
+            ) ** 2
             near = (d2 <= SCENE_RADIUS**2).any(axis=1) | np.isin(others, leads)
             others = others[near]
         elif not centres.size:
@@ -487,7 +493,9 @@ class EpisodeRecorders:
         lane = np.maximum(t.lane[rows], 0)
         speed = t.speed[rows]
         point = sim.mission_arrays.paths[agents, sim.route_index[agents], 0]
-        off_route = np.abs(-(t.x[rows] - point[:, 0]) * np.sin(point[:, 2]) + (t.y[rows] - point[:, 1]) * np.cos(point[:, 2]))
+        off_route = np.abs(
+            -(t.x[rows] - point[:, 0]) * np.sin(point[:, 2]) + (t.y[rows] - point[:, 1]) * np.cos(point[:, 2])
+        )
         to_goal = np.maximum(self.goal_s[agents] - sim.route_progress[agents], 0.0) + off_route
         ev = sim.agent_events[agents]
         gap, in_margin, visible = self._follow(which, agents, owner, speed)
@@ -575,7 +583,9 @@ class EpisodeRecorders:
             r._scene_rows.append((float(times[k] - r.start_time), index[cuts[k] : cuts[k + 1]],
                                   state[cuts[k] : cuts[k + 1]], colours))  # fmt: skip
 
-    def _near(self, others: np.ndarray, o_owner: np.ndarray, centres: np.ndarray, c_owner: np.ndarray, n: int) -> np.ndarray:
+    def _near(
+        self, others: np.ndarray, o_owner: np.ndarray, centres: np.ndarray, c_owner: np.ndarray, n: int
+    ) -> np.ndarray:
         """Whether each of ``others`` is within ``SCENE_RADIUS`` of a centre of its own episode
         (both grouped by owner: only each episode's own pairs, with the distances its own
         recorder computes)."""

@@ -152,12 +152,19 @@ def write_report(
         "complete": not_run == 0,
         "episodes_not_run": int(not_run),
         "action_spaces": list(suite.action_spaces),
-        "scenarios": [{"name": s.name, "difficulty": s.difficulty, "time_limit": s.time_limit} for s in suite.scenarios],
+        "scenarios": [
+            {"name": s.name, "difficulty": s.difficulty, "time_limit": s.time_limit} for s in suite.scenarios
+        ],
         "seeds": {name: {str(e): sd for e, sd in eps.items()} for name, eps in seeds.items()},
         "failures": failures,
         "retried": retried,
-        "ci": {"level": ci_level, "resamples": resamples, "seed": ci_seed, "method": method,
-               "null": f"an interval is null where {NA_REASON}"},
+        "ci": {
+            "level": ci_level,
+            "resamples": resamples,
+            "seed": ci_seed,
+            "method": method,
+            "null": f"an interval is null where {NA_REASON}",
+        },
         "references": references,
         "agents": {
             agent: {
@@ -243,7 +250,10 @@ def write_report(
             lines += [f"![{name} per scenario](plots/{path.name})", ""]
     lines += ["", "## Per scenario", ""]
     for entry in suite.scenarios:
-        lines += [f"### {entry.name} ({entry.difficulty}, {entry.time_limit:g} s; episodes {_seed_list(seeds.get(entry.name, {}))})", ""]
+        lines += [
+            f"### {entry.name} ({entry.difficulty}, {entry.time_limit:g} s; episodes {_seed_list(seeds.get(entry.name, {}))})",
+            "",
+        ]
         lines += ["| method | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
         for agent in shown:
             s = scores[agent]
@@ -259,10 +269,15 @@ def write_report(
     for entry in suite.scenarios:
         mine = [f for f in failures if f["scenario"] == entry.name]
         failed = "; ".join(f"{f['agent']} #{f['episode']}" for f in mine) or "none"
-        lines.append(f"| {entry.name} | {entry.difficulty} | {entry.time_limit:g} | {_seed_list(seeds.get(entry.name, {}))} | {failed} |")
+        lines.append(
+            f"| {entry.name} | {entry.difficulty} | {entry.time_limit:g} | {_seed_list(seeds.get(entry.name, {}))} | {failed} |"
+        )
     if failures:
         lines += ["", "## Failed episodes", ""]
-        lines += [f"- {f['agent']}: {f['scenario'] or '?'} #{f['episode']} (seed {f['seed']}): {f['failure']}" for f in failures]
+        lines += [
+            f"- {f['agent']}: {f['scenario'] or '?'} #{f['episode']} (seed {f['seed']}): {f['failure']}"
+            for f in failures
+        ]
     if retried:
         lines += ["", "## Episodes run again after their worker process died", ""]
         lines += [f"- {r['agent']}: {r['scenario'] or '?'} #{r['episode']} (seed {r['seed']}): {'; '.join(r['reasons'])}"
@@ -352,7 +367,9 @@ def _metric_plots(plots: Path, suite: Suite, scores: dict, names: tuple[str, ...
         ax.set_ylim(0, 1.05)
         ax.set_ylabel(f"{name} (higher is better)")
         ax.grid(axis="y", color="0.9", zorder=0)
-        ax.set_title(f"{suite.name}: {name}, overall and per scenario (bars: mean and confidence interval)", fontsize=10)
+        ax.set_title(
+            f"{suite.name}: {name}, overall and per scenario (bars: mean and confidence interval)", fontsize=10
+        )
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
         out[name] = _save(fig, plots / f"metric_{name}.png")
         plt.close(fig)
@@ -403,7 +420,12 @@ def _draw_road(ax, road_map, box) -> None:
     def inside(poly: np.ndarray) -> bool:
         if not len(poly):
             return False
-        return poly[:, 0].max() >= xmin and poly[:, 0].min() <= xmax and poly[:, 1].max() >= ymin and poly[:, 1].min() <= ymax
+        return (
+            poly[:, 0].max() >= xmin
+            and poly[:, 0].min() <= xmax
+            and poly[:, 1].max() >= ymin
+            and poly[:, 1].min() <= ymax
+        )
 
     surfaces = [np.asarray(p) for p in scene.surfaces if len(p) >= 3 and inside(np.asarray(p))]
     ax.add_collection(PolyCollection(surfaces, facecolors="#d5d5d8", edgecolors="#d5d5d8", linewidths=0.3, zorder=0))

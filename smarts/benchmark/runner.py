@@ -100,7 +100,9 @@ def check_output_folder(folder: str | os.PathLike, need_bytes: int, what: str = 
         os.unlink(probe)
     except OSError as err:
         why = "its file system is read-only" if err.errno == errno.EROFS else (err.strerror or str(err)).lower()
-        raise OutputError(f"{what} {folder}: cannot write there ({why}); give a folder this user can write to") from None
+        raise OutputError(
+            f"{what} {folder}: cannot write there ({why}); give a folder this user can write to"
+        ) from None
     free = shutil.disk_usage(base).free
     if free < need_bytes:
         raise OutputError(f"{what} {folder}: {free / 2**20:.0f} MiB free on its disk; the run needs about "
@@ -147,8 +149,9 @@ class PolicySetup:
             "controller": self.controller,
             "interface": None if self.interface is None else interface_to_dict(self.interface),
             "lane_relative": None if self.lane_relative is None else dataclasses.asdict(self.lane_relative),
-            "comms": None if self.comms is None else {**dataclasses.asdict(self.comms),
-                                                      "agent_channels": dict(self.comms.agent_channels)},
+            "comms": None
+            if self.comms is None
+            else {**dataclasses.asdict(self.comms), "agent_channels": dict(self.comms.agent_channels)},
         }
 
 
@@ -580,7 +583,9 @@ def plan_jobs(
         for i, scenario in enumerate(suite.scenarios):
             for episode in range(episodes):
                 path = root / agent_label(agent) / scenario.name / f"episode_{episode:03d}.npz"
-                jobs.append(Job(agent, suite.source, i, episode, base + episode, str(path), reuse, digests.get(agent, "")))
+                jobs.append(
+                    Job(agent, suite.source, i, episode, base + episode, str(path), reuse, digests.get(agent, ""))
+                )
     return jobs
 
 
@@ -836,7 +841,9 @@ class _Pool:
         if not self.workers[i].give(unit, self.jobs):  # it died while idle: its unit never started
             self.replace(i)
             if not self.workers[i].give(unit, self.jobs):
-                raise RuntimeError(f"a new benchmark worker process died at once ({_death(self.workers[i].exit_code())})")
+                raise RuntimeError(
+                    f"a new benchmark worker process died at once ({_death(self.workers[i].exit_code())})"
+                )
 
     def report(self, k: int, result: dict) -> None:
         self.done(k, {**result, "retried": self.reasons[k]} if k in self.reasons else result)
@@ -847,7 +854,9 @@ class _Pool:
                 if w.unit is None and self.queue:
                     self.assign(i, self.queue.popleft())
             busy = [w for w in self.workers if w.unit is not None]
-            wait_s = None if self.timeout is None else max(0.0, min(w.since for w in busy) + self.timeout - time.monotonic())
+            wait_s = (
+                None if self.timeout is None else max(0.0, min(w.since for w in busy) + self.timeout - time.monotonic())
+            )
             ready = set(multiprocessing.connection.wait([w.conn for w in busy] + [w.process.sentinel for w in busy],
                                                         timeout=wait_s))  # fmt: skip
             for i, w in enumerate(self.workers):
@@ -957,7 +966,12 @@ def _run_on_ray(
                         results = _ray_lost(jobs, unit, reason, reasons, submit)
                     for k, result in zip(unit, results):
                         if result is not None:
-                            done(k, {**result, "retried": reasons[k]} if k in reasons and "attempts" not in result else result)
+                            done(
+                                k,
+                                {**result, "retried": reasons[k]}
+                                if k in reasons and "attempts" not in result
+                                else result,
+                            )
         except KeyboardInterrupt:
             for ref in pending:
                 with contextlib.suppress(Exception):
@@ -1016,7 +1030,9 @@ MAX_BATCH = 64
 step while it waits longer for its longest episode."""
 
 
-def plan_units(jobs: list[Job], todo: list[int], workers: int = 1, policy_resolver: PolicyResolver | None = None) -> list[list[int]]:
+def plan_units(
+    jobs: list[Job], todo: list[int], workers: int = 1, policy_resolver: PolicyResolver | None = None
+) -> list[list[int]]:
     """``todo`` (job indices) as units: the episodes of one agent (and step length) that can share
     a simulation, in job order, at most :data:`MAX_BATCH` each, split further until there are
     ``workers`` units to run at once; every other episode a unit of its own."""

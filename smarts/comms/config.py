@@ -71,7 +71,10 @@ class CommsFile(Schema):
         last = self.channels - 1
         if not -1 <= self.traffic_channel <= last:
             problems.append(
-                ("traffic_channel", f"expected -1 (every channel) or a channel in [0, {last}], got {self.traffic_channel!r}")
+                (
+                    "traffic_channel",
+                    f"expected -1 (every channel) or a channel in [0, {last}], got {self.traffic_channel!r}",
+                )
             )
         for agent, channel in self.agent_channels.items():
             if not 0 <= channel <= last:
@@ -178,10 +181,7 @@ class CommsConfig:
         """Raise if ``agent_channels`` names an agent the scenario does not have."""
         unknown = sorted(set(self.agent_channels) - set(agent_ids))
         if unknown:
-            _fail(
-                f"{where}.agent_channels: unknown agents {unknown}; the scenario's agents are "
-                f"{list(agent_ids)}"
-            )
+            _fail(f"{where}.agent_channels: unknown agents {unknown}; the scenario's agents are {list(agent_ids)}")
 
     def fixed_channels(self, agent_ids: Sequence[str]) -> np.ndarray:
         """int64[n] channel of each agent when the action does not pick one (setup-time helper)."""

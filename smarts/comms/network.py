@@ -38,7 +38,14 @@ from smarts.core.geometry import wrap_scalar
 from smarts.core.vehicle_table import COLUMN, Role, VehicleTable
 
 TRAFFIC_PAYLOAD_FIELDS: tuple[str, ...] = (
-    "x", "y", "heading", "speed", "accel", "yaw_rate", "length", "width",
+    "x",
+    "y",
+    "heading",
+    "speed",
+    "accel",
+    "yaw_rate",
+    "length",
+    "width",
 )
 """What a connected traffic vehicle broadcasts (world frame, SI units), in payload order; a payload
 shorter than this keeps the leading fields, a longer one is zero-padded."""
@@ -141,8 +148,16 @@ class V2VNetworks:
         self._serial_seen[episodes] = 0
 
     # ------------------------------------------------------------------ sending
-    def send(self, steps: np.ndarray, data: np.ndarray, base: np.ndarray, episode: np.ndarray,
-             rows: np.ndarray, channels: np.ndarray, payloads: np.ndarray) -> int:
+    def send(
+        self,
+        steps: np.ndarray,
+        data: np.ndarray,
+        base: np.ndarray,
+        episode: np.ndarray,
+        rows: np.ndarray,
+        channels: np.ndarray,
+        payloads: np.ndarray,
+    ) -> int:
         """Queue one message per sender: episode ``episode[i]`` (ascending), its row ``rows[i]``
         (the episode's own; the pose is read at ``base[episode] + row`` of ``data``), a channel and
         a payload (clipped to +-payload_bound). ``steps[e]``: each episode's step. Returns -1, or
@@ -164,8 +179,14 @@ class V2VNetworks:
             raise RuntimeError(self._overflow_message())
         return bad
 
-    def broadcast_traffic(self, steps: np.ndarray, tables: Sequence[VehicleTable], whole: VehicleTable,
-                          base: np.ndarray, episodes: np.ndarray) -> None:
+    def broadcast_traffic(
+        self,
+        steps: np.ndarray,
+        tables: Sequence[VehicleTable],
+        whole: VehicleTable,
+        base: np.ndarray,
+        episodes: np.ndarray,
+    ) -> None:
         """Queue the state message of every connected traffic vehicle of ``episodes``
         (``tables[e]``: episode ``e``'s own table, for vehicle ids; ``whole``: the table whose row
         ``base[e] + r`` is its row ``r``)."""
@@ -211,8 +232,15 @@ class V2VNetworks:
         return f"V2V: more than {self.capacity} messages sent in one step (one per table row is the most a step holds)"
 
     # ------------------------------------------------------------------ delivery
-    def deliver(self, steps: np.ndarray, data: np.ndarray, base: np.ndarray, episode: np.ndarray,
-                rows: np.ndarray, channels: np.ndarray) -> Received:
+    def deliver(
+        self,
+        steps: np.ndarray,
+        data: np.ndarray,
+        base: np.ndarray,
+        episode: np.ndarray,
+        rows: np.ndarray,
+        channels: np.ndarray,
+    ) -> Received:
         """The messages sent ``latency`` steps ago that reach each receiver (episode
         ``episode[i]``, its row ``rows[i]``, tuned to ``channels[i]``) at its episode's step."""
         config = self.config
@@ -307,9 +335,7 @@ class V2VNetwork:
         if channels.ndim == 0:
             channels = np.full(n, channels, dtype=np.int64)
         elif channels.shape != (n,):
-            raise ValueError(
-                f"V2V deliver: receiver_channels has shape {channels.shape}; expected ({n},)"
-            )
+            raise ValueError(f"V2V deliver: receiver_channels has shape {channels.shape}; expected ({n},)")
         return self.net.deliver(np.array([step]), table.data, self._base, np.zeros(n, np.int64), rows, channels)
 
 
@@ -357,8 +383,23 @@ def _open_slot(steps, e, slot_step, count, slots):  # pragma: no cover - compile
 
 @numba.njit(cache=True, nogil=True)
 def _enqueue_agents(
-    steps, episode, rows, channels, payloads, data, base, capacity, n_channels, bound, slot_step, count,
-    q_row, q_kind, q_channel, q_pose, q_payload,
+    steps,
+    episode,
+    rows,
+    channels,
+    payloads,
+    data,
+    base,
+    capacity,
+    n_channels,
+    bound,
+    slot_step,
+    count,
+    q_row,
+    q_kind,
+    q_channel,
+    q_pose,
+    q_payload,
 ):  # pragma: no cover - compiled
     """Write agents' messages into their episodes' slots; returns the index of the first bad
     message (row or channel out of range, non-finite payload) without writing anything, -2 when a
@@ -392,8 +433,23 @@ def _enqueue_agents(
 
 @numba.njit(cache=True, nogil=True)
 def _enqueue_traffic(
-    steps, episodes, connected, alive, role, broadcasts, data, base, columns, channel, slot_step, count,
-    q_row, q_kind, q_channel, q_pose, q_payload,
+    steps,
+    episodes,
+    connected,
+    alive,
+    role,
+    broadcasts,
+    data,
+    base,
+    columns,
+    channel,
+    slot_step,
+    count,
+    q_row,
+    q_kind,
+    q_channel,
+    q_pose,
+    q_payload,
 ):  # pragma: no cover - compiled
     """Write the state message of every live connected traffic row of ``episodes``; returns -1
     when a slot overflows, else 0."""
@@ -426,8 +482,31 @@ def _enqueue_traffic(
 
 @numba.njit(cache=True, nogil=True)
 def _deliver(
-    steps, episode, receivers, r_channels, data, base, capacity, slot_step, count, q_row, q_kind, q_channel,
-    q_pose, q_payload, range2, loss, seeds, latency, limit, o_row, o_kind, o_pose, o_age, o_payload, o_mask,
+    steps,
+    episode,
+    receivers,
+    r_channels,
+    data,
+    base,
+    capacity,
+    slot_step,
+    count,
+    q_row,
+    q_kind,
+    q_channel,
+    q_pose,
+    q_payload,
+    range2,
+    loss,
+    seeds,
+    latency,
+    limit,
+    o_row,
+    o_kind,
+    o_pose,
+    o_age,
+    o_payload,
+    o_mask,
     o_count,
 ):  # pragma: no cover - compiled
     for i in range(receivers.shape[0]):

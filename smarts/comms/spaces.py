@@ -137,8 +137,13 @@ def received_to_observation(received: Received) -> dict[str, np.ndarray]:
     messages = np.empty((n, m, len(MESSAGE_FEATURES) + size), dtype=np.float32)
     mask = np.empty((n, m), dtype=np.float32)
     _fill_observation(
-        received.sender_kind, received.pose, received.age, received.payload, received.mask,
-        messages, mask,
+        received.sender_kind,
+        received.pose,
+        received.age,
+        received.payload,
+        received.mask,
+        messages,
+        mask,
     )
     return {"messages": messages, "message_mask": mask}
 

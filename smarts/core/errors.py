@@ -115,9 +115,7 @@ class LogError(ValueError):
         )
 
 
-def _rebuild_log_error(
-    problem: str, source: str, agent: str | None, column: str | None
-) -> LogError:
+def _rebuild_log_error(problem: str, source: str, agent: str | None, column: str | None) -> LogError:
     return LogError(problem, source=source, agent=agent, column=column)
 
 

@@ -187,15 +187,38 @@ def event_tables(tables):  # pragma: no cover - compiled
     calls then pass values, not the record)."""
     t = tables
     return EventTables(
-        data=t.data, lane=t.lane, anchor=t.anchor, anchor_time=t.anchor_time, lane_road=t.lane_road,
-        lane_internal=t.lane_internal, lane_length=t.lane_length, lane_width=t.lane_width,
-        lane_succ_offsets=t.lane_succ_offsets, raster_flat=t.raster_flat, raster_base=t.raster_base,
-        raster_width=t.raster_width, raster_origin=t.raster_origin, raster_inv_res=t.raster_inv_res,
-        raster_cell_max=t.raster_cell_max, on_route_road=t.on_route_road, goal_kind=t.goal_kind,
-        goal_xy=t.goal_xy, goal_radius=t.goal_radius, goal_road=t.goal_road, goal_lane=t.goal_lane,
-        goal_s=t.goal_s, goal_gate=t.goal_gate, agent_events=t.agent_events, agent_done=t.agent_done,
-        prev_xy=t.prev_xy, prev_row=t.prev_row, episode_map=t.episode_map, episode_step=t.episode_step,
-        episode_limit=t.episode_limit, terminate_on=t.terminate_on, not_moving_seconds=t.not_moving_seconds,
+        data=t.data,
+        lane=t.lane,
+        anchor=t.anchor,
+        anchor_time=t.anchor_time,
+        lane_road=t.lane_road,
+        lane_internal=t.lane_internal,
+        lane_length=t.lane_length,
+        lane_width=t.lane_width,
+        lane_succ_offsets=t.lane_succ_offsets,
+        raster_flat=t.raster_flat,
+        raster_base=t.raster_base,
+        raster_width=t.raster_width,
+        raster_origin=t.raster_origin,
+        raster_inv_res=t.raster_inv_res,
+        raster_cell_max=t.raster_cell_max,
+        on_route_road=t.on_route_road,
+        goal_kind=t.goal_kind,
+        goal_xy=t.goal_xy,
+        goal_radius=t.goal_radius,
+        goal_road=t.goal_road,
+        goal_lane=t.goal_lane,
+        goal_s=t.goal_s,
+        goal_gate=t.goal_gate,
+        agent_events=t.agent_events,
+        agent_done=t.agent_done,
+        prev_xy=t.prev_xy,
+        prev_row=t.prev_row,
+        episode_map=t.episode_map,
+        episode_step=t.episode_step,
+        episode_limit=t.episode_limit,
+        terminate_on=t.terminate_on,
+        not_moving_seconds=t.not_moving_seconds,
         not_moving_distance=t.not_moving_distance,
     )
 
@@ -210,7 +233,16 @@ def agent_events(tables, alive, agents, rows, b, time):  # pragma: no cover - co
 @numba.njit(cache=True, nogil=True)
 @cache_depends_on(_drivable)
 def events_by_episode(
-    tables, alive, agents, rows, episodes, alive_lo, alive_hi, agent_lo, agent_hi, episode_time,
+    tables,
+    alive,
+    agents,
+    rows,
+    episodes,
+    alive_lo,
+    alive_hi,
+    agent_lo,
+    agent_hi,
+    episode_time,
 ):  # pragma: no cover - compiled
     """``episode_events`` of each episode in ``episodes`` with only that episode's rows as others
     (``alive[alive_lo[b]:alive_hi[b]]``), its agents ``agents[agent_lo[b]:agent_hi[b]]`` and its
@@ -225,7 +257,7 @@ def events_by_episode(
         lo, hi = agent_lo[b], agent_hi[b]
         if lo == hi:
             continue
-        episode_events(et, alive[alive_lo[b]:alive_hi[b]], agents[lo:hi], rows[lo:hi], b, episode_time[b])
+        episode_events(et, alive[alive_lo[b] : alive_hi[b]], agents[lo:hi], rows[lo:hi], b, episode_time[b])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -254,7 +286,7 @@ def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - comp
     """
     data, lane = et.data, et.lane
     m = et.episode_map[b]
-    flat_raster = et.raster_flat[et.raster_base[m]:et.raster_base[m + 1]]
+    flat_raster = et.raster_flat[et.raster_base[m] : et.raster_base[m + 1]]
     raster_width, raster_origin = et.raster_width[m], et.raster_origin[m]
     inv_res, cell_max = et.raster_inv_res[m], et.raster_cell_max[m]
     lane_internal, lane_road, on_route_road = et.lane_internal, et.lane_road, et.on_route_road
@@ -308,9 +340,9 @@ def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - comp
         px, py = (prev_xy[a, 0], prev_xy[a, 1]) if prev_row[a] == r else (x, y)
         prev_xy[a, 0], prev_xy[a, 1], prev_row[a] = x, y, r
         if goal_kind[a] == 1:
-            ev[REACHED_GOAL] = segment_point_distance2(
-                px, py, x, y, goal_xy[a, 0], goal_xy[a, 1]
-            ) <= goal_radius[a] * goal_radius[a]
+            ev[REACHED_GOAL] = (
+                segment_point_distance2(px, py, x, y, goal_xy[a, 0], goal_xy[a, 1]) <= goal_radius[a] * goal_radius[a]
+            )
         elif goal_kind[a] == 2:
             ev[REACHED_GOAL] = (
                 ln >= 0
@@ -320,9 +352,7 @@ def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - comp
             ) or crosses_gate(px, py, x, y, goal_gate[a])
         if ev[REACHED_GOAL]:
             ev[OFF_ROUTE] = False
-        ev[NOT_MOVING] = not_moving_step(
-            anchor, anchor_time, r, x, y, time, not_moving_seconds, not_moving_distance
-        )
+        ev[NOT_MOVING] = not_moving_step(anchor, anchor_time, r, x, y, time, not_moving_seconds, not_moving_distance)
         ev[MAX_STEPS] = at_step_limit
         finished = at_step_limit or left_map
         for e in range(ev.shape[0]):

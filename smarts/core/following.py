@@ -240,7 +240,9 @@ def ahead_state(sim, agents: np.ndarray, sight: float = LEAD_SIGHT) -> AheadStat
 
 
 @numba.njit(cache=True, nogil=True)
-def _ahead_kernel(frozen_lanes, data, lane, rows, alive, alive_lo, alive_hi, sight, present, values):  # pragma: no cover - compiled
+def _ahead_kernel(
+    frozen_lanes, data, lane, rows, alive, alive_lo, alive_hi, sight, present, values
+):  # pragma: no cover - compiled
     """``ahead_state`` of the agents on ``rows`` among the live rows of their episodes
     (``alive[alive_lo[i]:alive_hi[i]]``) into ``present`` and the rows of ``values``
     (``_A_GAP``...)."""
@@ -252,7 +254,7 @@ def _ahead_kernel(frozen_lanes, data, lane, rows, alive, alive_lo, alive_hi, sig
             continue
         x, y, h, v = data[_X, r], data[_Y, r], data[_H, r], data[_SPEED, r]
         best = sight
-        for j in alive[alive_lo[i]:alive_hi[i]]:
+        for j in alive[alive_lo[i] : alive_hi[i]]:
             if j == r or lane[j] < 0:
                 continue
             dx, dy = data[_X, j] - x, data[_Y, j] - y

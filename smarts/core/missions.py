@@ -82,9 +82,7 @@ def _lane_of(road_map: RoadMap, road_id: str, lane_index: int, where: str) -> in
         raise MapError(f"{where}: map {road_map.source!r} has no road {road_id!r}") from None
     lanes = road_map.road_lanes(road)
     if not 0 <= lane_index < len(lanes):
-        raise MapError(
-            f"{where}: road {road_id!r} has {len(lanes)} lane(s) (0..{len(lanes) - 1}), got {lane_index}"
-        )
+        raise MapError(f"{where}: road {road_id!r} has {len(lanes)} lane(s) (0..{len(lanes) - 1}), got {lane_index}")
     return int(lanes[lane_index])
 
 
@@ -125,9 +123,7 @@ def _best_route(road_map: RoadMap, start: int, candidates: np.ndarray, where: st
     return best
 
 
-def resolve_mission(
-    road_map: RoadMap, agent_id: str, mission, where: str, traffic=None
-) -> ResolvedMission:
+def resolve_mission(road_map: RoadMap, agent_id: str, mission, where: str, traffic=None) -> ResolvedMission:
     """Resolve one agent's ``MissionSpec`` against the map; errors name ``where`` (the spec path).
 
     A mission that takes over a traffic trip starts where that trip departs (its first road, its
@@ -146,8 +142,7 @@ def resolve_mission(
     lane_len = float(road_map.lane_length[start_lane])
     if not 0.0 <= start.offset <= lane_len:
         raise MapError(
-            f"{where}.start.offset: lane {road_map.lane_ids[start_lane]!r} is {lane_len:.1f} m long, "
-            f"got {start.offset}"
+            f"{where}.start.offset: lane {road_map.lane_ids[start_lane]!r} is {lane_len:.1f} m long, got {start.offset}"
         )
     start_xy, heading = lane_pose_at(road_map, start_lane, start.offset)
     if getattr(start, "heading", None) is not None:
@@ -336,9 +331,9 @@ def stack_missions(road_map: RoadMap, missions: list[ResolvedMission]) -> Missio
         goal_road=np.array([ms.goal_road for ms in missions], dtype=np.int32),
         goal_lane=np.array([ms.goal_lane for ms in missions], dtype=np.int32),
         goal_s=np.array([ms.goal_s for ms in missions]),
-        goal_gate=np.array(
-            [ms.goal_gate if ms.goal_gate is not None else np.zeros(6) for ms in missions]
-        ).reshape(-1, 6),
+        goal_gate=np.array([ms.goal_gate if ms.goal_gate is not None else np.zeros(6) for ms in missions]).reshape(
+            -1, 6
+        ),
         signal_via=signal_via,
         signal_s=signal_s,
     )

@@ -127,7 +127,9 @@ def _freeze_fields(fields):
         raise numba.core.errors.TypingError(f"freeze_fields: expected a declared record's fields, got {fields}")
     struct_type = frozen(list(zip(fields.fields, fields.types)))
     body = "".join(f"    st.{f} = fields.{f}\n" for f in fields.fields)
-    return _impl("fields", f"    st = new(struct_type)\n{body}    return st\n", new=structref.new, struct_type=struct_type)
+    return _impl(
+        "fields", f"    st = new(struct_type)\n{body}    return st\n", new=structref.new, struct_type=struct_type
+    )
 
 
 @overload(view, prefer_literal=False)

@@ -306,7 +306,9 @@ class Simulation:
         self.road_map = self.map_stack.combined
         self.episode_map = np.array([e.map_index for e in episodes], dtype=np.int64)
         if not ((0 <= self.episode_map) & (self.episode_map < self.map_stack.num_maps)).all():
-            raise ValueError(f"episodes: map_index must be from 0 to {self.map_stack.num_maps - 1}, got {self.episode_map.tolist()}")
+            raise ValueError(
+                f"episodes: map_index must be from 0 to {self.map_stack.num_maps - 1}, got {self.episode_map.tolist()}"
+            )
         self.dt = float(dt)
         self.episodes = n
         self.episode_capacity = int(capacity)
@@ -364,8 +366,13 @@ class Simulation:
             self.table.ids = _StackedIds(self)
         cap = self.episode_capacity
         self.views = [
-            EpisodeView(self, b, self.table if n == 1 else block_view(self.table, b * cap, (b + 1) * cap),
-                        self.map_stack.windows[self.episode_map[b]], setup.signals)  # fmt: skip
+            EpisodeView(
+                self,
+                b,
+                self.table if n == 1 else block_view(self.table, b * cap, (b + 1) * cap),
+                self.map_stack.windows[self.episode_map[b]],
+                setup.signals,
+            )  # fmt: skip
             for b, setup in enumerate(episodes)
         ]
         self.row_map = np.repeat(self.episode_map, cap)  # map of every row
@@ -708,7 +715,10 @@ class Simulation:
         proj = self.project_rows(rows)
         t.lane[rows] = proj.lane
         t.s[rows], t.t[rows], t.lane_heading[rows], t.lane_distance[rows] = (
-            proj.s, proj.t, proj.lane_heading, proj.distance
+            proj.s,
+            proj.t,
+            proj.lane_heading,
+            proj.distance,
         )
 
     def _route_progress_of(self, agents: np.ndarray, first: bool) -> None:

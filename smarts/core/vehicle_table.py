@@ -124,8 +124,7 @@ class VehicleTable:
         free = np.flatnonzero(~self.alive)
         if free.size == 0:
             raise RuntimeError(
-                f"vehicle table is full (capacity {self.capacity}); raise the scenario's "
-                "'vehicle_capacity'"
+                f"vehicle table is full (capacity {self.capacity}); raise the scenario's 'vehicle_capacity'"
             )
         row = int(free[0])
         dl, dw, dh, _ = VEHICLE_DIMENSIONS[VehicleType(vtype)]

@@ -140,7 +140,13 @@ def _sumo_case(n: int, steps: int) -> dict:
     from smarts.diagnostic.sumo_step import sumo_step_benchmark
 
     r = sumo_step_benchmark(n, steps)
-    return {"engine": "sumo", "vehicles": n, "vehicles_on_road": r["vehicles"], "step_ms": r["step_ms"], "provider_ms": r["sumo_ms"]}
+    return {
+        "engine": "sumo",
+        "vehicles": n,
+        "vehicles_on_road": r["vehicles"],
+        "step_ms": r["step_ms"],
+        "provider_ms": r["sumo_ms"],
+    }
 
 
 def _builtin_case(n: int, steps: int) -> dict:
@@ -190,11 +196,18 @@ def _cpu_rows(cases: list[str], steps: int, warmup: int, stages: bool, console) 
 
     rows = []
     for case in cases:
+
         def run(split: bool) -> dict:
-            return cpu_step.one_agent(steps, warmup, split) if case == "1" else cpu_step.sumo(int(case[4:]), steps, split)
+            return (
+                cpu_step.one_agent(steps, warmup, split) if case == "1" else cpu_step.sumo(int(case[4:]), steps, split)
+            )
 
         row = run(False)  # the headline: no timing wrappers
-        name = "1 agent, env step" if case == "1" else f"{case[4:]} SUMO vehicles ({row['vehicles']:.0f} on the road), simulation step"
+        name = (
+            "1 agent, env step"
+            if case == "1"
+            else f"{case[4:]} SUMO vehicles ({row['vehicles']:.0f} on the road), simulation step"
+        )
         row = {"case": name, **row}
         if stages:
             row["stages_us"] = run(True)["stages_us"]
@@ -222,7 +235,9 @@ def _compare_rows(baseline: str, cases: list[str], steps: int, warmup: int, cons
     from smarts.diagnostic import cpu_step
 
     rows = cpu_step.compare(baseline, cases, steps, warmup)
-    table = Table(title=f"Thread CPU time per step against {baseline} (us, median of 3 alternating rounds)", min_width=100)
+    table = Table(
+        title=f"Thread CPU time per step against {baseline} (us, median of 3 alternating rounds)", min_width=100
+    )
     for col in ("case", "baseline", "this tree", "this / baseline"):
         table.add_column(col, justify="right", no_wrap=True)
     for r in rows:
@@ -240,7 +255,8 @@ def main(argv: list[str] | None = None) -> int:
         return batched_main([a for a in argv if a != "--batched"])
     parser = argparse.ArgumentParser(prog="python -m smarts.diagnostic", description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--batched", action="store_true",
+        "--batched",
+        action="store_true",
         help="time the batched backend against the per-env path instead (see --batched --help)",
     )
     parser.add_argument("--agents", default="1,10,20,50", help="comma-separated agent counts (default 1,10,20,50)")
@@ -251,21 +267,26 @@ def main(argv: list[str] | None = None) -> int:
         "--traffic", default="sumo,builtin", help="traffic engines to time: sumo,builtin (default both; 'none' to skip)"
     )
     parser.add_argument(
-        "--sensors", default="10:50",
+        "--sensors",
+        default="10:50",
         help="all-sensors case as AGENTS:VEHICLES (default 10:50, built-in traffic); 'none' to skip",
     )
     parser.add_argument(
-        "--replay", default="0,1,10,20,50,50+",
+        "--replay",
+        default="0,1,10,20,50,50+",
         help="replayed NGSIM vehicle counts; N+ adds an agent taking one over, 0 is the reference without replay "
         "(default 0,1,10,20,50,50+; 'none' to skip)",
     )
     parser.add_argument(
-        "--cpu", default="1,sumo50",
+        "--cpu",
+        default="1,sumo50",
         help="CPU-time rows: 1 (one agent, env step) and/or sumoN (N SUMO vehicles, simulation step); 'none' to skip",
     )
     parser.add_argument("--stages", action="store_true", help="split the CPU rows by stage")
     parser.add_argument(
-        "--baseline", default=None, metavar="TREE",
+        "--baseline",
+        default=None,
+        metavar="TREE",
         help="also time the CPU rows with the smarts source tree TREE (e.g. a git worktree of an older commit), "
         "alternating with this one in fresh interpreters, and print the ratios",
     )
@@ -345,9 +366,16 @@ def main(argv: list[str] | None = None) -> int:
             stable.add_column(col, justify="right", no_wrap=True)
         for r in sensor_rows:
             stable.add_row(
-                str(r["agents"]), str(r["vehicles"]), f"{r['env_ms_mean']:.3f}", f"{r['env_ms_median']:.3f}",
-                f"{r['sim_ms_mean']:.3f}", f"{r['obs_ms_mean']:.3f}", f"{r['shadows_ms_mean']:.3f}",
-                f"{r['rasters_ms_mean']:.3f}", f"{r['lidar_ms_mean']:.3f}", f"{r['v2v_ms_mean']:.3f}",
+                str(r["agents"]),
+                str(r["vehicles"]),
+                f"{r['env_ms_mean']:.3f}",
+                f"{r['env_ms_median']:.3f}",
+                f"{r['sim_ms_mean']:.3f}",
+                f"{r['obs_ms_mean']:.3f}",
+                f"{r['shadows_ms_mean']:.3f}",
+                f"{r['rasters_ms_mean']:.3f}",
+                f"{r['lidar_ms_mean']:.3f}",
+                f"{r['v2v_ms_mean']:.3f}",
             )
         console.print(stable)
 
@@ -368,13 +396,20 @@ def main(argv: list[str] | None = None) -> int:
             ttable.add_column(col, justify="right", no_wrap=True)
         for r in traffic_rows:
             ttable.add_row(
-                r["engine"], str(r["vehicles"]), f"{r['vehicles_on_road']:.0f}",
-                f"{r['step_ms']:.3f}", f"{r['provider_ms']:.3f}",
+                r["engine"],
+                str(r["vehicles"]),
+                f"{r['vehicles_on_road']:.0f}",
+                f"{r['step_ms']:.3f}",
+                f"{r['provider_ms']:.3f}",
             )
         console.print(ttable)
     report = {
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "machine": {"python": sys.version.split()[0], "platform": platform.platform(), "processor": platform.processor()},
+        "machine": {
+            "python": sys.version.split()[0],
+            "platform": platform.platform(),
+            "processor": platform.processor(),
+        },
         "map": PERF_MAP,
         "cases": rows,
         "sensor_cases": sensor_rows,

@@ -81,7 +81,9 @@ def case_spec(case: str):
     from smarts.scenario import ScenarioSpec
 
     if case not in CASES or CASES[case][0] == "mix":
-        raise ValueError(f"unknown single-scenario case {case!r}; expected one of {', '.join(c for c in CASES if CASES[c][0] != 'mix')}")
+        raise ValueError(
+            f"unknown single-scenario case {case!r}; expected one of {', '.join(c for c in CASES if CASES[c][0] != 'mix')}"
+        )
     scenario, controller = CASES[case]
     if scenario == "lead":
         spec = next(s.spec for s in load_suite("adaptive").scenarios if s.name == "a01_straight_free")
@@ -279,18 +281,29 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--batches", default=",".join(map(str, DEFAULT_BATCHES)), help="episode counts B")
     parser.add_argument("--cases", default=",".join(CASES), help=f"cases among {', '.join(CASES)}")
-    parser.add_argument("--steps", type=int, default=300, help="timed steps of the whole batch per row (batched backend)")
-    parser.add_argument("--per-env-agent-steps", type=int, default=5000, help="timed agent-steps per row on the per-env path")
+    parser.add_argument(
+        "--steps", type=int, default=300, help="timed steps of the whole batch per row (batched backend)"
+    )
+    parser.add_argument(
+        "--per-env-agent-steps", type=int, default=5000, help="timed agent-steps per row on the per-env path"
+    )
     parser.add_argument("--warmup", type=int, default=10, help="untimed steps first")
     parser.add_argument("--sensor-batch", type=int, default=64, help="copies of the all-sensors rows (0: none)")
-    parser.add_argument("--ppo-steps", type=int, default=0, help="env steps of each end-to-end PPO run (0: no PPO rows)")
+    parser.add_argument(
+        "--ppo-steps", type=int, default=0, help="env steps of each end-to-end PPO run (0: no PPO rows)"
+    )
     parser.add_argument("--ppo-envs", type=int, default=256, help="scenario copies of the PPO runs")
     parser.add_argument("--ppo-frames", type=int, default=16384, help="frames per batch of the PPO runs")
     parser.add_argument("--ppo-minibatch", type=int, default=4096, help="minibatch size of the PPO runs")
     parser.add_argument("--ppo-epochs", type=int, default=4, help="epochs of the PPO runs")
-    parser.add_argument("--ppo-workers", default="1,2", help="worker processes of each PPO run (0: the training process)")
-    parser.add_argument("--ppo-options", default="", help="more `python -m train ppo` options for every PPO run, e.g. "
-                        "'--device cuda --torch-threads 2'")
+    parser.add_argument(
+        "--ppo-workers", default="1,2", help="worker processes of each PPO run (0: the training process)"
+    )
+    parser.add_argument(
+        "--ppo-options",
+        default="",
+        help="more `python -m train ppo` options for every PPO run, e.g. '--device cuda --torch-threads 2'",
+    )
     parser.add_argument("--ppo-dir", type=Path, default=Path("runs/diagnostic_ppo"), help="where the PPO runs write")
     parser.add_argument("--out", type=Path, default=Path("reports/diagnostic_batched.json"), help="JSON output file")
     args = parser.parse_args(argv)
@@ -356,7 +369,11 @@ def main(argv: list[str] | None = None) -> int:
         console.print(ptable)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     report = {
-        "machine": {"python": platform.python_version(), "processor": platform.processor(), "system": platform.platform()},
+        "machine": {
+            "python": platform.python_version(),
+            "processor": platform.processor(),
+            "system": platform.platform(),
+        },
         "rows": rows,
         "sensors": sensors,
         "ppo": ppo_rows,

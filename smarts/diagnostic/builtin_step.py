@@ -43,16 +43,17 @@ def builtin_step_benchmark(n_vehicles: int, steps: int = 200, seed: int = 42) ->
             "seed": seed,
             "agents": [
                 # Only there because a simulation starts with an agent; it leaves right away.
-                {"id": "placeholder", "mission": {"start": {"road": "ramp", "lane": 0, "offset": 5.0},
-                                                  "goal": {"endless": True}}},
+                {
+                    "id": "placeholder",
+                    "mission": {"start": {"road": "ramp", "lane": 0, "offset": 5.0}, "goal": {"endless": True}},
+                },
             ],
         },
         source="builtin_step_benchmark",
     )
     sim = build_simulation(spec)
     flows = [
-        FlowSpec(id=f"flow_{i}", route=["main_0", "main_2"], rate=BENCH_RATE, depart_lane=i,
-                 vehicle_type="bench")
+        FlowSpec(id=f"flow_{i}", route=["main_0", "main_2"], rate=BENCH_RATE, depart_lane=i, vehicle_type="bench")
         for i in range(BENCH_FLOWS)
     ]
     bench = VehicleTypeSpec("bench", max_speed=BENCH_SPEED, tau=0.5, min_gap=2.0, speed_dev=0.0)

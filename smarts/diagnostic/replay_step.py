@@ -64,7 +64,10 @@ def replay_step_benchmark(n_vehicles: int, steps: int = 300, warmup: int = 20, t
         data = {"name": f"replay_{n_vehicles}", "map": f"builtin:{BENCH_MAP}", "episode_steps": frames,
                 "vehicle_capacity": n_vehicles + 8, "events": {"terminate_on": []}}  # fmt: skip
         # the agent stands at the far end of the ramp, out of everyone's way, unless it takes over
-        agent = {"id": "ego", "mission": {"start": {"road": "ramp", "lane": 0, "offset": 5.0}, "goal": {"endless": True}}}
+        agent = {
+            "id": "ego",
+            "mission": {"start": {"road": "ramp", "lane": 0, "offset": 5.0}, "goal": {"endless": True}},
+        }
         if n_vehicles:
             csv_path = write_bench_csv(Path(folder) / "bench.csv", n_vehicles, frames)
             data["replay"] = {"format": "ngsim", "path": str(csv_path), "swap_xy": True, "flip_y": True}

@@ -86,7 +86,9 @@ def _episode(sim, seed: int, steps: int, actions) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m smarts.diagnostic.reset_memory", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m smarts.diagnostic.reset_memory", description=__doc__.splitlines()[0]
+    )
     parser.add_argument("--resets", type=int, default=1000, help="resets to measure (default 1000)")
     parser.add_argument("--steps", type=int, default=5, help="steps after each reset (default 5)")
     parser.add_argument("--density", default="medium", help="traffic density (default medium)")

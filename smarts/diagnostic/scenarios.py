@@ -17,7 +17,12 @@ END_MARGIN = 15.0  # metres kept clear of the road's end
 SENSOR_INTERFACE = {
     "neighbours": {"extended": True},
     "occlusion": {"enabled": True, "mode": "hide"},
-    "rasters": {"size": 64, "resolution": 0.5, "layers": ["drivable", "lanes", "route", "occupancy", "occlusion"], "rgb": True},
+    "rasters": {
+        "size": 64,
+        "resolution": 0.5,
+        "layers": ["drivable", "lanes", "route", "occupancy", "occlusion"],
+        "rgb": True,
+    },
     "lidar": {"rays": 64, "range": 30.0},
 }
 SENSOR_COMMS = {
@@ -46,9 +51,14 @@ def sensor_scenario(n_agents: int, n_vehicles: int, steps: int) -> ScenarioSpec:
         )
     trips = [
         {
-            "id": f"car_{k}", "origin": PERF_ROAD, "destination": "main_2", "depart": 0,
-            "depart_lane": k % LANES, "depart_pos": 5.0 + TRAFFIC_SPACING * (k // LANES),
-            "depart_speed": CRUISE_SPEED, "vehicle_type": "cruise",
+            "id": f"car_{k}",
+            "origin": PERF_ROAD,
+            "destination": "main_2",
+            "depart": 0,
+            "depart_lane": k % LANES,
+            "depart_pos": 5.0 + TRAFFIC_SPACING * (k // LANES),
+            "depart_speed": CRUISE_SPEED,
+            "vehicle_type": "cruise",
         }  # fmt: skip
         for k in range(n_vehicles)
     ]

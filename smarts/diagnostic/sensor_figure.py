@@ -56,7 +56,9 @@ def make_figure(
         driver = resolve_policy(policy, policy_resolver)
         acts = (getattr(driver, "action_space", None), getattr(driver, "controller", None) or "direct")
         if acts != (wanted, "direct"):
-            raise ValueError(f"it acts in {acts[0]!r} with the {acts[1]!r} controller; the figure needs {wanted!r}, direct")
+            raise ValueError(
+                f"it acts in {acts[0]!r} with the {acts[1]!r} controller; the figure needs {wanted!r}, direct"
+            )
     except ValueError as error:
         env.close()
         raise ValueError(f"policy {policy!r}: {error}") from error
@@ -84,7 +86,9 @@ def make_figure(
     # Lidar rays (from just outside the ego's box) blended over the view, then the hit points.
     centre, scale = VIEW_SIZE / 2, 1.0 / VIEW_RESOLUTION
     angles = 2 * np.pi * np.arange(len(mine["lidar"])) / len(mine["lidar"])
-    ends = np.stack([centre - mine["lidar"] * np.sin(angles) * scale, centre - mine["lidar"] * np.cos(angles) * scale], 1)
+    ends = np.stack(
+        [centre - mine["lidar"] * np.sin(angles) * scale, centre - mine["lidar"] * np.cos(angles) * scale], 1
+    )
     starts = np.stack([centre - RAY_START * np.sin(angles) * scale, centre - RAY_START * np.cos(angles) * scale], 1)
     base = Image.fromarray(rgb)
     rays = base.copy()
@@ -115,11 +119,15 @@ def make_figure(
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m smarts.diagnostic.sensor_figure", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m smarts.diagnostic.sensor_figure", description=__doc__.splitlines()[0]
+    )
     parser.add_argument("--out", type=Path, default=Path("docs/figure1.png"), help="PNG file to write")
     parser.add_argument("--steps", type=int, default=STEPS, help=f"steps driven before the picture (default {STEPS})")
     parser.add_argument("--seed", type=int, default=SEED, help=f"episode seed (default {SEED})")
-    parser.add_argument("--policy", default=POLICY, help=f"locator of the RelativeTargetPose policy that drives (default {POLICY})")
+    parser.add_argument(
+        "--policy", default=POLICY, help=f"locator of the RelativeTargetPose policy that drives (default {POLICY})"
+    )
     args = parser.parse_args(argv)
     if args.steps < 0:
         parser.error("--steps must be >= 0")

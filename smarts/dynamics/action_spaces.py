@@ -48,9 +48,7 @@ def _as_kind(kind: ActionSpaceType | str) -> ActionSpaceType:
         raise ValueError(f"unknown action space {kind!r}; expected one of {names}") from None
 
 
-def action_space(
-    kind: ActionSpaceType | str, limits: ReachLimits, dt: float
-) -> gymnasium.spaces.Box:
+def action_space(kind: ActionSpaceType | str, limits: ReachLimits, dt: float) -> gymnasium.spaces.Box:
     """The float32 box of one agent's action for ``kind``.
 
     The relative pose box is what the car could at most cover in ``dt`` seconds (|dx|, |dy| <=
@@ -180,7 +178,10 @@ def action_problem(kind: ActionSpaceType | str, value: object, agent_id: str, co
     if finite.all():
         return None
     bad = np.flatnonzero(~finite).tolist()
-    return "; ".join(f"{agent_id}: {label} action component {components[c]} is {arr[c]}" for c in bad) + "; expected finite numbers"
+    return (
+        "; ".join(f"{agent_id}: {label} action component {components[c]} is {arr[c]}" for c in bad)
+        + "; expected finite numbers"
+    )
 
 
 def _short(value: object, limit: int = 60) -> str:

@@ -91,9 +91,7 @@ class AgentProvider(ProviderBase):
             if v.controller == "lane_relative" and v.action_space is ActionSpaceType.LANE:
                 raise ValueError(f"{v.agent_id}: the lane_relative controller cannot drive the lane action space")
         self.commanded = np.array([v.controller == "lane_relative" for v in vehicles], dtype=bool)
-        self.lane_relative = (
-            LaneRelativeController(len(vehicles), lane_relative) if self.commanded.any() else None
-        )
+        self.lane_relative = LaneRelativeController(len(vehicles), lane_relative) if self.commanded.any() else None
         self.physical = np.array([v.action_space is ActionSpaceType.CONTINUOUS for v in vehicles], dtype=bool)
         self.worlds: dict[int, object] = {}  # episode -> pybullet PhysicsWorld (Continuous agents only)
         self.handles = np.full(len(vehicles), -1, dtype=np.int64)
@@ -277,7 +275,8 @@ class AgentProvider(ProviderBase):
         n = len(sim.agent_ids)
         if actions.ndim != 2 or actions.shape[0] != n or actions.shape[1] < self.width:
             raise ActionError(
-                f"expected an action array of shape ({n}, {self.width}) (agents, action components), got {actions.shape}", []
+                f"expected an action array of shape ({n}, {self.width}) (agents, action components), got {actions.shape}",
+                [],
             )
         if actions.dtype.kind not in REAL_KINDS:
             raise ActionError(f"expected real-number actions, got dtype {actions.dtype}", [])
@@ -336,7 +335,9 @@ class AgentProvider(ProviderBase):
         if kind is ActionSpaceType.TARGET_POSE:
             return ctl.target_pose_actions(sim, members, rows, commands, dt)
         world = next(iter(self.worlds.values()))  # the car model's constants (every world has the same)
-        return ctl.continuous_actions(sim, members, rows, commands, dt, world, self.mass[members], self.wheelbase[members])
+        return ctl.continuous_actions(
+            sim, members, rows, commands, dt, world, self.mass[members], self.wheelbase[members]
+        )
 
     def _drive(self, kind, sim, members, rows, actions, dt, checked: bool = False) -> None:
         """Move ``rows`` by ``actions`` of ``kind``; ``checked``: the actions are the plan's
@@ -344,7 +345,9 @@ class AgentProvider(ProviderBase):
         if kind in (ActionSpaceType.RELATIVE_TARGET_POSE, ActionSpaceType.TARGET_POSE) and self.device is not None:
             from smarts.dynamics.pose_control_torch import apply_pose_torch
 
-            apply_pose_torch(sim.table, rows, actions, kind is ActionSpaceType.TARGET_POSE, dt, self.limits, self.device)
+            apply_pose_torch(
+                sim.table, rows, actions, kind is ActionSpaceType.TARGET_POSE, dt, self.limits, self.device
+            )
         elif checked and kind in (ActionSpaceType.RELATIVE_TARGET_POSE, ActionSpaceType.TARGET_POSE):
             move_to_poses(sim.table, rows, actions, kind is ActionSpaceType.TARGET_POSE, dt, self._limit_params)
         elif kind is ActionSpaceType.RELATIVE_TARGET_POSE:
@@ -360,6 +363,7 @@ class AgentProvider(ProviderBase):
                 apply_continuous(self.worlds[b], sim.table, rows[mine], self.handles[members[mine]], actions[mine], dt)
         else:
             self._lane_step(sim, members, rows, actions, dt)
+
     def _lane_step(self, sim: Simulation, members, rows, actions, dt) -> None:
         """Follow the route path or the path one lane left/right of it (see ``MissionArrays``)."""
         target_speed, change = lane_command(actions, self.limits)
@@ -377,7 +381,6 @@ class AgentProvider(ProviderBase):
         self.lane_offset[members] = offset
         target = ma.paths[members, idx, path, :2]
         lane_control_step(sim.table, rows, target_speed, target, dt, self.limits, self.wheelbase[members])
-
 
 
 def _stack(actions: dict, ids: list[str], width: int) -> np.ndarray | None:

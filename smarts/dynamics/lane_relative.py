@@ -84,7 +84,9 @@ class LaneRelativeParams:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise ValueError(f"LaneRelativeParams.{f.name}: expected a finite number, got {value!r}")
             if value <= 0 or (f.name == "threshold" and value >= 1):
-                raise ValueError(f"LaneRelativeParams.{f.name}: expected a number in (0, {'1' if f.name == 'threshold' else 'inf'}), got {value!r}")
+                raise ValueError(
+                    f"LaneRelativeParams.{f.name}: expected a number in (0, {'1' if f.name == 'threshold' else 'inf'}), got {value!r}"
+                )
 
 
 class Limits(NamedTuple):
@@ -387,7 +389,17 @@ def _project_near(offsets, points, point_s, lane, x, y, s_hint):  # pragma: no c
 
 @numba.njit(cache=True, nogil=True)
 def _targets_kernel(
-    frozen_lanes, frozen_state, data, lane_col, members, rows, cmd, dt, accel_out, kappa_out, target_out,
+    frozen_lanes,
+    frozen_state,
+    data,
+    lane_col,
+    members,
+    rows,
+    cmd,
+    dt,
+    accel_out,
+    kappa_out,
+    target_out,
 ):  # pragma: no cover - compiled
     """``LaneRelativeController.targets``: members ``members`` on rows ``rows`` follow ``cmd``
     (``frozen_lanes``: the map's frozen ``Lanes``; ``frozen_state``: the controller's frozen
@@ -398,10 +410,17 @@ def _targets_kernel(
     lanes, state = view(frozen_lanes), view(frozen_state)
     limits = state.limits
     lc_time, look_time, min_look, threshold = (
-        limits.lane_change_time, limits.lookahead_time, limits.min_lookahead, limits.threshold
+        limits.lane_change_time,
+        limits.lookahead_time,
+        limits.min_lookahead,
+        limits.threshold,
     )
     lane_left, lane_right, lane_width, lane_length, speed_limit = (
-        lanes.left, lanes.right, lanes.width, lanes.length, lanes.speed_limit
+        lanes.left,
+        lanes.right,
+        lanes.width,
+        lanes.length,
+        lanes.speed_limit,
     )
     succ_offsets = lanes.succ_offsets
     lp_offsets, lp_points, lp_s, lp_heading = lanes.point_offsets, lanes.points, lanes.point_s, lanes.point_heading

@@ -43,9 +43,7 @@ class ReachLimits:
             value = getattr(self, f.name)
             if f.name == "allow_reverse":
                 if not isinstance(value, bool):
-                    raise ValueError(
-                        f"ReachLimits.allow_reverse must be a bool, got {value!r}"
-                    )
+                    raise ValueError(f"ReachLimits.allow_reverse must be a bool, got {value!r}")
                 continue
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise ValueError(f"ReachLimits.{f.name} must be a number, got {value!r}")
@@ -53,9 +51,7 @@ class ReachLimits:
                 raise ValueError(f"ReachLimits.{f.name} must be finite, got {value!r}")
             if f.name == "max_slip":
                 if not 0.0 <= value < math.pi / 2:
-                    raise ValueError(
-                        f"ReachLimits.max_slip must be in [0, pi/2) rad, got {value!r}"
-                    )
+                    raise ValueError(f"ReachLimits.max_slip must be in [0, pi/2) rad, got {value!r}")
             elif value <= 0.0:
                 raise ValueError(f"ReachLimits.{f.name} must be positive, got {value!r}")
 

@@ -94,9 +94,7 @@ def _limit_one(dx, dy, dh, v0, dt, params):  # pragma: no cover - compiled
 @numba.njit(cache=True, nogil=True)
 def _limit_kernel(req, speed, dt, params, out):  # pragma: no cover - compiled
     for i in range(req.shape[0]):
-        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = _limit_one(
-            req[i, 0], req[i, 1], req[i, 2], speed[i], dt, params
-        )
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = _limit_one(req[i, 0], req[i, 1], req[i, 2], speed[i], dt, params)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -129,9 +127,7 @@ _SPEED, _ACCEL, _JERK = COLUMN["speed"], COLUMN["accel"], COLUMN["jerk"]
 _YAW_RATE, _LAT_ACCEL = COLUMN["yaw_rate"], COLUMN["lat_accel"]
 
 
-def _checked(
-    kind: ActionSpaceType, actions: np.ndarray, table: VehicleTable, rows: np.ndarray
-) -> np.ndarray:
+def _checked(kind: ActionSpaceType, actions: np.ndarray, table: VehicleTable, rows: np.ndarray) -> np.ndarray:
     """Cheap guard: a bad action must never reach the table; errors name the vehicles."""
     actions = np.asarray(actions, dtype=np.float64)
     if actions.shape != (len(rows), 3) or not np.isfinite(actions).all():

@@ -94,9 +94,7 @@ class PhysicsWorld:
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"PhysicsWorld: {name} must be a positive number, got {value!r}")
         if not (isinstance(solver_iterations, int) and solver_iterations > 0):
-            raise ValueError(
-                f"PhysicsWorld: solver_iterations must be a positive int, got {solver_iterations!r}"
-            )
+            raise ValueError(f"PhysicsWorld: solver_iterations must be a positive int, got {solver_iterations!r}")
         self.dt = float(dt)
         self.substeps = max(1, int(round(dt * physics_hz)))
         self.max_steer = float(max_steer)
@@ -126,9 +124,7 @@ class PhysicsWorld:
         )
         plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid)
         self.ground = p.createMultiBody(0.0, plane, physicsClientId=cid)
-        p.changeDynamics(
-            self.ground, -1, lateralFriction=self.friction, restitution=0.0, physicsClientId=cid
-        )
+        p.changeDynamics(self.ground, -1, lateralFriction=self.friction, restitution=0.0, physicsClientId=cid)
         # Per-handle geometry, indexed by the pybullet body id (small non-negative ints).
         self._wheelbase = np.zeros(16)
         self._half_track = np.zeros(16)
@@ -193,14 +189,10 @@ class PhysicsWorld:
         if not math.isfinite(speed):
             raise ValueError(f"add_vehicle: speed must be finite, got {speed!r}")
         if height <= CHASSIS_CLEARANCE + 0.1:
-            raise ValueError(
-                f"add_vehicle: height must exceed {CHASSIS_CLEARANCE + 0.1} m, got {height!r}"
-            )
+            raise ValueError(f"add_vehicle: height must exceed {CHASSIS_CLEARANCE + 0.1} m, got {height!r}")
         chassis_mass = mass - 4.0 * WHEEL_MASS - 2.0 * HINGE_MASS
         if not (math.isfinite(mass) and chassis_mass > 0):
-            raise ValueError(
-                f"add_vehicle: mass must exceed {4 * WHEEL_MASS + 2 * HINGE_MASS} kg, got {mass!r}"
-            )
+            raise ValueError(f"add_vehicle: mass must exceed {4 * WHEEL_MASS + 2 * HINGE_MASS} kg, got {mass!r}")
         cid = self._client
         base_z = WHEEL_RADIUS + CENTRE_OF_MASS_ABOVE_AXLE
         box_centre_z = 0.5 * (CHASSIS_CLEARANCE + height)
@@ -259,15 +251,11 @@ class PhysicsWorld:
         # Bullet's default damping acts like a strong air drag (60 v^2 N on a sedan): switch it off.
         p.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0, physicsClientId=cid)
         for link in _WHEELS:
-            p.changeDynamics(
-                body, link, lateralFriction=self.friction, restitution=0.0, physicsClientId=cid
-            )
+            p.changeDynamics(body, link, lateralFriction=self.friction, restitution=0.0, physicsClientId=cid)
         if speed != 0.0:
             p.resetBaseVelocity(body, [speed * c, speed * s, 0.0], physicsClientId=cid)
             for link in _WHEELS:
-                p.resetJointState(
-                    body, link, 0.0, targetVelocity=speed / WHEEL_RADIUS, physicsClientId=cid
-                )
+                p.resetJointState(body, link, 0.0, targetVelocity=speed / WHEEL_RADIUS, physicsClientId=cid)
         rolling = 0.25 * self.rolling_resistance * mass * _GRAVITY * WHEEL_RADIUS
         self._store_geometry(body, wheelbase, half_track, box_above_base, rolling, mass)
         # Coasting with centred steering until the first controls arrive.
@@ -336,16 +324,22 @@ class PhysicsWorld:
         cid = self._client
         hinge_targets = np.stack([left, right], axis=1).tolist()
         steer_forces = [self.steering_torque] * 2
-        for body, tgt, frc, hinge_tgt in zip(
-            handles.tolist(), target.tolist(), force.tolist(), hinge_targets
-        ):
+        for body, tgt, frc, hinge_tgt in zip(handles.tolist(), target.tolist(), force.tolist(), hinge_targets):
             p.setJointMotorControlArray(
-                body, _WHEELS, p.VELOCITY_CONTROL, targetVelocities=tgt, forces=frc,
+                body,
+                _WHEELS,
+                p.VELOCITY_CONTROL,
+                targetVelocities=tgt,
+                forces=frc,
                 physicsClientId=cid,
             )
             p.setJointMotorControlArray(
-                body, _HINGES, p.POSITION_CONTROL, targetPositions=hinge_tgt,
-                forces=steer_forces, physicsClientId=cid,
+                body,
+                _HINGES,
+                p.POSITION_CONTROL,
+                targetPositions=hinge_tgt,
+                forces=steer_forces,
+                physicsClientId=cid,
             )
 
     def read_state(self, handles: Sequence[int] | np.ndarray) -> ChassisState:
@@ -393,9 +387,7 @@ def apply_continuous(
     y, heading, speed, accel, jerk, yaw_rate, lat_accel and steering of the rows in place.
     """
     if abs(dt - world.dt) > 1e-12:
-        raise ValueError(
-            f"apply_continuous: dt {dt} differs from the physics world's dt {world.dt}"
-        )
+        raise ValueError(f"apply_continuous: dt {dt} differs from the physics world's dt {world.dt}")
     actions = np.asarray(actions, dtype=np.float64)
     if actions.shape != (len(rows), 3) or not np.isfinite(actions).all():
         ids = [str(table.ids[r]) for r in np.asarray(rows).tolist()]

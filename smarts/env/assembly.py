@@ -89,7 +89,9 @@ def build_simulation(
         key = _map_key(spec)
         if key not in map_number:
             if road_map is not None and maps:
-                raise ScenarioError(f"{spec.source}: map {spec.map} differs from {first.source}'s, but one road_map was given for all")
+                raise ScenarioError(
+                    f"{spec.source}: map {spec.map} differs from {first.source}'s, but one road_map was given for all"
+                )
             map_number[key] = len(maps)
             maps.append(road_map if road_map is not None else scenario_map(spec))
     stack = stack_maps(maps)
@@ -115,7 +117,9 @@ def _map_key(spec: ScenarioSpec) -> tuple:
     return (str(spec.map_path()),)
 
 
-def _episode(spec: ScenarioSpec, road_map: RoadMap, seed: int, limits: ReachLimits) -> tuple[EpisodeSetup, list[AgentVehicle]]:
+def _episode(
+    spec: ScenarioSpec, road_map: RoadMap, seed: int, limits: ReachLimits
+) -> tuple[EpisodeSetup, list[AgentVehicle]]:
     """One episode of ``spec`` on ``road_map`` (its window of the simulation's maps): its
     missions, own providers, rules and signals, and its agents' vehicles."""
     replay = _replay_plan(spec)
@@ -156,7 +160,9 @@ def _episode(spec: ScenarioSpec, road_map: RoadMap, seed: int, limits: ReachLimi
     providers = traffic_providers(spec, road_map, signals)
     if replay is not None:
         providers.insert(0, _replay_provider(spec, replay, road_map, providers, signals))
-    setup = EpisodeSetup(missions, providers, episode_steps=spec.episode_steps, events=events, seed=seed, signals=signals)
+    setup = EpisodeSetup(
+        missions, providers, episode_steps=spec.episode_steps, events=events, seed=seed, signals=signals
+    )
     return setup, vehicles
 
 

@@ -75,7 +75,9 @@ class Driving:
     ):
         self.specs = [as_spec(s) for s in specs]
         self.limits = limits or ReachLimits()
-        self.sim = sim = build_simulation(self.specs, self.limits, lane_relative=lane_relative, seeds=seeds, device=device)
+        self.sim = sim = build_simulation(
+            self.specs, self.limits, lane_relative=lane_relative, seeds=seeds, device=device
+        )
         interfaces = self._interfaces(observation)
         with_comms = [self.specs[b].comms is not None for b in sim.agent_episode.tolist()]
         self.sensors = ObservationSuite(interfaces, [(i, c) for i, c in zip(interfaces, with_comms)], sim.agent_episode)
@@ -142,7 +144,9 @@ class Driving:
         """Call ``listener(sim)`` after every step, before agents that finished are removed."""
         self._listeners.append(listener)
 
-    def reset(self, episodes: np.ndarray, seeds: Sequence[int | None] | None = None) -> tuple[np.ndarray, list[Batch], np.ndarray | None]:
+    def reset(
+        self, episodes: np.ndarray, seeds: Sequence[int | None] | None = None
+    ) -> tuple[np.ndarray, list[Batch], np.ndarray | None]:
         """Start ``episodes``; returns their agents (learners and social, ascending), the agents'
         first observations and, with comms, the messages each heard."""
         sim = self.sim
@@ -222,7 +226,10 @@ class Driving:
         payloads, channels = {}, {}
         if isinstance(actions, np.ndarray):
             if actions.ndim != 2 or actions.shape[0] != len(sim.agent_ids) or actions.dtype.kind not in REAL_KINDS:
-                raise ActionError(f"expected a real-number action array of {len(sim.agent_ids)} rows, got {actions.shape} {actions.dtype}", [])
+                raise ActionError(
+                    f"expected a real-number action array of {len(sim.agent_ids)} rows, got {actions.shape} {actions.dtype}",
+                    [],
+                )
             for k, link in enumerate(self.v2v):
                 mine = senders[link.mine[senders]]
                 payloads[k], channels[k] = link.split_array(actions, mine)
@@ -256,7 +263,9 @@ class Driving:
             hearing = np.concatenate([r for r, _ in parts])
             order = np.argsort(hearing, kind="stable")
             hearing = hearing[order]
-            received = Received(*(np.concatenate([getattr(got, f) for _, got in parts])[order] for f in Received.__dataclass_fields__))
+            received = Received(
+                *(np.concatenate([getattr(got, f) for _, got in parts])[order] for f in Received.__dataclass_fields__)
+            )
         if hearing.size == agents.size:
             V2VLink.merge(batches, agents, received)
             return received.count

@@ -142,7 +142,9 @@ class DrivingParallelEnv(ParallelEnv):
         live = set(self.agents)
         unknown = [a for a in actions if a not in live]
         if unknown:
-            raise ActionError(f"actions given for agents that are not live: {unknown}; live agents: {self.agents}", unknown)
+            raise ActionError(
+                f"actions given for agents that are not live: {unknown}; live agents: {self.agents}", unknown
+            )
         missing = [a for a in self.agents if a not in actions]
         raise ActionError(f"no action given for live agents {missing}", missing)
 

@@ -141,7 +141,8 @@ class SmartsVecEnv(VecEnv):
 
         raise BatchedSetupError(
             "SmartsVecEnv: SB3 trains one policy with one Box action space, but the slots have "
-            f"{len(first)} different ones: " + "; ".join(name(j) for j in first.values())
+            f"{len(first)} different ones: "
+            + "; ".join(name(j) for j in first.values())
             + ". Give every learning agent the same action space (or train with SmartsBatchedEnv, "
             "whose action spec bounds each slot)"
         )

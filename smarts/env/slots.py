@@ -25,14 +25,18 @@ def check_slot_actions(actions: Any, shape: tuple[int, ...], owner: str) -> np.n
     try:
         array = np.asarray(actions)
     except (TypeError, ValueError) as err:  # ragged nested lists
-        raise ActionError(f"{owner}: actions: expected an array of shape {shape}, got {type(actions).__name__} ({err})") from None
+        raise ActionError(
+            f"{owner}: actions: expected an array of shape {shape}, got {type(actions).__name__} ({err})"
+        ) from None
     if array.shape != tuple(shape):
         raise ActionError(
             f"{owner}: actions: expected shape {tuple(shape)} (one row of {shape[-1]} numbers per slot, "
             f"{shape[0]} slots), got shape {array.shape}"
         )
     if array.dtype.kind not in REAL_KINDS:
-        raise ActionError(f"{owner}: actions: expected real numbers (an integer or float dtype), got dtype {array.dtype}")
+        raise ActionError(
+            f"{owner}: actions: expected real numbers (an integer or float dtype), got dtype {array.dtype}"
+        )
     return array
 
 

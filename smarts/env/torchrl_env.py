@@ -301,7 +301,9 @@ def _flags(done, terminated, truncated) -> dict[str, torch.Tensor]:
 
 def slot_observation_spec(obs_space: gym.spaces.Dict, k: int, device) -> Composite:
     """The spec of ``slot_observation`` for ``k`` slots of ``obs_space``."""
-    obs = Composite({key: space_to_spec(sp, (k,), device) for key, sp in obs_space.spaces.items()}, shape=(k,), device=device)
+    obs = Composite(
+        {key: space_to_spec(sp, (k,), device) for key, sp in obs_space.spaces.items()}, shape=(k,), device=device
+    )
     return Composite(
         observation=obs,
         valid=Categorical(2, shape=(k, 1), dtype=torch.bool, device=device),
@@ -413,7 +415,9 @@ class SmartsBatchedEnv(EnvBase):
             raise ValueError("SmartsBatchedEnv needs at least one scenario")
         built = [s for s in scenarios if isinstance(s, DrivingParallelEnv)]
         if built:
-            raise TypeError("SmartsBatchedEnv builds its own copies: pass scenario names, paths or specs, not a built env")
+            raise TypeError(
+                "SmartsBatchedEnv builds its own copies: pass scenario names, paths or specs, not a built env"
+            )
         self.driving = BatchedDriving(scenarios, reward_factory=reward_factory, **options)
         n = self.driving.num_slots
         if slots is not None and slots < n:

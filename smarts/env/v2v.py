@@ -97,7 +97,9 @@ class V2VLink:
     def _tables(self) -> list:
         return [self.sim.views[b].table for b in self.episodes.tolist()]
 
-    def split(self, actions: Mapping[str, Any], ids: Sequence[str], agents: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    def split(
+        self, actions: Mapping[str, Any], ids: Sequence[str], agents: np.ndarray
+    ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
         """Driving actions by id, payloads float32[n, message_size] and channels int64[n] of the
         agents ``ids`` (agent indices ``agents``). A wrong length or a non-finite message number
         raises ``ActionError`` naming the agents, before anything moves."""
@@ -186,8 +188,7 @@ class V2VLink:
             arr = arr.astype(np.float64, copy=False)
         except (TypeError, ValueError):
             raise ActionError(
-                f"{agent}: action {action!r} is not an array of numbers; expected "
-                f"{self._expected(k)}",
+                f"{agent}: action {action!r} is not an array of numbers; expected {self._expected(k)}",
                 [agent],
             ) from None
         if arr.shape != (k + len(self.message_components),):

@@ -79,8 +79,10 @@ def assemble_road_map(
     point_s = running - np.repeat(running[point_offsets[:-1]], counts)
     lane_length = point_s[point_offsets[1:] - 1]
     lane_sumo_length = np.array(
-        [lane.sumo_length if lane.sumo_length is not None else length
-         for lane, length in zip(lanes, lane_length.tolist())],
+        [
+            lane.sumo_length if lane.sumo_length is not None else length
+            for lane, length in zip(lanes, lane_length.tolist())
+        ],
         dtype=np.float64,
     )
 
@@ -100,18 +102,14 @@ def assemble_road_map(
     seg_s0 = point_s[seg_idx]
 
     margin = float(lane_width.max()) + GRID_EXTRA_MARGIN
-    grid_origin, grid_shape, grid_offsets, grid_segs = build_segment_grid(
-        seg_start, seg_vec, GRID_CELL, margin
-    )
+    grid_origin, grid_shape, grid_offsets, grid_segs = build_segment_grid(seg_start, seg_vec, GRID_CELL, margin)
 
     shapes = [np.asarray(s, dtype=np.float64).reshape(-1, 2) for s in junction_shapes]
     raster_origin, resolution, drivable = build_drivable_raster(
         polylines, lane_width, shapes, raster_resolution, max_raster_cells
     )
 
-    lp_offsets, lp_xy, lp_s, lp_heading = _lanepoints(
-        points, point_s, point_offsets, seg_heading, LANEPOINT_SPACING
-    )
+    lp_offsets, lp_xy, lp_s, lp_heading = _lanepoints(points, point_s, point_offsets, seg_heading, LANEPOINT_SPACING)
 
     all_xy = np.concatenate([points, *shapes]) if shapes else points
     pad = float(lane_width.max()) / 2
@@ -191,9 +189,7 @@ def _neighbours(lane_road: np.ndarray, lane_index: np.ndarray) -> tuple[np.ndarr
     return left, right
 
 
-def _csr(
-    n: int, links: Sequence[tuple[int, int]], reverse: bool
-) -> tuple[np.ndarray, np.ndarray]:
+def _csr(n: int, links: Sequence[tuple[int, int]], reverse: bool) -> tuple[np.ndarray, np.ndarray]:
     pairs = np.array(sorted(set(links)), dtype=np.int64).reshape(-1, 2)
     if reverse:
         pairs = pairs[:, ::-1]
@@ -255,9 +251,7 @@ def build_segment_grid(
     return origin, (nx, ny), offsets, segs_all
 
 
-def _segment_rect_distance(
-    a: np.ndarray, v: np.ndarray, rect_lo: np.ndarray, size: float
-) -> np.ndarray:
+def _segment_rect_distance(a: np.ndarray, v: np.ndarray, rect_lo: np.ndarray, size: float) -> np.ndarray:
     """Distance between segments a + u v (u in [0, 1]) and axis-aligned squares, vectorised."""
     rect_hi = rect_lo + size
     # Liang-Barsky clipping: the segment intersects the square when the clipped range is non-empty.

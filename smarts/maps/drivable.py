@@ -79,6 +79,7 @@ def build_drivable_raster(
     lo = all_xy.min(axis=0) - pad
     hi = all_xy.max(axis=0) + pad
     extent = hi - lo
+
     def cells(res: float) -> int:
         return (math.ceil(extent[0] / res) + 2) * (math.ceil(extent[1] / res) + 2)
 

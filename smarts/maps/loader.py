@@ -136,9 +136,7 @@ def sumo_net_path(path: str | Path, cache_dir: Path | None = None) -> Path:
             raise
         names = [net_name] + ([IGNORED_ERRORS_NAME] if (build / IGNORED_ERRORS_NAME).is_file() else [])
         cache.write_manifest(build, names)
-        final = cache.publish_dir(
-            build, folder / entry_name, lambda d: cache.check_manifest(d, [net_name]) is None
-        )
+        final = cache.publish_dir(build, folder / entry_name, lambda d: cache.check_manifest(d, [net_name]) is None)
     finally:
         if build.exists():
             shutil.rmtree(build, ignore_errors=True)
@@ -200,9 +198,7 @@ def _checked_name(path: Path) -> str:
     """Lower-cased file name, after checking the suffix names a supported format."""
     name = path.name.lower()
     if not name.endswith(_SUFFIXES):
-        raise MapError(
-            f"{path}: unknown map format; expected a file ending in {' or '.join(_SUFFIXES)}"
-        )
+        raise MapError(f"{path}: unknown map format; expected a file ending in {' or '.join(_SUFFIXES)}")
     return name
 
 

@@ -107,6 +107,7 @@ class _Index:
             )
         )
 
+
 def projection_index(road_map: RoadMap) -> _Index:
     index = road_map.__dict__.get("_projection_index")
     if index is None:
@@ -115,9 +116,7 @@ def projection_index(road_map: RoadMap) -> _Index:
     return index
 
 
-def project(
-    road_map: RoadMap, xy: np.ndarray, heading: np.ndarray | None = None
-) -> LaneProjection:
+def project(road_map: RoadMap, xy: np.ndarray, heading: np.ndarray | None = None) -> LaneProjection:
     """Project points ``xy[N, 2]`` onto their lanes.
 
     A point is *on* a lane when it is within half the lane's width of its centre line. Among the
@@ -144,8 +143,23 @@ def project_on_grids(grids: Grids, xy: np.ndarray, heading: np.ndarray | None, p
 
 @numba.njit(cache=True, nogil=True)
 def _project_kernel(
-    table, offsets, grid_segs, cell_base, ny, origin, inv_cell, cell_max, point_map,
-    xy, heading, use_heading, out_lane, out_s, out_t, out_heading, out_distance,
+    table,
+    offsets,
+    grid_segs,
+    cell_base,
+    ny,
+    origin,
+    inv_cell,
+    cell_max,
+    point_map,
+    xy,
+    heading,
+    use_heading,
+    out_lane,
+    out_s,
+    out_t,
+    out_heading,
+    out_distance,
 ):  # pragma: no cover - compiled
     """Point ``p`` searches the grid of map ``point_map[p]`` (``point_map[0]`` for every point
     when it has one entry): per map, its first cell in ``offsets``, its cells per column, origin,
@@ -212,5 +226,3 @@ def project_point(grids, m, x, y, heading, use_heading):  # pragma: no cover - c
         int(table[_LANE, best]), table[_S0, best] + u * table[_LEN, best],
         side * math.hypot(rx - u * vx, ry - u * vy), table[_HEADING, best], dist,
     )  # fmt: skip
-
-

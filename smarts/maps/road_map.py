@@ -229,9 +229,7 @@ class RoadMap:
             if f.name == "junction_shapes":
                 lengths = np.array([len(s) for s in value], dtype=np.int64)
                 arrays["junction_shape_offsets"] = np.concatenate([[0], np.cumsum(lengths)])
-                arrays["junction_shape_points"] = (
-                    np.concatenate(value) if value else np.zeros((0, 2))
-                )
+                arrays["junction_shape_points"] = np.concatenate(value) if value else np.zeros((0, 2))
                 continue
             if isinstance(value, list):
                 value = np.array(value, dtype=np.str_)
@@ -258,9 +256,7 @@ class RoadMap:
             kwargs[f.name] = value
         offsets = data["junction_shape_offsets"]
         pts = data["junction_shape_points"]
-        kwargs["junction_shapes"] = [
-            pts[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)
-        ]
+        kwargs["junction_shapes"] = [pts[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)]
         return cls(**kwargs)
 
     def save(self, path: Path) -> None:

@@ -63,9 +63,7 @@ def shortest_route(
     n = road_map.num_lanes
     for name, lane in (("start", start_lane), ("end", end_lane)):
         if not 0 <= int(lane) < n:
-            raise MapError(
-                f"{road_map.source}: {name} lane {lane} is not a lane index (0..{n - 1})"
-            )
+            raise MapError(f"{road_map.source}: {name} lane {lane} is not a lane index (0..{n - 1})")
     if start_lane == end_lane:
         return np.array([start_lane], dtype=np.int32)
     graph = lane_graph(road_map, lane_change_cost)
@@ -106,19 +104,14 @@ def route_between(
     exits = road_map.successors(a)
     if len(exits) == 0:
         raise NoRouteError(
-            f"{road_map.source}: the goal is behind the start on lane "
-            f"{road_map.lane_ids[a]!r}, which is a dead end"
+            f"{road_map.source}: the goal is behind the start on lane {road_map.lane_ids[a]!r}, which is a dead end"
         )
     graph = lane_graph(road_map, lane_change_cost)
     dist = dijkstra(graph, indices=exits.astype(np.int64))[:, b]
     if not np.isfinite(dist).any():
-        raise NoRouteError(
-            f"{road_map.source}: no route leaves lane {road_map.lane_ids[a]!r} and returns to it"
-        )
+        raise NoRouteError(f"{road_map.source}: no route leaves lane {road_map.lane_ids[a]!r} and returns to it")
     via = int(exits[int(np.argmin(dist))])
-    return np.concatenate([[a], shortest_route(road_map, via, b, lane_change_cost)]).astype(
-        np.int32
-    )
+    return np.concatenate([[a], shortest_route(road_map, via, b, lane_change_cost)]).astype(np.int32)
 
 
 def junction_links(road_map: RoadMap) -> tuple[list[frozenset[int]], list[frozenset[int]]]:

@@ -175,7 +175,10 @@ class MapStack:
             offsets=_csr([g.offsets for g in grids]).astype(np.intp),
             segs=np.concatenate([g.segs for g in grids]).astype(np.intp),
             cell_base=np.concatenate([[0], np.cumsum([len(g.offsets) - 1 for g in grids[:-1]])]).astype(np.int64),
-            **{name: np.concatenate([getattr(g, name) for g in grids]) for name in ("ny", "origin", "inv_cell", "cell_max")},
+            **{
+                name: np.concatenate([getattr(g, name) for g in grids])
+                for name in ("ny", "origin", "inv_cell", "cell_max")
+            },
         )
         rasters = [raster_lookup(m) for m in self.maps]
         self.raster_flat = np.concatenate([r[4] for r in rasters])

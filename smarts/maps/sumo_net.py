@@ -209,8 +209,7 @@ def _int_attr(path: Path, element: ET.Element, name: str) -> int:
         return int(value)  # type: ignore[arg-type]
     except (TypeError, ValueError):
         raise MapError(
-            f"{path}: <{element.tag} id={element.get('id')!r}> needs an integer {name!r}, "
-            f"got {value!r}"
+            f"{path}: <{element.tag} id={element.get('id')!r}> needs an integer {name!r}, got {value!r}"
         ) from None
 
 
@@ -224,8 +223,7 @@ def _float_attr(path: Path, element: ET.Element, name: str, default: float) -> f
         number = float("nan")
     if not np.isfinite(number) or number <= 0:
         raise MapError(
-            f"{path}: <{element.tag} id={element.get('id')!r}> needs a positive number for "
-            f"{name!r}, got {value!r}"
+            f"{path}: <{element.tag} id={element.get('id')!r}> needs a positive number for {name!r}, got {value!r}"
         )
     return number
 
@@ -240,9 +238,7 @@ def _length_attr(path: Path, lane: ET.Element) -> float | None:
     except ValueError:
         number = float("nan")
     if not np.isfinite(number) or number < 0:
-        raise MapError(
-            f"{path}: <lane id={lane.get('id')!r}> needs a length >= 0, got {value!r}"
-        )
+        raise MapError(f"{path}: <lane id={lane.get('id')!r}> needs a length >= 0, got {value!r}")
     return number
 
 
@@ -259,8 +255,7 @@ def _parse_shape(path: Path, owner: str, shape: str | None) -> np.ndarray:
             coords.append((float(parts[0]), float(parts[1])))
         except ValueError:
             raise MapError(
-                f"{path}: {owner!r} has a malformed shape point {token!r} "
-                f"(expected 'x,y' or 'x,y,z')"
+                f"{path}: {owner!r} has a malformed shape point {token!r} (expected 'x,y' or 'x,y,z')"
             ) from None
     xy = np.array(coords, dtype=np.float64)
     if not np.isfinite(xy).all():

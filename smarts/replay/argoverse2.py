@@ -84,7 +84,9 @@ def scenario_files(path: str | Path) -> tuple[Path, Path]:
                     "text": " (NGSIM trajectories are read with --format ngsim)"}.get(kind, "")  # fmt: skip
             raise ReplayError(f"{path}: is a {kind} file, not an Argoverse 2 scenario parquet{hint}")
     if len(maps) != 1:
-        raise ReplayError(f"{folder}: expected one log_map_archive_<id>.json next to {parquet[0].name}, found {len(maps)}")
+        raise ReplayError(
+            f"{folder}: expected one log_map_archive_<id>.json next to {parquet[0].name}, found {len(maps)}"
+        )
     return parquet[0], maps[0]
 
 
@@ -168,7 +170,9 @@ def _items(data: dict, key: str, path: Path) -> list[tuple[str, object]]:
         return [(str(k), v) for k, v in value.items()]
     if isinstance(value, list):
         return [(str(v.get("id", i)) if isinstance(v, dict) else str(i), v) for i, v in enumerate(value)]
-    raise ReplayError(f"{path}: {key}: expected a mapping of id -> entry (or a list of entries), got {type(value).__name__}")
+    raise ReplayError(
+        f"{path}: {key}: expected a mapping of id -> entry (or a list of entries), got {type(value).__name__}"
+    )
 
 
 def read_map(

@@ -67,7 +67,7 @@ def check_options(model: type[Schema], args: argparse.Namespace) -> Schema:
         for problem in exc.errors():
             where, message = locate(model, problem)
             flag = "--" + where.split("[")[0].replace("_", "-")
-            lines.append(f"{flag}{where[len(where.split('[')[0]):]}: {message}")
+            lines.append(f"{flag}{where[len(where.split('[')[0]) :]}: {message}")
         raise ReplayError("\n".join(lines)) from None
 
 
@@ -165,7 +165,9 @@ def summary(rec) -> dict:
         out["map_lanes"] = len(dm.lane_ids)
         from smarts.replay.recording import MARK_NAMES
 
-        marks = {MARK_NAMES[k]: int(n) for k, n in zip(*np.unique(np.asarray(dm.mark_kinds, dtype=int), return_counts=True))}
+        marks = {
+            MARK_NAMES[k]: int(n) for k, n in zip(*np.unique(np.asarray(dm.mark_kinds, dtype=int), return_counts=True))
+        }
         if marks:
             out["map_marks"] = marks
         if dm.signal_lanes:
@@ -257,4 +259,3 @@ def _suite(args: argparse.Namespace) -> int:
     print(f"wrote {args.out} ({written} scenario{'s' if written != 1 else ''}); run it with: python -m train "
           f"benchmark --suite {args.out} --agent <locator>")  # fmt: skip
     return 0
-

@@ -110,8 +110,20 @@ def compile_lane_map(dm: DatasetMap, content_hash: str | None = None) -> RoadMap
         for line in [*dm.polylines, *dm.marks]:
             h.update(np.ascontiguousarray(line, dtype=np.float64).tobytes())
         h.update("\0".join(dm.lane_ids).encode())
-        h.update(repr((dm.successors, dm.left, dm.right, dm.stop_sign_lanes, dm.mark_kinds, dm.signal_lanes,
-                       list(np.asarray(dm.internal).tolist()), list(np.asarray(dm.widths).tolist()))).encode())
+        h.update(
+            repr(
+                (
+                    dm.successors,
+                    dm.left,
+                    dm.right,
+                    dm.stop_sign_lanes,
+                    dm.mark_kinds,
+                    dm.signal_lanes,
+                    list(np.asarray(dm.internal).tolist()),
+                    list(np.asarray(dm.widths).tolist()),
+                )
+            ).encode()
+        )
         h.update(np.ascontiguousarray(dm.stop_signs, dtype=np.float64).tobytes())
         h.update(np.ascontiguousarray(dm.signal_stops, dtype=np.float64).tobytes())
         content_hash = h.hexdigest()

@@ -50,7 +50,17 @@ def read_recording(
         raise ReplayError(f"{path}: scenario {scenario!r}: an Argoverse 2 scenario is a folder of its own (name it "
                           "in path)")  # fmt: skip
     stat = path.stat()
-    key = (fmt, str(path.resolve()), stat.st_size, stat.st_mtime_ns, coordinates, swap_xy, flip_y, tuple(offset), scenario)
+    key = (
+        fmt,
+        str(path.resolve()),
+        stat.st_size,
+        stat.st_mtime_ns,
+        coordinates,
+        swap_xy,
+        flip_y,
+        tuple(offset),
+        scenario,
+    )
     rec = _CACHE.get(key)
     if rec is not None:
         _CACHE.move_to_end(key)

@@ -158,7 +158,9 @@ def _header(line: str) -> list[str]:
     return [c.strip().strip('"') for c in line.strip().split(",")] if line.strip() else []
 
 
-def _read_csv(path: Path, xcol: str, ycol: str, coordinates: str, location: str | None) -> tuple[dict, np.ndarray | None]:
+def _read_csv(
+    path: Path, xcol: str, ycol: str, coordinates: str, location: str | None
+) -> tuple[dict, np.ndarray | None]:
     """The columns of a CSV with a header (names matched whatever their capitalisation) and the
     data row number of each kept row (None when every row is kept)."""
     import pyarrow as pa

@@ -153,7 +153,9 @@ class ReplayProvider(ProviderBase):
         self._signal_frame = rel
         codes = rec.signal_states[rel]
         tls_ids = sim.road_map.tls_ids
-        signals.set_states({tls_ids[t]: SIGNAL_CHARS[int(c)] for t, c in zip(self._signal_tls.tolist(), codes) if t >= 0})
+        signals.set_states(
+            {tls_ids[t]: SIGNAL_CHARS[int(c)] for t, c in zip(self._signal_tls.tolist(), codes) if t >= 0}
+        )
 
     def _advance(self, sim: Simulation, dt: float) -> None:
         rec = self.recording

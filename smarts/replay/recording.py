@@ -268,7 +268,9 @@ class Recording:
             times=self.times,
             signal_states=self.signal_states,
             skipped=dict(self.skipped),
-            ego=self.ego if self.ego is not None and self.ego in self.index_of and keep[self.index_of[self.ego]] else None,
+            ego=self.ego
+            if self.ego is not None and self.ego in self.index_of and keep[self.index_of[self.ego]]
+            else None,
         )
 
     # ------------------------------------------------------------------ state at a time

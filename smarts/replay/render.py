@@ -366,7 +366,9 @@ def render_frame(
     boxes = idx[rec.kind[idx] != ObjectKind.PEDESTRIAN]
     highlight = followed if followed is not None else (rec.index_of.get(rec.ego) if rec.ego is not None else None)
     if boxes.size:
-        corners = canvas.pixels(box_corners(st[0, boxes], st[1, boxes], st[2, boxes], rec.length[boxes], rec.width[boxes]))
+        corners = canvas.pixels(
+            box_corners(st[0, boxes], st[1, boxes], st[2, boxes], rec.length[boxes], rec.width[boxes])
+        )
         for k, poly in zip(boxes.tolist(), corners):
             colour = CYCLIST if rec.kind[k] == ObjectKind.CYCLIST else VEHICLE
             if k == highlight:
@@ -424,7 +426,12 @@ def render(
     extent = rec.extent()
     under = tuple(road_map.bounds) if road_map is not None else scene.extent()
     if under is not None:
-        extent = (min(extent[0], under[0]), min(extent[1], under[1]), max(extent[2], under[2]), max(extent[3], under[3]))
+        extent = (
+            min(extent[0], under[0]),
+            min(extent[1], under[1]),
+            max(extent[2], under[2]),
+            max(extent[3], under[3]),
+        )
     if follow == "auto":
         follow = rec.ego if suffix != ".png" else None
     elif follow == "ego":

@@ -156,7 +156,9 @@ def build_suite(
                 "replay": replay, "agents": [{"id": "ego"}]}  # fmt: skip
         if peak + 1 > DEFAULT_CAPACITY:
             body["vehicle_capacity"] = int(peak + 8)
-        entry_name = _name(f"{Path(source).stem}_{scenario}_{vid}" if scenario is not None else f"{Path(source).stem}_{vid}")
+        entry_name = _name(
+            f"{Path(source).stem}_{scenario}_{vid}" if scenario is not None else f"{Path(source).stem}_{vid}"
+        )
         while entry_name in names:
             entry_name += "_"
         names.add(entry_name)

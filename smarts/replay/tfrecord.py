@@ -85,10 +85,14 @@ def read_records(path: str | Path) -> Iterator[bytes]:
             (length,) = struct.unpack("<Q", length_bytes)
             after = size - offset - 12
             if length + 4 > after:  # checked before reading: a header may claim any size
-                raise ReplayError(f"{where}: truncated (the header claims {length} data bytes and a 4-byte checksum; "
-                                  f"{max(after, 0)} bytes follow it)")
+                raise ReplayError(
+                    f"{where}: truncated (the header claims {length} data bytes and a 4-byte checksum; "
+                    f"{max(after, 0)} bytes follow it)"
+                )
             if length > MAX_RECORD_BYTES:
-                raise ReplayError(f"{where}: a {length}-byte record; at most {MAX_RECORD_BYTES} bytes are read per record")
+                raise ReplayError(
+                    f"{where}: a {length}-byte record; at most {MAX_RECORD_BYTES} bytes are read per record"
+                )
             data = f.read(length)
             footer = f.read(4)
             if len(data) < length or len(footer) < 4:

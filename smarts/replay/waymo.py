@@ -120,7 +120,9 @@ def read_waymo(
             continue
         states = track.states
         if n_frames and len(states) != n_frames:
-            raise ReplayError(f"{where}: tracks[{i}].states: expected one per timestamp ({n_frames}), got {len(states)}")
+            raise ReplayError(
+                f"{where}: tracks[{i}].states: expected one per timestamp ({n_frames}), got {len(states)}"
+            )
         valid = np.array([s.valid for s in states], dtype=bool)
         if not valid.any():
             skipped[str(track.id)] = f"a {kind.name.lower()} never valid"

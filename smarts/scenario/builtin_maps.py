@@ -144,9 +144,7 @@ def straight_road(lanes: int, length: float = 300.0, speed: float = 13.89, width
     )
 
 
-def straight_road_twoway(
-    length: float = 300.0, speed: float = 13.89, width: float = 3.2
-) -> PlainNetwork:
+def straight_road_twoway(length: float = 300.0, speed: float = 13.89, width: float = 3.2) -> PlainNetwork:
     """A two-way road: 'eastbound' and 'westbound', one lane each, sharing a centre line at y = 0.
 
     No U-turn is built at the ends: vehicles leave the map there.
@@ -333,12 +331,8 @@ class MapRecipe:
 
 def _recipes() -> dict[str, MapRecipe]:
     recipes = [
-        MapRecipe(
-            "straight_2lane", "300 m one-way road 'main', 2 lanes", straight_road, {"lanes": 2}
-        ),
-        MapRecipe(
-            "straight_3lane", "300 m one-way road 'main', 3 lanes", straight_road, {"lanes": 3}
-        ),
+        MapRecipe("straight_2lane", "300 m one-way road 'main', 2 lanes", straight_road, {"lanes": 2}),
+        MapRecipe("straight_3lane", "300 m one-way road 'main', 3 lanes", straight_road, {"lanes": 3}),
         MapRecipe(
             "straight_2lane_twoway",
             "300 m two-way road: 'eastbound' and 'westbound', 1 lane each",
@@ -367,8 +361,7 @@ def _recipes() -> dict[str, MapRecipe]:
             recipes.append(
                 MapRecipe(
                     f"intersection_4way_{lanes}lane" + ("_signal" if signal else ""),
-                    f"{kind} 4-way intersection, {lanes} lane{'s' if lanes > 1 else ''} each way, "
-                    "100 m arms",
+                    f"{kind} 4-way intersection, {lanes} lane{'s' if lanes > 1 else ''} each way, 100 m arms",
                     junction,
                     {"arms": ("west", "north", "east", "south"), "lanes": lanes, "signal": signal},
                 )
@@ -485,18 +478,14 @@ def compile_map(recipe: MapRecipe, cache_dir: str | os.PathLike | None = None) -
     try:
         _run_netconvert(recipe, xml_files, build, net_name)
         cache.write_manifest(build, [net_name, *(f"{recipe.name}.{s}" for s in xml_files)])
-        final = cache.publish_dir(
-            build, root / entry_name, lambda d: cache.check_manifest(d, [net_name]) is None
-        )
+        final = cache.publish_dir(build, root / entry_name, lambda d: cache.check_manifest(d, [net_name]) is None)
     finally:
         if build.exists():
             shutil.rmtree(build, ignore_errors=True)
     return final / net_name
 
 
-def _run_netconvert(
-    recipe: MapRecipe, xml_files: Mapping[str, str], work_dir: Path, net_name: str
-) -> None:
+def _run_netconvert(recipe: MapRecipe, xml_files: Mapping[str, str], work_dir: Path, net_name: str) -> None:
     args = [netconvert_binary()]
     option_of = {
         "nod.xml": "--node-files",
@@ -535,7 +524,5 @@ def builtin_map_path(name: str, cache_dir: str | os.PathLike | None = None) -> P
     try:
         recipe = BUILTIN_MAPS[name]
     except KeyError:
-        raise ScenarioError(
-            f"unknown built-in map {name!r}; known maps: {', '.join(sorted(BUILTIN_MAPS))}"
-        ) from None
+        raise ScenarioError(f"unknown built-in map {name!r}; known maps: {', '.join(sorted(BUILTIN_MAPS))}") from None
     return compile_map(recipe, cache_dir)

@@ -49,7 +49,9 @@ def add_map_commands(maps: argparse.ArgumentParser, argv: list[str] | None = Non
     map_sub.required = True
     p = map_sub.add_parser("list", help="list the built-in maps", formatter_class=HelpFormatter)
     p.set_defaults(run=_map_list)
-    p = map_sub.add_parser("build", help="build a built-in map with netconvert; print its path", formatter_class=HelpFormatter)
+    p = map_sub.add_parser(
+        "build", help="build a built-in map with netconvert; print its path", formatter_class=HelpFormatter
+    )
     p.add_argument("name", help="built-in map name")
     p.set_defaults(run=_map_build)
 
@@ -119,7 +121,9 @@ def _validate(name: str):
     try:
         return validate_scenario(name)
     except Exception as exc:  # noqa: BLE001 - a command reports, it does not crash
-        return Validation(name, [f"{name}: internal error while validating (please report it): {type(exc).__name__}: {exc}"])
+        return Validation(
+            name, [f"{name}: internal error while validating (please report it): {type(exc).__name__}: {exc}"]
+        )
 
 
 def _map_summary(road_map) -> str:

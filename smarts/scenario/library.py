@@ -31,10 +31,7 @@ def load_scenario(name_or_path: str | os.PathLike) -> ScenarioSpec:
     """Load a built-in scenario by name, or any scenario file by path."""
     text = os.fspath(name_or_path)
     looks_like_path = (
-        isinstance(name_or_path, Path)
-        or text.endswith((".yaml", ".yml"))
-        or "/" in text
-        or os.sep in text
+        isinstance(name_or_path, Path) or text.endswith((".yaml", ".yml")) or "/" in text or os.sep in text
     )
     if looks_like_path:
         return ScenarioSpec.from_yaml(text)

@@ -267,8 +267,7 @@ class _MapChecker:
         if not (xmin - radius <= x <= xmax + radius and ymin - radius <= y <= ymax + radius):
             self.add(
                 path,
-                f"({x:g}, {y:g}) lies outside the map bounds x {xmin:.1f}..{xmax:.1f}, "
-                f"y {ymin:.1f}..{ymax:.1f}",
+                f"({x:g}, {y:g}) lies outside the map bounds x {xmin:.1f}..{xmax:.1f}, y {ymin:.1f}..{ymax:.1f}",
             )
             return False
         return True

@@ -105,18 +105,14 @@ def read_scenario(
     return scenario.to_spec(spec_class, source, folder)
 
 
-def read_scenario_file(
-    path: str | os.PathLike, spec_class: type[ScenarioSpec] = ScenarioSpec
-) -> ScenarioSpec:
+def read_scenario_file(path: str | os.PathLike, spec_class: type[ScenarioSpec] = ScenarioSpec) -> ScenarioSpec:
     """Read and validate a scenario YAML file; its name defaults to the file's name."""
     path = Path(path)
     source = str(path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
-        raise ScenarioError(
-            f"{source}: cannot read scenario file: {exc.strerror or exc}"
-        ) from None
+        raise ScenarioError(f"{source}: cannot read scenario file: {exc.strerror or exc}") from None
     except UnicodeDecodeError as exc:
         raise ScenarioError(
             f"{source}: not a YAML text file (not UTF-8: byte {exc.object[exc.start]:#04x} at offset {exc.start})"
@@ -465,9 +461,7 @@ def _route_problems(item: Schema) -> list[tuple[Any, str]]:
     if not ends:
         return [((), "expected a route (a list of roads) or origin and destination, got neither")]
     return [
-        (key, "required field missing (a road id)")
-        for key in ("origin", "destination")
-        if getattr(item, key) is None
+        (key, "required field missing (a road id)") for key in ("origin", "destination") if getattr(item, key) is None
     ]
 
 
@@ -507,9 +501,7 @@ class _Departure(Schema):
 class FlowFile(_Departure):
     """Repeated departures: ``rate`` vehicles per hour or a departure ``probability`` each second."""
 
-    rate: Rate | None = Field(
-        None, description=f"Vehicles per hour (evenly spaced), at most {MAX_FLOW_RATE:,.0f}."
-    )
+    rate: Rate | None = Field(None, description=f"Vehicles per hour (evenly spaced), at most {MAX_FLOW_RATE:,.0f}.")
     probability: Annotated[float, Field(gt=0, le=1)] | None = Field(None, description="Departures per second.")
     begin: Time = Field(0.0, description="s.")
     end: Time = Field(3600.0, description="s, after begin.")
@@ -673,7 +665,9 @@ class ScenarioFile(Schema):
         first: dict[str, int] = {}
         for i, agent_id in enumerate(ids):
             if agent_id in first:
-                problems.append((("agents", i, "id"), f"duplicate agent id {agent_id!r} (also agents[{first[agent_id]}])"))
+                problems.append(
+                    (("agents", i, "id"), f"duplicate agent id {agent_id!r} (also agents[{first[agent_id]}])")
+                )
             first.setdefault(agent_id, i)
         problems += self._agents_and_replay(ids)
         problems += self._agents_and_traffic(first)
@@ -696,20 +690,26 @@ class ScenarioFile(Schema):
                 problems.append((("agents", i, "mission"), f"not allowed: replay.take_over gives agent {ids[i]!r} "
                                  f"recorded vehicle {taken[ids[i]]!r}, whose track sets its start and goal"))  # fmt: skip
             elif ids[i] not in taken and agent.mission is None:
-                problems.append((("agents", i, "mission"), "required field missing (or name the agent in replay.take_over)"))
+                problems.append(
+                    (("agents", i, "mission"), "required field missing (or name the agent in replay.take_over)")
+                )
         for agent_id in taken:
             if agent_id not in ids:
                 problems.append((("replay", "take_over", agent_id), f"unknown agent {agent_id!r}{_did_you_mean(agent_id, ids)}; "
                                  f"the scenario's agents are {ids}"))  # fmt: skip
         twice = [v for i, v in enumerate(taken.values()) if v in list(taken.values())[:i]]
         for vehicle in dict.fromkeys(twice):
-            problems.append((("replay", "take_over"), f"recorded vehicle {vehicle!r} is taken over by more than one agent"))
+            problems.append(
+                (("replay", "take_over"), f"recorded vehicle {vehicle!r} is taken over by more than one agent")
+            )
         if self.map == REPLAY_MAP and (self.replay is None or self.replay.format == "ngsim"):
             problems.append(("map", f"{REPLAY_MAP!r} is the map of an argoverse2 or waymo replay; "
                              + ("the scenario has no replay section" if self.replay is None else
                                 "NGSIM has no map of its own: name its .net.xml")))  # fmt: skip
         if self.map == REPLAY_MAP and self.traffic is not None and self.traffic.engine == "sumo":
-            problems.append((("traffic", "engine"), f"sumo needs a SUMO network; map {REPLAY_MAP!r} has none (use builtin)"))
+            problems.append(
+                (("traffic", "engine"), f"sumo needs a SUMO network; map {REPLAY_MAP!r} has none (use builtin)")
+            )
         return problems
 
     def _agents_and_traffic(self, agent_index: dict[str, int]) -> list[tuple[Any, str]]:

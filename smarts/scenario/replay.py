@@ -75,8 +75,9 @@ class ReplayFile(Schema):
         default_factory=lambda: [0.0, 0.0], description="[x, y] m added after swapping and flipping."
     )
     scenario: ScenarioId | None = Field(
-        None, description="Waymo: scenario id or record index in the file (null: the first); NGSIM: the site "
-        "(Location column) to keep from the data portal's file of every site."
+        None,
+        description="Waymo: scenario id or record index in the file (null: the first); NGSIM: the site "
+        "(Location column) to keep from the data portal's file of every site.",
     )
 
     def to_spec(self) -> ReplaySpec:

@@ -124,10 +124,7 @@ def _traffic_dict(traffic: TrafficSpec) -> dict[str, Any]:
     return {
         "engine": traffic.engine,
         "density": traffic.density,
-        "vehicle_types": {
-            name: _without_none(vtype, drop=("id",))
-            for name, vtype in traffic.vehicle_types.items()
-        },
+        "vehicle_types": {name: _without_none(vtype, drop=("id",)) for name, vtype in traffic.vehicle_types.items()},
         "flows": [_without_none(flow) for flow in traffic.flows],
         "trips": [_without_none(trip) for trip in traffic.trips],
         "pedestrians": [_without_none(ped) for ped in traffic.pedestrians],

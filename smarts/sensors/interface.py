@@ -143,7 +143,9 @@ class InterfaceFile(Schema):
             neighbours=NeighboursInterface(**self.neighbours.model_dump()),
             waypoints=WaypointsInterface(**self.waypoints.model_dump()),
             occlusion=OcclusionInterface(**self.occlusion.model_dump()),
-            rasters=None if rasters is None else RasterInterface(**{**rasters.model_dump(), "layers": tuple(rasters.layers)}),
+            rasters=None
+            if rasters is None
+            else RasterInterface(**{**rasters.model_dump(), "layers": tuple(rasters.layers)}),
             lidar=None if self.lidar is None else LidarInterface(**self.lidar.model_dump()),
             signals=self.signals,
             lead=self.lead,

@@ -58,7 +58,11 @@ class LidarSensor:
         for m in np.unique(maps).tolist() if n else []:
             idx = np.flatnonzero(maps == m)
             f = map_fields(sim.map_stack.maps[m])
-            d, h = (dist, hit) if len(idx) == n else (np.empty((len(idx), cfg.rays), np.float32), np.empty((len(idx), cfg.rays), np.float32))
+            d, h = (
+                (dist, hit)
+                if len(idx) == n
+                else (np.empty((len(idx), cfg.rays), np.float32), np.empty((len(idx), cfg.rays), np.float32))
+            )
             kernel = lidar_scan_parallel if parallel_worth_it(len(idx)) else lidar_scan
             kernel(
                 sim.table.data, sim.table.role, scope.alive, scope.lo[idx], scope.hi[idx], rows[idx], cfg.range,
@@ -90,7 +94,20 @@ class LidarSensor:
 
 @numba.njit(cache=True, nogil=True)
 def lidar_scan(
-    data, role, alive, alive_lo, alive_hi, rows, max_range, origin, inv_res, cell_max, width, clearance, dist, hit,
+    data,
+    role,
+    alive,
+    alive_lo,
+    alive_hi,
+    rows,
+    max_range,
+    origin,
+    inv_res,
+    cell_max,
+    width,
+    clearance,
+    dist,
+    hit,
 ):  # pragma: no cover - compiled
     """Each agent's rays (``rows[i]`` among ``alive[alive_lo[i]:alive_hi[i]]``)."""
     for i in range(rows.shape[0]):
@@ -100,7 +117,20 @@ def lidar_scan(
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def lidar_scan_parallel(
-    data, role, alive, alive_lo, alive_hi, rows, max_range, origin, inv_res, cell_max, width, clearance, dist, hit,
+    data,
+    role,
+    alive,
+    alive_lo,
+    alive_hi,
+    rows,
+    max_range,
+    origin,
+    inv_res,
+    cell_max,
+    width,
+    clearance,
+    dist,
+    hit,
 ):  # pragma: no cover - compiled
     """``lidar_scan`` with the agents spread over threads (each agent's rays are its own)."""
     for i in numba.prange(rows.shape[0]):
@@ -109,7 +139,9 @@ def lidar_scan_parallel(
 
 
 @numba.njit(cache=True, nogil=True)
-def _scan_one(data, role, alive, r, max_range, origin, inv_res, cell_max, width, clearance, dist, hit):  # pragma: no cover - compiled
+def _scan_one(
+    data, role, alive, r, max_range, origin, inv_res, cell_max, width, clearance, dist, hit
+):  # pragma: no cover - compiled
     n_rays = dist.shape[0]
     step = 2.0 * math.pi / n_rays
     px, py, h = data[_X, r], data[_Y, r], data[_H, r]

@@ -145,9 +145,7 @@ class ObservationConfig:
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"observation.{name}: expected a positive integer, got {value!r}")
         if not self.neighbour_radius > 0:
-            raise ValueError(
-                f"observation.neighbour_radius: expected a positive number, got {self.neighbour_radius!r}"
-            )
+            raise ValueError(f"observation.neighbour_radius: expected a positive number, got {self.neighbour_radius!r}")
 
     def interface(self) -> AgentInterface:
         return AgentInterface(
@@ -200,7 +198,10 @@ class ObservationBuilder:
     def __init__(self, config: AgentInterface | ObservationConfig | None = None, stream: int = 0):
         self.interface = interface = as_interface(config)
         self.config = ObservationConfig(  # the basic sizes, for callers of the older API
-            interface.neighbours.count, interface.neighbours.radius, interface.waypoints.count, interface.waypoints.spacing
+            interface.neighbours.count,
+            interface.neighbours.radius,
+            interface.waypoints.count,
+            interface.waypoints.spacing,
         )
         k, w = interface.neighbours.count, interface.waypoints.count
         self._ego_features = len(ego_feature_names(interface))
@@ -309,7 +310,9 @@ def lead_features(sim: Simulation, agents: np.ndarray) -> np.ndarray:
 
 @numba.njit(cache=True, nogil=True)
 @cache_depends_on(_geometry)
-def _observe(tables, setup, alive, alive_lo, alive_hi, row_base, agents, rows, visible, out):  # pragma: no cover - compiled
+def _observe(
+    tables, setup, alive, alive_lo, alive_hi, row_base, agents, rows, visible, out
+):  # pragma: no cover - compiled
     """The basic observation of each agent ``agents[i]`` (row ``rows[i]``) among the live rows of
     its own episode (``alive[alive_lo[i]:alive_hi[i]]``; ``visible`` is indexed by the row within
     the episode, ``row - row_base[i]``), with its episode's signal colours and step: from
@@ -323,7 +326,12 @@ def _observe(tables, setup, alive, alive_lo, alive_hi, row_base, agents, rows, v
     signal_via, signal_s, via_colours = t.signal_via, t.signal_s, t.via_colour
     agent_episode, events, episode_step, dt = t.agent_episode, t.agent_events, t.episode_step, t.dt
     offsets, radius2, extended, vis_mode, ego_extended, yaw = (
-        c.offsets, c.radius2, c.extended, c.vis_mode, c.ego_extended, c.yaw
+        c.offsets,
+        c.radius2,
+        c.extended,
+        c.vis_mode,
+        c.ego_extended,
+        c.yaw,
     )
     ego, neighbours, neighbour_mask, waypoints = out.ego, out.neighbours, out.neighbour_mask, out.waypoints
     waypoint_mask, goal, signal, events_out = out.waypoint_mask, out.goal, out.signal, out.events
@@ -363,7 +371,7 @@ def _observe(tables, setup, alive, alive_lo, alive_hi, row_base, agents, rows, v
 
         # K nearest by insertion into a sorted list (K is small); equal distances keep row order.
         m = 0
-        for j in alive[alive_lo[i]:alive_hi[i]]:
+        for j in alive[alive_lo[i] : alive_hi[i]]:
             if j == r:
                 continue
             d2 = (data[_X, j] - x) ** 2 + (data[_Y, j] - y) ** 2

@@ -66,20 +66,28 @@ class ShadowCaster:
 
 
 @numba.njit(cache=True, nogil=True)
-def cast_shadows(data, alive, alive_lo, alive_hi, row_base, rows, sensor_range, depth, owner, visible):  # pragma: no cover - compiled
+def cast_shadows(
+    data, alive, alive_lo, alive_hi, row_base, rows, sensor_range, depth, owner, visible
+):  # pragma: no cover - compiled
     """Fill ``depth``/``owner`` [n, bins] and ``visible`` [n, capacity] for the agents' rows, each
     among ``alive[alive_lo[i]:alive_hi[i]]`` (``visible`` by row within the episode, ``row -
     row_base[i]``; ``owner`` holds global rows)."""
     for i in range(rows.shape[0]):
-        _cast_one(data, alive[alive_lo[i]:alive_hi[i]], row_base[i], rows[i], sensor_range, depth[i], owner[i], visible[i])
+        _cast_one(
+            data, alive[alive_lo[i] : alive_hi[i]], row_base[i], rows[i], sensor_range, depth[i], owner[i], visible[i]
+        )
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def cast_shadows_parallel(data, alive, alive_lo, alive_hi, row_base, rows, sensor_range, depth, owner, visible):  # pragma: no cover - compiled
+def cast_shadows_parallel(
+    data, alive, alive_lo, alive_hi, row_base, rows, sensor_range, depth, owner, visible
+):  # pragma: no cover - compiled
     """``cast_shadows`` with the agents spread over threads (each agent's buffers are its own, so
     the result is the same)."""
     for i in numba.prange(rows.shape[0]):
-        _cast_one(data, alive[alive_lo[i]:alive_hi[i]], row_base[i], rows[i], sensor_range, depth[i], owner[i], visible[i])
+        _cast_one(
+            data, alive[alive_lo[i] : alive_hi[i]], row_base[i], rows[i], sensor_range, depth[i], owner[i], visible[i]
+        )
 
 
 @numba.njit(cache=True, nogil=True)

@@ -57,9 +57,7 @@ PALETTE = np.array(
 )
 OCCLUDED_SHADE = 0.55
 OUT_OF_RANGE_SHADE = 0.3
-SHADED_PALETTE = np.stack(
-    [(PALETTE * f).astype(np.uint8) for f in (OUT_OF_RANGE_SHADE, OCCLUDED_SHADE, 1.0)]
-)
+SHADED_PALETTE = np.stack([(PALETTE * f).astype(np.uint8) for f in (OUT_OF_RANGE_SHADE, OCCLUDED_SHADE, 1.0)])
 """The palette per occlusion value (out of range, occluded, visible)."""
 _ROUTE_BACK = 400  # route points searched behind the ego's nearest one
 _ROUTE_AHEAD = 200  # ... and at most this many beyond the view's diameter ahead of it
@@ -87,7 +85,9 @@ class RasterSensor:
         self._slot = np.full(len(RASTER_LAYERS), -1, dtype=np.int64)
         for i, name in enumerate(config.layers):
             self._slot[RASTER_LAYERS.index(name)] = i
-        self._pixels = RasterPixels(self._ex, self._ey, self._bin, self._dist, int(s), float(config.resolution), self._slot)
+        self._pixels = RasterPixels(
+            self._ex, self._ey, self._bin, self._dist, int(s), float(config.resolution), self._slot
+        )
         self._no_shadow = np.zeros((1, 1))
         self._no_visible = np.zeros((1, 1), dtype=np.float32)
 
@@ -100,7 +100,9 @@ class RasterSensor:
             out["rgb"] = gym.spaces.Box(0, 255, (s, s, 3), np.uint8)
         return out
 
-    def observe(self, sim: Simulation, agents: np.ndarray, rows: np.ndarray, shadows: Shadows | None) -> dict[str, np.ndarray]:
+    def observe(
+        self, sim: Simulation, agents: np.ndarray, rows: np.ndarray, shadows: Shadows | None
+    ) -> dict[str, np.ndarray]:
         cfg = self.config
         n, s = rows.shape[0], cfg.size
         layers = np.empty((n, len(cfg.layers), s, s), dtype=np.uint8)
@@ -129,7 +131,9 @@ class RasterSensor:
         ma = sim.mission_arrays
         # A pixel is on a lane line within half a pixel of it (at least one map cell).
         lane_cells = max(0.5 * cfg.resolution * f.inv_res, 1.0)
-        grid = MapGrid(f.origin, float(f.inv_res), f.cell_max, int(f.width), f.drivable, f.lane_distance, float(lane_cells))
+        grid = MapGrid(
+            f.origin, float(f.inv_res), f.cell_max, int(f.width), f.drivable, f.lane_distance, float(lane_cells)
+        )
         paths = RoutePaths(ma.flat_paths, ma.flat_valid, int(ma.stride), ma.path_len, sim.route_index)
         sh = ShadowView(
             shadows.depth[part] if shadows is not None else self._no_shadow,
@@ -200,7 +204,9 @@ class ShadowView(NamedTuple):
 
 
 @numba.njit(cache=True, nogil=True)
-def draw_rasters(data, role, scope, agents, rows, pix, grid, paths, sh, layers, want_rgb, rgb, shaded):  # pragma: no cover - compiled
+def draw_rasters(
+    data, role, scope, agents, rows, pix, grid, paths, sh, layers, want_rgb, rgb, shaded
+):  # pragma: no cover - compiled
     """Draw the layers (and the RGB view) of each agent ``agents[i]`` (row ``rows[i]``) among its
     episode's road users (``scope``, a ``smarts.core.simulation.Scope``)."""
     n_px = pix.size * pix.size
@@ -213,7 +219,9 @@ def draw_rasters(data, role, scope, agents, rows, pix, grid, paths, sh, layers, 
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def draw_rasters_parallel(data, role, scope, agents, rows, pix, grid, paths, sh, layers, want_rgb, rgb, shaded):  # pragma: no cover - compiled
+def draw_rasters_parallel(
+    data, role, scope, agents, rows, pix, grid, paths, sh, layers, want_rgb, rgb, shaded
+):  # pragma: no cover - compiled
     """``draw_rasters`` with the agents spread over threads (each its own scratch buffers)."""
     n_px = pix.size * pix.size
     for i in numba.prange(rows.shape[0]):
@@ -232,15 +240,39 @@ def _agent_part(a, i):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, nogil=True)
 def _draw_one(
-    data, role, alive, row_base, a, r, pix, grid, paths, sh, depth, visible, occupant, route, cell, on_road,
-    on_lane, shade, layers, want_rgb, rgb, shaded,
+    data,
+    role,
+    alive,
+    row_base,
+    a,
+    r,
+    pix,
+    grid,
+    paths,
+    sh,
+    depth,
+    visible,
+    occupant,
+    route,
+    cell,
+    on_road,
+    on_lane,
+    shade,
+    layers,
+    want_rgb,
+    rgb,
+    shaded,
 ):  # pragma: no cover - compiled
     """One agent's rasters (its own scratch buffers and output planes)."""
     px_ex, px_ey, px_bin, px_dist, size, res = pix.ex, pix.ey, pix.bin, pix.dist, pix.size, pix.res
     origin, inv_res, cell_max, width = grid.origin, grid.inv_res, grid.cell_max, grid.width
     drivable, lane_distance, lane_cells = grid.drivable, grid.lane_distance, grid.lane_cells
     flat_paths, flat_valid, stride, path_len, route_index = (
-        paths.flat_paths, paths.flat_valid, paths.stride, paths.path_len, paths.route_index
+        paths.flat_paths,
+        paths.flat_valid,
+        paths.stride,
+        paths.path_len,
+        paths.route_index,
     )
     half = 0.5 * size * res
     view = half * math.sqrt(2.0)  # farthest pixel corner from the ego
@@ -371,6 +403,7 @@ class EgoViewRenderer:
         agents = np.array([agent], dtype=np.int64)
         rows = sim.agent_row[agents]
         return self.sensor.observe(sim, agents, rows, self.shadows.scan(sim, agents, rows))["rgb"][0]
+
 
 _X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
 _LENGTH, _WIDTH = COLUMN["length"], COLUMN["width"]

@@ -43,6 +43,8 @@ def parallel_worth_it(n_agents: int) -> bool:
         return False
     numba.set_num_threads(threads)
     return True
+
+
 GRAZE = 1e-6  # metres: a ray touching a box corner still hits it
 
 
@@ -51,9 +53,7 @@ def ray_box(px, py, dx, dy, bx, by, bc, bs, half_length, half_width):  # pragma:
     """Distance along the unit ray (px, py) + t (dx, dy), t >= 0, to where it enters the box
     centred at (bx, by) with heading cosine/sine (bc, bs); inf when it misses."""
     ox, oy = px - bx, py - by
-    return slab(
-        bc * ox + bs * oy, -bs * ox + bc * oy, bc * dx + bs * dy, -bs * dx + bc * dy, half_length, half_width
-    )
+    return slab(bc * ox + bs * oy, -bs * ox + bc * oy, bc * dx + bs * dy, -bs * dx + bc * dy, half_length, half_width)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -98,4 +98,3 @@ def box_interval(px, py, heading, bx, by, bh, half_length, half_width):  # pragm
     rel = centre - heading
     rel -= _TWO_PI * math.floor((rel + math.pi) / _TWO_PI)
     return rel + lo, rel + hi, False
-

@@ -21,7 +21,12 @@ Batch = tuple[np.ndarray, dict[str, np.ndarray]]
 
 
 class ObservationSuite:
-    def __init__(self, interfaces: Sequence[AgentInterface], keys: Sequence | None = None, episode_of: Sequence[int] | None = None):
+    def __init__(
+        self,
+        interfaces: Sequence[AgentInterface],
+        keys: Sequence | None = None,
+        episode_of: Sequence[int] | None = None,
+    ):
         """``interfaces[i]`` is agent i's interface (agent indices as in ``Simulation``);
         ``keys[i]`` (default: the interface) groups agents whose observations have the same
         layout, when something else adds to them (V2V messages in some episodes only);

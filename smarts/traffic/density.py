@@ -118,9 +118,7 @@ def density_flows(traffic: TrafficSpec, road_map: RoadMap) -> list[FlowSpec]:
     """
     level = traffic.density
     if level not in DENSITY_RATES:
-        raise ScenarioError(
-            f"traffic.density: expected one of {list(DENSITY_LEVELS)}, got {level!r}"
-        )
+        raise ScenarioError(f"traffic.density: expected one of {list(DENSITY_LEVELS)}, got {level!r}")
     rate = DENSITY_RATES[level]
     if rate <= 0:
         return []

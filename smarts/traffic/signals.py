@@ -38,9 +38,7 @@ class SignalState:
         self.from_lane = road_map.conn_from[self.connections]
         self.via_lane = road_map.conn_via[self.connections]
         self.colour = np.full(len(self.connections), NO_SIGNAL, dtype=np.int8)
-        self.stop_xy = np.array(
-            [road_map.lane_polyline(lane)[-1] for lane in self.from_lane]
-        ).reshape(-1, 2)
+        self.stop_xy = np.array([road_map.lane_polyline(lane)[-1] for lane in self.from_lane]).reshape(-1, 2)
         self.lane_colour = np.zeros(road_map.num_lanes, dtype=np.int8)
         self.via_colour = np.zeros(road_map.num_lanes, dtype=np.int8)
         self._cycle = np.array(

@@ -167,8 +167,7 @@ class SumoTrafficProvider(ProviderBase):
             raise
         flows = all_flows(traffic, road_map)
         self.type_info: dict[str, VehicleTypeInfo] = {
-            name: vehicle_type_info(spec)
-            for name, spec in used_vehicle_types(traffic, flows).items()
+            name: vehicle_type_info(spec) for name, spec in used_vehicle_types(traffic, flows).items()
         }
         self.has_pedestrians = bool(traffic.pedestrians)
         self.closed = False
@@ -350,9 +349,7 @@ class SumoTrafficProvider(ProviderBase):
         departed = _C.simulation_getDepartedIDList()
         if departed:
             self._depart_vehicles(sim, departed)
-        self._read_poses(
-            t, self._vehicles, _C.vehicle_getPosition, _C.vehicle_getAngle, _C.vehicle_getSpeed, 0.5
-        )
+        self._read_poses(t, self._vehicles, _C.vehicle_getPosition, _C.vehicle_getAngle, _C.vehicle_getSpeed, 0.5)
         if self.has_pedestrians:
             arrived = _C.simulation_getArrivedPersonIDList()
             if arrived:
@@ -360,15 +357,11 @@ class SumoTrafficProvider(ProviderBase):
             departed = _C.simulation_getDepartedPersonIDList()
             if departed:
                 self._depart_persons(sim, departed)
-            self._read_poses(
-                t, self._persons, _C.person_getPosition, _C.person_getAngle, _C.person_getSpeed, 0.0
-            )
+            self._read_poses(t, self._persons, _C.person_getPosition, _C.person_getAngle, _C.person_getSpeed, 0.0)
         if self._tls_ids:
             states = list(map(_C.trafficlight_getRedYellowGreenState, self._tls_ids))
             if states != self._tls_last:
-                changed = {
-                    tls: s for tls, s, old in zip(self._tls_ids, states, self._tls_last) if s != old
-                }
+                changed = {tls: s for tls, s, old in zip(self._tls_ids, states, self._tls_last) if s != old}
                 self._tls_last = states
                 self.signals.set_states(changed)
 
@@ -517,9 +510,7 @@ class SumoTrafficProvider(ProviderBase):
                 self._vehicles.add(vid)
             else:  # a vehicle SUMO has never seen: insert it at the row's pose
                 x, y, angle, speed = _twin_poses(t.data, np.array([row]))[0].tolist()
-                ls.vehicle.add(
-                    vid, self._edge_route(sim, row), typeID=AGENT_VTYPE, departSpeed=f"{speed:.3f}"
-                )
+                ls.vehicle.add(vid, self._edge_route(sim, row), typeID=AGENT_VTYPE, departSpeed=f"{speed:.3f}")
                 ls.vehicle.setLength(vid, float(t.length[row]))
                 ls.vehicle.setWidth(vid, float(t.width[row]))
                 ls.vehicle.moveToXY(vid, "", -1, x, y, angle, 2, TWIN_MATCH_RADIUS)
@@ -605,9 +596,7 @@ def _check_net_file(net_file: Path, road_map: RoadMap) -> None:
     except ET.ParseError as err:
         raise ScenarioError(f"{net_file}: the SUMO network is not valid XML ({err})") from None
     if root_tag != "net":
-        raise ScenarioError(
-            f"{net_file}: expected a SUMO network with root <net>, found <{root_tag}>"
-        )
+        raise ScenarioError(f"{net_file}: expected a SUMO network with root <net>, found <{root_tag}>")
 
 
 def _shut_down(work_dir: Path, started: list[bool]) -> None:

@@ -85,9 +85,7 @@ class _Checker:
     def run(self) -> None:
         t = self.traffic
         if t.density not in DENSITY_LEVELS:
-            raise self.error(
-                "density", f"expected one of {', '.join(DENSITY_LEVELS)}, got {t.density!r}"
-            )
+            raise self.error("density", f"expected one of {', '.join(DENSITY_LEVELS)}, got {t.density!r}")
         for name, spec in t.vehicle_types.items():
             self.vehicle_type(f"vehicle_types.{name}", name, spec)
         ids: dict[str, str] = {}
@@ -112,9 +110,7 @@ class _Checker:
 
     def unique_id(self, ids: dict[str, str], ident: str, where: str) -> None:
         if not isinstance(ident, str) or not ident or any(c.isspace() for c in ident):
-            raise self.error(
-                f"{where}.id", f"expected a non-empty id without spaces, got {ident!r}"
-            )
+            raise self.error(f"{where}.id", f"expected a non-empty id without spaces, got {ident!r}")
         if ident in ids:
             raise self.error(f"{where}.id", f"id {ident!r} is already used by traffic.{ids[ident]}")
         ids[ident] = where
@@ -123,9 +119,7 @@ class _Checker:
         if name == AGENT_VTYPE:
             raise self.error(where, f"the type name {AGENT_VTYPE!r} is reserved for agent vehicles")
         if spec.base not in VEHICLE_BASES:
-            raise self.error(
-                f"{where}.base", f"expected one of {', '.join(VEHICLE_BASES)}, got {spec.base!r}"
-            )
+            raise self.error(f"{where}.base", f"expected one of {', '.join(VEHICLE_BASES)}, got {spec.base!r}")
         positive = (
             "length",
             "width",
@@ -160,9 +154,7 @@ class _Checker:
             return self.traffic.vehicle_type(name)
         except (KeyError, TypeError):
             known = sorted(set(self.traffic.vehicle_types) | set(DEFAULT_VEHICLE_TYPES))
-            raise self.error(
-                where, f"unknown vehicle type {name!r}; known types: {', '.join(known)}"
-            ) from None
+            raise self.error(where, f"unknown vehicle type {name!r}; known types: {', '.join(known)}") from None
 
     def road(self, where: str, road_id: object) -> int:
         rm = self.road_map
@@ -178,9 +170,7 @@ class _Checker:
         self.known_type(f"{where}.vehicle_type", item.vehicle_type)
         if item.route:
             if not isinstance(item.route, (list, tuple)):
-                raise self.error(
-                    f"{where}.route", f"expected a list of road ids, got {item.route!r}"
-                )
+                raise self.error(f"{where}.route", f"expected a list of road ids, got {item.route!r}")
             roads = [self.road(f"{where}.route[{k}]", r) for k, r in enumerate(item.route)]
             labels = [f"{where}.route"] * len(roads)
         else:
@@ -198,8 +188,7 @@ class _Checker:
         first_lanes = self.road_map.road_lanes(roads[0])
         lane = item.depart_lane
         if isinstance(lane, bool) or not (
-            lane in DEPART_LANES
-            or (isinstance(lane, (int, np.integer)) and 0 <= lane < len(first_lanes))
+            lane in DEPART_LANES or (isinstance(lane, (int, np.integer)) and 0 <= lane < len(first_lanes))
         ):
             raise self.error(
                 f"{where}.depart_lane",
@@ -208,8 +197,7 @@ class _Checker:
             )
         speed = item.depart_speed
         if isinstance(speed, bool) or not (
-            speed in DEPART_SPEEDS
-            or (isinstance(speed, (int, float)) and _finite(speed) and speed >= 0)
+            speed in DEPART_SPEEDS or (isinstance(speed, (int, float)) and _finite(speed) and speed >= 0)
         ):
             raise self.error(
                 f"{where}.depart_speed",
@@ -220,8 +208,7 @@ class _Checker:
         if not (isinstance(pos, (int, float)) and _finite(pos) and 0 <= pos <= length):
             raise self.error(
                 f"{where}.depart_pos",
-                f"expected metres in [0, {length:.1f}] along road "
-                f"{self.road_map.road_ids[roads[0]]!r}, got {pos!r}",
+                f"expected metres in [0, {length:.1f}] along road {self.road_map.road_ids[roads[0]]!r}, got {pos!r}",
             )
 
     def connects(self, a: int, b: int) -> bool:
@@ -238,9 +225,7 @@ class _Checker:
 
     def rate(self, where: str, rate: float | None, probability: float | None) -> None:
         if (rate is None) == (probability is None):
-            raise self.error(
-                where, "give exactly one of 'rate' (vehicles per hour) or 'probability'"
-            )
+            raise self.error(where, "give exactly one of 'rate' (vehicles per hour) or 'probability'")
         if rate is not None and not (_finite(rate) and rate > 0):
             raise self.error(f"{where}.rate", f"expected a positive rate per hour, got {rate!r}")
         if probability is not None and not (_finite(probability) and 0 < probability <= 1):
@@ -259,9 +244,7 @@ class _Checker:
         self.rate(where, ped.rate, ped.probability)
         self.interval(where, ped.begin, ped.end)
         if not (_finite(ped.speed) and ped.speed > 0):
-            raise self.error(
-                f"{where}.speed", f"expected a positive walking speed, got {ped.speed!r}"
-            )
+            raise self.error(f"{where}.speed", f"expected a positive walking speed, got {ped.speed!r}")
         for attr in ("origin", "destination"):
             road = getattr(ped, attr)
             if sidewalks is None:
@@ -312,9 +295,7 @@ def _finite(value: object) -> bool:
 
 
 # ---------------------------------------------------------------------------- writing
-def used_vehicle_types(
-    traffic: TrafficSpec, flows: Sequence[FlowSpec]
-) -> dict[str, VehicleTypeSpec]:
+def used_vehicle_types(traffic: TrafficSpec, flows: Sequence[FlowSpec]) -> dict[str, VehicleTypeSpec]:
     """The types the flows and trips use (each once, in order of first use)."""
     names = [f.vehicle_type for f in flows] + [t.vehicle_type for t in traffic.trips]
     return {name: traffic.vehicle_type(name) for name in dict.fromkeys(names)}
@@ -365,9 +346,7 @@ def write_route_file(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "traffic.rou.xml"
-    path.write_text(
-        '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
-    )
+    path.write_text('<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n")
     return path
 
 
@@ -403,9 +382,7 @@ def _path_attrib(roads: list[str]) -> dict[str, str]:
     return attrib
 
 
-def _depart_attrib(
-    item: FlowSpec | TripSpec, traffic: TrafficSpec, road_map: RoadMap
-) -> dict[str, str]:
+def _depart_attrib(item: FlowSpec | TripSpec, traffic: TrafficSpec, road_map: RoadMap) -> dict[str, str]:
     """SUMO depart attributes. ``depart_pos`` is where the box centre starts (our convention),
     so SUMO, which places the front bumper, gets ``depart_pos + length / 2``; 0 keeps the whole
     vehicle on the road (SUMO's "base"). It is metres along the lane's shape, scaled to SUMO's
@@ -463,9 +440,7 @@ def _person_flow_element(ped: PedestrianFlowSpec) -> ET.Element:
     else:
         attrib["probability"] = _num(ped.probability)
     element = ET.Element("personFlow", attrib)
-    ET.SubElement(
-        element, "walk", {"from": ped.origin, "to": ped.destination, "speed": _num(ped.speed)}
-    )
+    ET.SubElement(element, "walk", {"from": ped.origin, "to": ped.destination, "speed": _num(ped.speed)})
     return element
 
 

@@ -51,6 +51,7 @@ def action_fields(spec: Any) -> dict[str, list[str]]:
         out[str(agent.id)] = [f"{n} ({FIELD_UNITS[n]})" if n in FIELD_UNITS else n for n in names]
     return out
 
+
 Frame = dict[str, Any]
 
 
@@ -95,8 +96,7 @@ class StepCapture:
             "signal_colour": (
                 signals.colour.copy() if signals is not None and signals.has_signals else np.zeros(0, np.int8)
             ),
-            "agent_vehicle": np.searchsorted(rows, agent_rows).astype(np.int64) * (agent_rows >= 0)
-            - (agent_rows < 0),
+            "agent_vehicle": np.searchsorted(rows, agent_rows).astype(np.int64) * (agent_rows >= 0) - (agent_rows < 0),
             "agent_pose": np.where(
                 (agent_rows >= 0)[:, None],
                 np.stack([table.x[agent_rows], table.y[agent_rows], table.heading[agent_rows]], axis=1),

@@ -266,9 +266,18 @@ def _check_arrays(data: dict[str, np.ndarray], meta: dict, src: str) -> None:
     if n and (data["vehicle_index"].min() < 0 or data["vehicle_index"].max() >= len(meta["vehicle_ids"])):
         raise LogError("an index outside the metadata's vehicle_ids", source=src, column="vehicle_index")
     n_agents = len(meta["agent_ids"])
-    for name in ("agent_vehicle", "agent_reward", "agent_action", "agent_events", "agent_neighbours", "agent_waypoints"):
+    for name in (
+        "agent_vehicle",
+        "agent_reward",
+        "agent_action",
+        "agent_events",
+        "agent_neighbours",
+        "agent_waypoints",
+    ):
         if data[name].shape[:2] != (t, n_agents):
-            raise LogError(f"expected {t} steps x {n_agents} agents, got shape {data[name].shape}", source=src, column=name)
+            raise LogError(
+                f"expected {t} steps x {n_agents} agents, got shape {data[name].shape}", source=src, column=name
+            )
     counts = np.diff(offsets)
     v = data["agent_vehicle"]
     if np.any(v >= counts[:, None]) or np.any(v < -1):

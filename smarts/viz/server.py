@@ -89,10 +89,7 @@ def check_bind(host: str, allow_remote: bool) -> str | None:
             f"shows everything under its path. Use --host 127.0.0.1 (the default), or add --allow-remote "
             f"to serve on {host} anyway"
         )
-    return (
-        f"warning: serving on {host}: anyone who can reach this address can view these episodes "
-        "(no authentication)"
-    )
+    return f"warning: serving on {host}: anyone who can reach this address can view these episodes (no authentication)"
 
 
 # ---------------------------------------------------------------------------------- Host and Origin

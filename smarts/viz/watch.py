@@ -63,9 +63,7 @@ class WatchedEnv:
             "action_fields": action_fields(self.env.scenario),
         }
         if self.publisher is not None:
-            self.publisher.episode(
-                {**self._meta, "agent_ids": list(self.capture.agent_ids), "live": True}, self.scene
-            )
+            self.publisher.episode({**self._meta, "agent_ids": list(self.capture.agent_ids), "live": True}, self.scene)
         if self._capturing:
             self._keep(self.capture.reset_frame(obs))
         return obs, infos

@@ -48,8 +48,13 @@ def test_slices_name_the_position_columns():
     "interface",
     [
         {"signals": True},
-        {"signals": True, "ego": {"extended": True}, "neighbours": {"count": 4, "extended": True},
-         "occlusion": {"enabled": True}, "waypoints": {"count": 7}},
+        {
+            "signals": True,
+            "ego": {"extended": True},
+            "neighbours": {"count": 4, "extended": True},
+            "occlusion": {"enabled": True},
+            "waypoints": {"count": 7},
+        },
     ],  # fmt: skip
 )
 def test_the_env_observation_has_these_columns_first(interface):

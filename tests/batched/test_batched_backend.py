@@ -26,7 +26,9 @@ def _adaptive(*names: str, controller: str = "lane_relative") -> list:
     out = []
     for name in names:
         spec = suite[name]
-        agents = [dataclasses.replace(a, action_space="relative_target_pose", controller=controller) for a in spec.agents]
+        agents = [
+            dataclasses.replace(a, action_space="relative_target_pose", controller=controller) for a in spec.agents
+        ]
         out.append(dataclasses.replace(spec, agents=agents))
     return out
 
@@ -41,7 +43,9 @@ def test_episode_with_seed_s_follows_the_single_env_with_seed_s(controller):
     simulation), each against a single env reset with the same seed and given the same actions:
     observations, rewards and end flags equal bit for bit over whole episodes, through the
     batch's auto-resets."""
-    specs = _adaptive("a02_straight_two_followers_low", "a09_lead_turns_right_at_signal_medium", controller=controller) * 2
+    specs = (
+        _adaptive("a02_straight_two_followers_low", "a09_lead_turns_right_at_signal_medium", controller=controller) * 2
+    )
     batch = BatchedDriving(specs, observation=PLATOON, reward_factory=_platoon_reward())
     assert len(batch.groups) == 1 and batch.groups[0].sim.map_stack.num_maps == 2
     assert all(group.sim.batch_stages for group in batch.groups)  # traffic stepped in one call per spec
@@ -155,7 +159,10 @@ def test_scenarios_that_cannot_be_batched_are_refused_naming_why():
     """What stays refused now that SUMO copies (in worker processes), social agents and mixed
     action spaces batch: a batch without a learning agent, and learners whose observations differ."""
     suite = {s.name: s.spec for s in load_suite("adaptive").scenarios}
-    social = dataclasses.replace(suite["a01_straight_free"], agents=[dataclasses.replace(a, policy="zoo:keep-lane") for a in suite["a01_straight_free"].agents])
+    social = dataclasses.replace(
+        suite["a01_straight_free"],
+        agents=[dataclasses.replace(a, policy="zoo:keep-lane") for a in suite["a01_straight_free"].agents],
+    )
     with pytest.raises(BatchedSetupError, match=r"every agent has a policy; at least one must learn"):
         BatchedDriving([social])
     plain, lead = make_spec([agent()]), make_spec([agent(interface={"lead": True})])
@@ -214,7 +221,9 @@ def test_episode_recorder_logs_the_same_episode_on_both_backends():
         EpisodeRecorder(batch.episode_sim(i), env.possible_agents, scenario=s.name, **meta)
         for i, (s, env) in enumerate(zip(specs, singles))
     ]  # fmt: skip
-    reference = [EpisodeRecorder(env.sim, env.possible_agents, scenario=s.name, **meta) for s, env in zip(specs, singles)]
+    reference = [
+        EpisodeRecorder(env.sim, env.possible_agents, scenario=s.name, **meta) for s, env in zip(specs, singles)
+    ]
     open_copies = [True] * len(specs)
     batch.add_step_listener(lambda: [r.record() for r, live in zip(recorders, open_copies) if live])
     for env, rec in zip(singles, reference):

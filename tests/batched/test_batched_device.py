@@ -8,7 +8,10 @@ import torch
 from smarts.env.batched import BatchedDriving
 from tests.batched.test_batched_backend import PLATOON, _adaptive, _platoon_reward
 
-DEVICES = ["torch-cpu", pytest.param("cuda", marks=pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA GPU visible"))]
+DEVICES = [
+    "torch-cpu",
+    pytest.param("cuda", marks=pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA GPU visible")),
+]
 
 
 def _rollout(device: str, controller: str, steps: int = 200) -> tuple[BatchedDriving, np.ndarray]:

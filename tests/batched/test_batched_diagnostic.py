@@ -23,7 +23,8 @@ def test_batched_rows_are_written_as_json(tmp_path):
     assert "speed-up" in done.stdout
     sensors = json.loads(out.read_text())["sensors"]
     assert [(r["case"], r["batch"], r["agents"], r["vehicles"]) for r in sensors] == [
-        ("sensors_v2v", 2, 10, 50), ("sensors_off", 2, 10, 50),
+        ("sensors_v2v", 2, 10, 50),
+        ("sensors_off", 2, 10, 50),
     ]
     assert sensors[0]["ratio_to_off"] == sensors[0]["agent_steps_per_s"] / sensors[1]["agent_steps_per_s"]
     assert "All sensors and V2V" in done.stdout

@@ -23,7 +23,7 @@ def _train(tmp_path, capsys, backend: str, workers: int, lib: str = "torchrl") -
     capsys.readouterr()
     assert main(args) == 0
     printed = capsys.readouterr().out
-    summary = json.loads(printed[printed.index("{\n"):printed.rindex("}") + 1])
+    summary = json.loads(printed[printed.index("{\n") : printed.rindex("}") + 1])
     return torch.load(out / "final.pt", weights_only=True), summary
 
 

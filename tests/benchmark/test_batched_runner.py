@@ -111,7 +111,11 @@ def test_episodes_whose_policy_fails_in_a_batch_are_recorded_as_alone(tmp_path):
 
 def test_plan_units_batches_what_can_share_a_simulation(tmp_path):
     suite_file = tmp_path / "suite.yaml"
-    text = Path(TINY).read_text().replace("traffic: {engine: builtin, density: low}", "traffic: {engine: sumo, density: low}")
+    text = (
+        Path(TINY)
+        .read_text()
+        .replace("traffic: {engine: builtin, density: low}", "traffic: {engine: sumo, density: low}")
+    )
     suite_file.write_text(text)
     suite = load_suite(suite_file)
     jobs = plan_jobs(["zoo:keep-lane", "test:hang"], suite, 3, tmp_path / "run", references=False,

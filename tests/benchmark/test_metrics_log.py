@@ -27,9 +27,7 @@ from smarts.benchmark.metrics.synthetic import make_episode, make_trace
 
 
 def _adaptive_log():
-    follow = make_trace(
-        6, with_following=True, extra={"steering": np.linspace(-0.1, 0.1, 6)}
-    )
+    follow = make_trace(6, with_following=True, extra={"steering": np.linspace(-0.1, 0.1, 6)})
     follow.follow_time_gap[2] = np.nan
     follow.lead_in_lane_and_visible[2] = False
     off = np.array([False, False, False, False, True, True])
@@ -70,10 +68,7 @@ def test_round_trip(tmp_path):
     assert back.source == str(path)
     assert back.agent_ids == ["ego/0", "ego 1"]
     assert back.seed is None and back.failure is None and back.info == log.info
-    assert (
-        back.agents["ego/0"].extra["steering"].tolist()
-        == log.agents["ego/0"].extra["steering"].tolist()
-    )
+    assert back.agents["ego/0"].extra["steering"].tolist() == log.agents["ego/0"].extra["steering"].tolist()
     assert back.agents["ego 1"].wrong_way.dtype == np.bool_
     assert math.isinf(back.agents["ego 1"].follow_time_gap[0])
     assert score_episode(back) == score_episode(log)
@@ -87,9 +82,7 @@ def test_round_trip_collaborative_without_following_columns(tmp_path):
     log = make_episode({"a": make_trace(4)}, failure=None, seed=7)
     back = read_episode(write_episode(log, tmp_path / "x.npz"))
     assert back == log and back.agents["a"].follow_time_gap is None and back.seed == 7
-    failed = make_episode(
-        {"a": AgentTrace.empty()}, task="adaptive", failure="agent raised ValueError"
-    )
+    failed = make_episode({"a": AgentTrace.empty()}, task="adaptive", failure="agent raised ValueError")
     back = read_episode(write_episode(failed, tmp_path / "failed.npz"))
     assert back.failure == "agent raised ValueError" and back.agents["a"].num_steps == 0
 
@@ -107,12 +100,8 @@ def test_exports(tmp_path):
     lines = export_jsonl(log, tmp_path / "log.jsonl").read_text().splitlines()
     assert len(lines) == 12
     row = json.loads(lines[2])
-    assert (
-        row["agent"] == "ego/0" and row["step"] == 2 and row["follow_time_gap"] is None
-    )
-    assert row["extra.steering"] == pytest.approx(
-        log.agents["ego/0"].extra["steering"][2]
-    )
+    assert row["agent"] == "ego/0" and row["step"] == 2 and row["follow_time_gap"] is None
+    assert row["extra.steering"] == pytest.approx(log.agents["ego/0"].extra["steering"][2])
     with open(export_csv(log, tmp_path / "log.csv"), newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == 12 and rows[0]["scenario"] == "platoon: merge"
@@ -121,9 +110,7 @@ def test_exports(tmp_path):
 
 
 def test_missing_column_in_file_names_file_agent_column(tmp_path):
-    path = write_episode(
-        make_episode({"a": make_trace(3), "b": make_trace(3)}), tmp_path / "e.npz"
-    )
+    path = write_episode(make_episode({"a": make_trace(3), "b": make_trace(3)}), tmp_path / "e.npz")
     _rewrite(path, drop=("agents/1/lane_width",))
     with pytest.raises(LogError) as err:
         read_episode(path)
@@ -208,9 +195,7 @@ def test_bad_metadata(tmp_path):
     with pytest.raises(LogError, match="metadata.dt"):
         score_episode(make_episode({"a": make_trace(3)}, dt=0.0))
     with pytest.raises(LogError, match="metadata.initial_route_distance"):
-        score_episode(
-            make_episode({"a": make_trace(3)}, initial_route_distance={"b": 1.0})
-        )
+        score_episode(make_episode({"a": make_trace(3)}, initial_route_distance={"b": 1.0}))
     with pytest.raises(LogError, match="no steps logged"):
         score_episode(make_episode({"a": AgentTrace.empty()}))
     path = write_episode(make_episode({"a": make_trace(3)}), tmp_path / "e.npz")
@@ -242,9 +227,7 @@ def test_every_required_column_is_checked():
 
 def test_cli_scores_a_folder(tmp_path, capsys):
     for ep in range(2):
-        write_episode(
-            make_episode({"a": make_trace(3)}, episode=ep), tmp_path / f"e{ep}.npz"
-        )
+        write_episode(make_episode({"a": make_trace(3)}, episode=ep), tmp_path / f"e{ep}.npz")
     assert cli_main([str(tmp_path)]) == 0
     assert "overall" in capsys.readouterr().out
     assert cli_main([str(tmp_path), "--json"]) == 0
@@ -291,9 +274,7 @@ def test_cli_scores_each_agent_of_a_benchmark_logs_folder(tmp_path, capsys):
 def test_log_error_survives_pickling():
     err = LogError("missing column", source="runs/e.npz", agent="a", column="speed")
     back = pickle.loads(pickle.dumps(err))
-    assert (
-        str(back) == str(err) == "runs/e.npz: agent 'a': column 'speed': missing column"
-    )
+    assert str(back) == str(err) == "runs/e.npz: agent 'a': column 'speed': missing column"
     assert (back.source, back.agent, back.column) == ("runs/e.npz", "a", "speed")
 
 

@@ -38,15 +38,10 @@ def test_config_file_equals_paper_defaults():
 
 def test_partial_override_keeps_other_defaults(tmp_path):
     path = tmp_path / "m.yaml"
-    path.write_text(
-        "weights: {rc: 1}\nfollowing:\n  max_time_gap_s: 2\nfailed_episodes: exclude\n"
-    )
+    path.write_text("weights: {rc: 1}\nfollowing:\n  max_time_gap_s: 2\nfailed_episodes: exclude\n")
     params = load_params(path)
     assert params.weights.rc == 1.0 and params.weights.pr == 0.1
-    assert (
-        params.following.max_time_gap_s == 2.0
-        and params.following.safe_headway_s == 1.0
-    )
+    assert params.following.max_time_gap_s == 2.0 and params.following.safe_headway_s == 1.0
     assert params.failed_episodes == "exclude"
     assert MetricParams.from_dict(params.to_dict()) == params
 

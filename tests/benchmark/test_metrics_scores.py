@@ -45,9 +45,7 @@ def test_progress_goal_reached_counts_as_route_completed():
     # Arrived inside the 2 m goal radius with 1.5 m left: no shortfall.
     goal = np.array([False, False, True])
     log = one(
-        make_trace(
-            3, route_distance_to_goal=np.array([40.0, 10.0, 1.5]), goal_reached=goal
-        ),
+        make_trace(3, route_distance_to_goal=np.array([40.0, 10.0, 1.5]), goal_reached=goal),
         initial_route_distance=60.0,
     )
     assert score_episode(log, P)["PR"] == pytest.approx(1.0)
@@ -64,9 +62,7 @@ def test_goal_never_reached():
 
 
 def test_zero_length_route_is_already_there():
-    log = one(
-        make_trace(4, speed=0.0, initial_route_distance=0.0), initial_route_distance=0.0
-    )
+    log = one(make_trace(4, speed=0.0, initial_route_distance=0.0), initial_route_distance=0.0)
     assert agent_costs(log, P)["a"].progress == 0.0
     assert score_episode(log, P)["PR"] == 1.0
 
@@ -96,9 +92,7 @@ def test_comfort_window_by_hand():
 
 
 def test_comfort_spike_and_penalty_window():
-    params = MetricParams(
-        humanness=HumannessParams(penalty_period_s=0.3)
-    )  # 3 steps at dt 0.1
+    params = MetricParams(humanness=HumannessParams(penalty_period_s=0.3))  # 3 steps at dt 0.1
     assert penalty_steps(0.1, params) == 3
     accel = np.zeros(6)
     accel[1] = 2.5  # > 2.0 m/s^2 at step 2
@@ -158,9 +152,7 @@ def test_always_off_road():
 
 # ------------------------------------------------------------------------------------ RC
 def test_rules_hand_computed():
-    speed = np.array(
-        [10.0, 12.5, 15.0, 20.0]
-    )  # limit 10: excess / 5 -> 0, .5, 1, 2 -> capped 1
+    speed = np.array([10.0, 12.5, 15.0, 20.0])  # limit 10: excess / 5 -> 0, .5, 1, 2 -> capped 1
     wrong = np.array([False, True, False, False])
     log = one(make_trace(4, speed=speed, speed_limit=np.full(4, 10.0), wrong_way=wrong))
     c = agent_costs(log, P)["a"]
@@ -285,12 +277,8 @@ def test_s_bench_weights_collaborative_and_adaptive():
     assert s["SFD"] == pytest.approx(0.5)
     assert s["S_bench"] == pytest.approx(0.1 * 0.5 + 0.45 + 0.15 + 0.3 * 0.5)
     # Weights need not sum to 1: S_bench divides by their sum.
-    params = MetricParams(
-        weights=Weights(pr=1.0, rc=0.0, humanness=0.0, mte=1.0, sfd=3.0)
-    )
-    assert score_episode(one(trace, initial_route_distance=100.0), params)[
-        "S_bench"
-    ] == pytest.approx(0.25)
+    params = MetricParams(weights=Weights(pr=1.0, rc=0.0, humanness=0.0, mte=1.0, sfd=3.0))
+    assert score_episode(one(trace, initial_route_distance=100.0), params)["S_bench"] == pytest.approx(0.25)
     s = score_episode(one(trace, task="adaptive", initial_route_distance=100.0), params)
     assert s["S_bench"] == pytest.approx((0.5 + 3 * 0.5) / 4)
 
@@ -307,9 +295,7 @@ def test_s_bench_puts_each_weight_on_its_own_metric():
 
 def _progress_episode(scenario: str, episode: int, left: float) -> object:
     trace = make_trace(3, route_distance_to_goal=np.full(3, left))
-    return make_episode(
-        {"a": trace}, scenario=scenario, episode=episode, initial_route_distance=100.0
-    )
+    return make_episode({"a": trace}, scenario=scenario, episode=episode, initial_route_distance=100.0)
 
 
 def test_suite_averages_episodes_within_a_scenario_first():
@@ -323,14 +309,10 @@ def test_suite_averages_episodes_within_a_scenario_first():
     assert suite.episodes == {"long": 3, "short": 1}
     assert suite.scenarios["short"]["PR"] == 1.0
     assert suite.scenarios["long"]["PR"] == pytest.approx(1 / 3)
-    assert suite.overall["PR"] == pytest.approx(
-        (1 + 1 / 3) / 2
-    )  # not the episode mean 0.5
+    assert suite.overall["PR"] == pytest.approx((1 + 1 / 3) / 2)  # not the episode mean 0.5
     assert list(suite.overall) == ["PR", "RC", "Humanness", "MTE", "S_bench"]
     # Linear metrics: S_bench of the means equals the mean of per-scenario S_bench.
-    assert suite.overall["S_bench"] == pytest.approx(
-        np.mean([r["S_bench"] for r in suite.scenarios.values()])
-    )
+    assert suite.overall["S_bench"] == pytest.approx(np.mean([r["S_bench"] for r in suite.scenarios.values()]))
     table = suite.format_table()
     assert "overall" in table and "long" in table and "short" in table
 
@@ -385,9 +367,7 @@ def test_failed_episode_without_any_agent():
 
 def test_suite_rejects_mixed_tasks_duplicates_and_bad_logs():
     a = _progress_episode("s", 0, 0.0)
-    b = make_episode(
-        {"a": make_trace(3, with_following=True)}, scenario="f", task="adaptive"
-    )
+    b = make_episode({"a": make_trace(3, with_following=True)}, scenario="f", task="adaptive")
     with pytest.raises(ValueError, match="mix tasks"):
         score_suite([a, b], P)
     with pytest.raises(LogError, match="appears twice"):

@@ -84,7 +84,9 @@ def test_lead_straight_ahead_stays_in_lane_across_segment_boundaries(tmp_path):
     log, road_map = _drive(entry, KeepLanePolicy(speed=10.0), listener)
     follower, neighbour = log.agents["agent_0"], log.agents["agent_1"]
     assert follower.num_steps == len(seen) == 80
-    roads = [(road_map.road_ids[road_map.lane_road[s[0][0]]], road_map.road_ids[road_map.lane_road[s[2][0]]]) for s in seen]
+    roads = [
+        (road_map.road_ids[road_map.lane_road[s[0][0]]], road_map.road_ids[road_map.lane_road[s[2][0]]]) for s in seen
+    ]
     # The lead crosses from main_0 into main_1 (new lane ids, one more lane) before the follower does.
     assert ("main_0", "main_1") in roads and roads[-1] == ("main_1", "main_1")
     assert any(s[0][0] != s[2][0] for s in seen)

@@ -48,13 +48,17 @@ def test_a_worker_that_dies_is_replaced_and_its_episode_runs_again(tmp_path, mar
     write_report(tmp_path, suite, ["test:die-once"], results)
     doc = json.loads((tmp_path / "results.json").read_text())
     assert doc["complete"] and doc["failures"] == []
-    assert doc["retried"] == [{k: retried[0][k] for k in ("agent", "scenario", "episode", "seed")} | {"reasons": [SIGKILLED]}]
+    assert doc["retried"] == [
+        {k: retried[0][k] for k in ("agent", "scenario", "episode", "seed")} | {"reasons": [SIGKILLED]}
+    ]
     assert "## Episodes run again after their worker process died" in (tmp_path / "report.md").read_text()
 
 
 def test_an_episode_whose_worker_always_dies_fails_with_the_reason_and_the_rest_goes_on(tmp_path, marker_dir):
     suite = load_suite(TINY)
-    jobs = plan_jobs(["test:die-always", "zoo:keep-lane"], suite, 1, tmp_path, references=False, policy_resolver=resolve)
+    jobs = plan_jobs(
+        ["test:die-always", "zoo:keep-lane"], suite, 1, tmp_path, references=False, policy_resolver=resolve
+    )
     results = run_jobs(jobs, workers=2, progress=False, policy_resolver=resolve)
     dead = _by_agent(results, "test:die-always")
     reason = f"{SIGKILLED} on all 2 attempts, each in its own worker"
@@ -102,8 +106,11 @@ def test_the_episode_timeout_is_checked(tmp_path):
 
 def test_on_ray_a_task_whose_worker_dies_is_run_again_or_becomes_a_failed_episode(tmp_path, marker_dir):
     import ray  # noqa: F401  (installed by the test extra; never skipped)
+
     suite = load_suite(TINY)
-    jobs = plan_jobs(["test:die-once", "test:die-always"], suite, 1, tmp_path, references=False, policy_resolver=resolve)
+    jobs = plan_jobs(
+        ["test:die-once", "test:die-always"], suite, 1, tmp_path, references=False, policy_resolver=resolve
+    )
     results = run_jobs(jobs, progress=False, ray_address="local", policy_resolver=resolve)
     assert (marker_dir / "died").exists()
     once, always = _by_agent(results, "test:die-once"), _by_agent(results, "test:die-always")
@@ -125,7 +132,10 @@ def test_the_report_is_written_when_every_episode_failed_and_failed_episodes_are
     write_report(tmp_path, suite, ["zoo:stand-still"], results)
     doc = json.loads((tmp_path / "results.json").read_text())
     assert doc["agents"]["zoo:stand-still"]["scores"] is None
-    assert [(f["scenario"], f["failure"]) for f in doc["failures"]] == [("t1_left", SIGKILLED), ("t2_straight_traffic", SIGKILLED)]
+    assert [(f["scenario"], f["failure"]) for f in doc["failures"]] == [
+        ("t1_left", SIGKILLED),
+        ("t2_straight_traffic", SIGKILLED),
+    ]
 
 
 def _bench(out, *extra):

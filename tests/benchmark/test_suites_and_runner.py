@@ -38,7 +38,11 @@ def test_collaborative_suite_covers_the_required_variety():
     assert {len(s.spec.agents) for s in suite.scenarios} == {1, 2, 3, 4}
     densities = {s.spec.traffic.density if s.spec.traffic else "none" for s in suite.scenarios}
     assert densities == {"none", "low", "medium", "high"}
-    goals = {(a.mission.start.road.split("_")[0], a.mission.goal.road.split("_")[0]) for s in suite.scenarios for a in s.spec.agents}
+    goals = {
+        (a.mission.start.road.split("_")[0], a.mission.goal.road.split("_")[0])
+        for s in suite.scenarios
+        for a in s.spec.agents
+    }
     assert any(a == b for a, b in goals)  # a U-turn
     assert {s.difficulty for s in suite.scenarios} == {"easy", "medium", "hard"}
 
@@ -157,7 +161,9 @@ def test_a_continuous_policy_drives_a_continuous_vehicle(tmp_path, space_agents)
     assert trace.speed[-1] > 8.5 and (np.diff(trace.speed) > 0).mean() > 0.8
 
 
-def test_a_policy_in_an_action_space_the_suite_does_not_host_is_refused_before_any_episode(tmp_path, capsys, space_agents):
+def test_a_policy_in_an_action_space_the_suite_does_not_host_is_refused_before_any_episode(
+    tmp_path, capsys, space_agents
+):
     assert _run(tmp_path / "a", "--agent", "zoo:lane-model") == 2
     err = capsys.readouterr().err
     assert "agent 'zoo:lane-model' acts in action space 'lane'" in err
@@ -197,7 +203,9 @@ def test_reference_agents_are_added_and_can_be_cached(tmp_path):
     assert len(cached) == 6 and all(cache in p.parents for p in cached)  # every reference agent's episodes
     first = run_jobs(jobs, workers=1, progress=False)
     stamps = [p.stat().st_mtime_ns for p in cached]
-    again = run_jobs(plan_jobs(["zoo:keep-lane"], suite, 1, tmp_path / "b", reference_cache=cache), workers=1, progress=False)
+    again = run_jobs(
+        plan_jobs(["zoo:keep-lane"], suite, 1, tmp_path / "b", reference_cache=cache), workers=1, progress=False
+    )
     assert [p.stat().st_mtime_ns for p in cached] == stamps  # reused, not re-run
     assert [r["log"] for r in again] == [str(p) for p in cached]
     write_report(tmp_path / "b", suite, ["zoo:keep-lane"], again)
@@ -234,13 +242,27 @@ def test_a_checkpoint_evaluates_like_train_ppo_does(tmp_path):
 @pytest.mark.parametrize(
     "section, value, problem",
     [
-        ("interface", {"lidar": {"rays": 0}}, "recorded observation interface is invalid (interface.lidar.rays: input should be greater than or equal to 1"),
+        (
+            "interface",
+            {"lidar": {"rays": 0}},
+            "recorded observation interface is invalid (interface.lidar.rays: input should be greater than or equal to 1",
+        ),
         ("interface", ["lead"], "recorded observation interface is invalid (interface: expected a mapping"),
-        ("lane_relative", {"max_jerk": -1.0}, "recorded lane-relative settings are invalid (LaneRelativeParams.max_jerk:"),
-        ("lane_relative", {"max_jerks": 1.0}, "recorded lane-relative settings are invalid (lane_relative.max_jerks: unknown"),
+        (
+            "lane_relative",
+            {"max_jerk": -1.0},
+            "recorded lane-relative settings are invalid (LaneRelativeParams.max_jerk:",
+        ),
+        (
+            "lane_relative",
+            {"max_jerks": 1.0},
+            "recorded lane-relative settings are invalid (lane_relative.max_jerks: unknown",
+        ),
     ],
 )
-def test_a_checkpoint_with_bad_recorded_settings_is_refused_before_any_episode(tmp_path, capsys, section, value, problem):
+def test_a_checkpoint_with_bad_recorded_settings_is_refused_before_any_episode(
+    tmp_path, capsys, section, value, problem
+):
     """The policy carries its settings as plain data; the runner validates them (and `train eval`
     exits with the file and the field) before any episode runs."""
     import torch

@@ -7,15 +7,15 @@ import numpy as np
 from smarts.core.vehicle_table import Role, VehicleTable
 
 
-def table_with(poses: dict[str, tuple[float, float, float]], capacity: int = 64,
-               traffic: tuple[str, ...] = ()) -> tuple[VehicleTable, dict[str, int]]:
+def table_with(
+    poses: dict[str, tuple[float, float, float]], capacity: int = 64, traffic: tuple[str, ...] = ()
+) -> tuple[VehicleTable, dict[str, int]]:
     """A table holding one vehicle per id at (x, y, heading); ids in ``traffic`` are traffic."""
     table = VehicleTable(capacity)
     rows = {}
     for vid, (x, y, h) in poses.items():
         role = Role.TRAFFIC if vid in traffic else Role.AGENT
-        rows[vid] = table.add(vid, owner=1 if vid in traffic else 0, role=role, x=x, y=y, heading=h,
-                              speed=2.0)
+        rows[vid] = table.add(vid, owner=1 if vid in traffic else 0, role=role, x=x, y=y, heading=h, speed=2.0)
     return table, rows
 
 

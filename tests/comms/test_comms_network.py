@@ -54,8 +54,7 @@ def test_loss_rate_matches_probability_and_is_reproducible():
 
     def run(seed):
         net = V2VNetwork(CommsConfig(loss=p), table.capacity, seed=seed)
-        return np.stack([one_step(net, table, rows_of(rows, "s"), receivers, step=k).mask[:, 0]
-                         for k in range(steps)])
+        return np.stack([one_step(net, table, rows_of(rows, "s"), receivers, step=k).mask[:, 0] for k in range(steps)])
 
     first = run(7)
     lost = 1.0 - first.mean()
@@ -81,8 +80,7 @@ def test_bandwidth_keeps_the_nearest_senders_in_distance_order():
     config = CommsConfig(message_size=8, bandwidth_bytes=120)  # 48 bytes per message
     got = one_step(V2VNetwork(config, table.capacity, seed=1), table, senders, rows_of(rows, "r"))
     assert delivered_from(got, 0) == [rows["s9"], rows["s8"]]
-    got = one_step(V2VNetwork(CommsConfig(max_messages=4), table.capacity, 1), table, senders,
-                   rows_of(rows, "r"))
+    got = one_step(V2VNetwork(CommsConfig(max_messages=4), table.capacity, 1), table, senders, rows_of(rows, "r"))
     assert got.count[0] == 4
 
 
@@ -100,16 +98,14 @@ def test_channels_isolate_and_traffic_on_every_channel_reaches_all():
     config = CommsConfig(channels=2, penetration=1.0, traffic_channel=1)
     net = V2VNetwork(config, table.capacity, seed=1)
     abc = rows_of(rows, "a", "b", "c")
-    got = one_step(net, table, abc, abc, channels=np.array([0, 1, 0]),
-                   receiver_channels=np.array([0, 1, 0]))
+    got = one_step(net, table, abc, abc, channels=np.array([0, 1, 0]), receiver_channels=np.array([0, 1, 0]))
     assert delivered_from(got, 0) == [rows["c"]]  # a hears c only (b is on channel 1)
     assert delivered_from(got, 1) == [rows["t"]]  # b hears traffic on channel 1 only
     assert delivered_from(got, 2) == [rows["a"]]
 
     config = CommsConfig(channels=2, penetration=1.0, traffic_channel=-1)
     net = V2VNetwork(config, table.capacity, seed=1)
-    got = one_step(net, table, abc, abc, channels=np.array([0, 1, 0]),
-                   receiver_channels=np.array([0, 1, 0]))
+    got = one_step(net, table, abc, abc, channels=np.array([0, 1, 0]), receiver_channels=np.array([0, 1, 0]))
     assert all(rows["t"] in delivered_from(got, i) for i in range(3))
 
 
@@ -161,7 +157,7 @@ def test_traffic_messages_carry_the_standard_state_payload():
         assert got.sender_kind[0, 0] == SenderKind.TRAFFIC
         expected = [getattr(table, f)[rows["t"]] for f in TRAFFIC_PAYLOAD_FIELDS][:size]
         np.testing.assert_allclose(got.payload[0, 0, : len(expected)], expected, rtol=1e-6)
-        assert (got.payload[0, 0, len(expected):] == 0).all()
+        assert (got.payload[0, 0, len(expected) :] == 0).all()
 
 
 def test_relative_pose_is_in_the_receiver_frame():
@@ -194,8 +190,9 @@ def _scripted_run(seed: int) -> list[np.ndarray]:
         table.add(f"agent_{i}", owner=0, role=Role.AGENT, x=10.0 * i, y=0.0, heading=0.0)
     for i in range(n_traffic):
         table.add(f"car.{i}", owner=1, role=Role.TRAFFIC, x=4.0 * i, y=3.0, heading=0.1)
-    config = CommsConfig(channels=2, latency=2, loss=0.2, penetration=0.5, bandwidth=5,
-                         message_size=4, range=60.0, traffic_channel=-1)
+    config = CommsConfig(
+        channels=2, latency=2, loss=0.2, penetration=0.5, bandwidth=5, message_size=4, range=60.0, traffic_channel=-1
+    )
     net = V2VNetwork(config, table.capacity, seed=seed)
     agents = np.arange(n_agents)
     out = []

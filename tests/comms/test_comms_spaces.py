@@ -27,9 +27,7 @@ def test_action_space_is_payload_then_optional_channel():
 
 def test_split_clips_payload_and_rounds_the_channel():
     config = CommsConfig(message_size=2, channels=3, channel_action=True)
-    payloads, channels = split_message_action(
-        config, np.array([[0.5, 4.0, 1.4], [-3.0, 0.0, 9.0]]), ["a", "b"]
-    )
+    payloads, channels = split_message_action(config, np.array([[0.5, 4.0, 1.4], [-3.0, 0.0, 9.0]]), ["a", "b"])
     assert payloads.dtype == np.float32 and payloads.tolist() == [[0.5, 1.0], [-1.0, 0.0]]
     assert channels.tolist() == [1, 2]
 

@@ -59,7 +59,7 @@ def test_a_cache_index_naming_a_record_class_that_is_gone_reads_as_stale(tmp_pat
     assert index._load_index() == {}  # numba compiles again and overwrites it, rather than failing
 
 
-_KERNEL = '''
+_KERNEL = """
 import numba
 import dep
 from smarts.core.records import cache_depends_on
@@ -69,7 +69,7 @@ from smarts.core.records import cache_depends_on
 @cache_depends_on(dep)
 def twice(x):
     return dep.scale(x) * 2
-'''
+"""
 
 
 def _run_kernel(folder, cache_dir) -> str:
@@ -79,7 +79,9 @@ def _run_kernel(folder, cache_dir) -> str:
 
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache_dir), "PYTHONPATH": os.pathsep.join([str(folder), *sys.path])}
     code = "import kern; print(kern.twice(1.0), sum(kern.twice.stats.cache_hits.values()))"
-    return subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True, text=True).stdout.split()
+    return subprocess.run(
+        [sys.executable, "-c", code], env=env, check=True, capture_output=True, text=True
+    ).stdout.split()
 
 
 def test_a_kernel_that_names_its_dependencies_recompiles_when_one_of_them_changes(tmp_path):

@@ -37,13 +37,15 @@ def _drive(net, goal, offset=81.0, steps=20):
         {
             "name": "short-goal",
             "map": str(net),
-            "agents": [{
-                "action_space": "relative_target_pose",
-                "mission": {
-                    "start": {"road": "AB", "lane": 0, "offset": offset, "speed": 25.0},
-                    "goal": goal,
-                },
-            }],
+            "agents": [
+                {
+                    "action_space": "relative_target_pose",
+                    "mission": {
+                        "start": {"road": "AB", "lane": 0, "offset": offset, "speed": 25.0},
+                        "goal": goal,
+                    },
+                }
+            ],
         },
         source="short-goal",
     )
@@ -68,8 +70,12 @@ def test_the_goal_road_is_shorter_than_a_step(short_net):
 
 @pytest.mark.parametrize(
     "goal",
-    [{"road": "BC"}, {"road": "BC", "lane": 0}, {"road": "BC", "offset": 0.6},
-     {"position": [100.6, -4.8], "radius": 0.5}],
+    [
+        {"road": "BC"},
+        {"road": "BC", "lane": 0},
+        {"road": "BC", "offset": 0.6},
+        {"position": [100.6, -4.8], "radius": 0.5},
+    ],
     ids=["any-lane", "lane", "offset", "position"],
 )
 def test_a_goal_on_a_lane_jumped_over_in_one_step_is_reached(short_net, goal):

@@ -76,9 +76,7 @@ def test_the_env_takes_a_plain_core_spec():
     from smarts.env.assembly import as_spec
 
     spec = load_scenario("straight_2lane_cruise")
-    plain = core_spec.ScenarioSpec(
-        **{f.name: getattr(spec, f.name) for f in dataclasses.fields(spec)}
-    )
+    plain = core_spec.ScenarioSpec(**{f.name: getattr(spec, f.name) for f in dataclasses.fields(spec)})
     assert type(plain) is core_spec.ScenarioSpec
     built = as_spec(plain)
     assert type(built) is ScenarioSpec and built == spec and built.base_dir == spec.base_dir

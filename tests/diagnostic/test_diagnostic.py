@@ -5,8 +5,21 @@ from smarts.diagnostic.__main__ import main
 
 def test_diagnostic_writes_a_table_and_json(tmp_path, capsys):
     out = tmp_path / "diag.json"
-    args = ["--agents", "1,3", "--vehicles", "10", "--traffic", "sumo,builtin", "--steps", "5", "--warmup", "1",
-            "--cpu", "1,sumo10", "--stages"]
+    args = [
+        "--agents",
+        "1,3",
+        "--vehicles",
+        "10",
+        "--traffic",
+        "sumo,builtin",
+        "--steps",
+        "5",
+        "--warmup",
+        "1",
+        "--cpu",
+        "1,sumo10",
+        "--stages",
+    ]
     assert main([*args, "--out", str(out)]) == 0
     report = json.loads(out.read_text())
     cases = report["cases"]

@@ -73,9 +73,7 @@ def test_check_actions_names_agent_and_component_of_nan():
     ids = ["agent_0", "agent_1", "agent_2", "agent_3"]
     with pytest.raises(ActionError) as err:
         check_actions("relative_target_pose", actions, ids)
-    assert str(err.value) == (
-        "agent_3: relative_target_pose action component dheading is nan; expected finite numbers"
-    )
+    assert str(err.value) == ("agent_3: relative_target_pose action component dheading is nan; expected finite numbers")
     assert err.value.agent_ids == ["agent_3"]
     assert isinstance(err.value, ValueError)
 
@@ -116,9 +114,7 @@ def test_finite_out_of_range_actions_are_not_errors():
 
 
 def test_lane_command_clips_speed_and_rounds_lane_change():
-    speed, change = lane_command(
-        np.array([[-3.0, -0.7], [10.0, 0.2], [99.0, 3.0], [5.0, -0.3]]), ReachLimits()
-    )
+    speed, change = lane_command(np.array([[-3.0, -0.7], [10.0, 0.2], [99.0, 3.0], [5.0, -0.3]]), ReachLimits())
     np.testing.assert_allclose(speed, [0.0, 10.0, 22.22, 5.0])
     np.testing.assert_array_equal(change, [-1, 0, 1, 0])
     assert change.dtype == np.int8

@@ -76,8 +76,14 @@ def test_braking_stops_at_zero_speed_without_reversing():
 def test_vectorised_with_per_vehicle_wheelbase():
     n = 3
     x, y, h, v = bicycle_step(
-        np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, 5.0), np.zeros(n),
-        np.full(n, 0.2), np.array([2.0, 3.0, 6.0]), 1.0,
+        np.zeros(n),
+        np.zeros(n),
+        np.zeros(n),
+        np.full(n, 5.0),
+        np.zeros(n),
+        np.full(n, 0.2),
+        np.array([2.0, 3.0, 6.0]),
+        1.0,
     )
     np.testing.assert_allclose(h, 5.0 * math.tan(0.2) / np.array([2.0, 3.0, 6.0]))
 

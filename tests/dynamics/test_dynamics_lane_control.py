@@ -40,9 +40,7 @@ def test_writes_steering_and_derived_columns():
     table = VehicleTable(4)
     row = table.add("a", owner=0, role=Role.AGENT, x=0.0, y=0.0, heading=0.0, speed=10.0)
     rows = np.array([row])
-    lane_control_step(
-        table, rows, np.array([10.0]), np.array([[10.0, 3.0]]), DT, LIMITS, np.array([WHEELBASE])
-    )
+    lane_control_step(table, rows, np.array([10.0]), np.array([[10.0, 3.0]]), DT, LIMITS, np.array([WHEELBASE]))
     assert table.steering[row] > 0  # the point is on the left
     assert table.yaw_rate[row] > 0 and table.y[row] > 0
     assert table.lat_accel[row] == pytest.approx(table.speed[row] * table.yaw_rate[row])
@@ -60,7 +58,12 @@ def test_sharp_look_ahead_is_capped_by_yaw_rate_and_curvature():
         ]
     )
     lane_control_step(
-        table, rows, np.array([10.0, 1.0]), np.array([[2.0, -3.0], [2.0, 53.0]]), DT, LIMITS,
+        table,
+        rows,
+        np.array([10.0, 1.0]),
+        np.array([[2.0, -3.0], [2.0, 53.0]]),
+        DT,
+        LIMITS,
         WHEELBASE,
     )
     # Fast: curvature capped at max_yaw_rate / speed (right turn); slow: at max_curvature.
@@ -79,8 +82,13 @@ def test_target_speed_is_clipped_and_braking_is_limited():
     assert table.jerk[rows[0]] == pytest.approx(-LIMITS.max_decel / DT)
     for _ in range(30):
         lane_control_step(
-            table, rows, np.array([99.0]), np.array([[table.x[rows[0]] + 30.0, 0.0]]), DT,
-            LIMITS, WHEELBASE,
+            table,
+            rows,
+            np.array([99.0]),
+            np.array([[table.x[rows[0]] + 30.0, 0.0]]),
+            DT,
+            LIMITS,
+            WHEELBASE,
         )
     assert table.speed[rows[0]] <= LIMITS.max_speed + 1e-9
     assert table.speed[rows[0]] == pytest.approx(LIMITS.max_speed, abs=0.05)

@@ -116,9 +116,7 @@ def test_reverse_when_allowed():
 def test_vectorised_rows_match_single_rows():
     rng = np.random.default_rng(3)
     n = 50
-    req = np.column_stack(
-        [rng.uniform(-1, 4, n), rng.uniform(-1, 1, n), rng.uniform(-0.5, 0.5, n)]
-    )
+    req = np.column_stack([rng.uniform(-1, 4, n), rng.uniform(-1, 1, n), rng.uniform(-0.5, 0.5, n)])
     speed = rng.uniform(0, 25, n)
     batch = limit_relative_pose(req, speed, DT, LIMITS)
     for i in range(n):
@@ -180,9 +178,7 @@ def test_target_pose_equals_relative_target_pose():
         for s in rng.uniform(0, 20, n)
     ]
     poses[0] = (1.0, 2.0, math.pi - 0.02, 8.0)  # the target heading wraps across +-pi
-    rel = np.column_stack(
-        [rng.uniform(-0.5, 3, n), rng.uniform(-0.3, 0.3, n), rng.uniform(-0.3, 0.3, n)]
-    )
+    rel = np.column_stack([rng.uniform(-0.5, 3, n), rng.uniform(-0.3, 0.3, n), rng.uniform(-0.3, 0.3, n)])
     rel[0] = [0.8, 0.0, 0.06]
     table_rel, rows = make_table(poses)
     table_abs, _ = make_table(poses)
@@ -198,6 +194,4 @@ def test_target_pose_equals_relative_target_pose():
     apply_relative_pose(table_rel, rows, rel, DT, LIMITS)
     apply_target_pose(table_abs, rows, world, DT, LIMITS)
     for col in ("x", "y", "heading", "speed", "accel", "jerk", "yaw_rate", "lat_accel"):
-        np.testing.assert_allclose(
-            getattr(table_abs, col)[rows], getattr(table_rel, col)[rows], atol=1e-9, err_msg=col
-        )
+        np.testing.assert_allclose(getattr(table_abs, col)[rows], getattr(table_rel, col)[rows], atol=1e-9, err_msg=col)

@@ -25,9 +25,7 @@ def world():
 def drive(world, handles, throttle, brake, steering, seconds):
     n = len(handles)
     for _ in range(int(round(seconds / DT))):
-        world.apply_controls(
-            handles, np.full(n, throttle), np.full(n, brake), np.broadcast_to(steering, (n,))
-        )
+        world.apply_controls(handles, np.full(n, throttle), np.full(n, brake), np.broadcast_to(steering, (n,)))
         world.step()
     return world.read_state(handles)
 
@@ -82,9 +80,7 @@ def test_two_fresh_worlds_are_deterministic():
         with PhysicsWorld(dt=DT) as w:
             handles = [w.add_vehicle(0.0, 0.0, 0.1, speed=5.0), w.add_vehicle(20.0, 4.0, 3.0)]
             for k in range(40):
-                w.apply_controls(
-                    handles, [0.6, 1.0], [0.0, 0.1 * (k % 3)], [math.sin(0.2 * k), -0.3]
-                )
+                w.apply_controls(handles, [0.6, 1.0], [0.0, 0.1 * (k % 3)], [math.sin(0.2 * k), -0.3])
                 w.step()
             results.append(np.array(w.read_state(handles)))
     np.testing.assert_array_equal(results[0], results[1])
@@ -116,9 +112,7 @@ def test_apply_continuous_writes_table_columns(world):
             table.add("other", owner=0, role=Role.AGENT, x=0.0, y=20.0, heading=0.0, speed=6.0),
         ]
     )
-    handles = [
-        world.add_vehicle(table.x[r], table.y[r], table.heading[r], table.speed[r]) for r in rows
-    ]
+    handles = [world.add_vehicle(table.x[r], table.y[r], table.heading[r], table.speed[r]) for r in rows]
     actions = np.array([[1.0, 0.0, 0.0], [0.3, 0.0, 1.0]])
     for _ in range(10):
         apply_continuous(world, table, rows, handles, actions, DT)

@@ -141,7 +141,9 @@ def test_bad_commands_name_the_agent_and_the_component_before_anything_moves():
     env = _env()
     row = env.sim.agent_row[0]
     x0 = env.sim.table.x[row]
-    with pytest.raises(ActionError, match=r"agent_0: relative_target_pose \(lane_relative\) action component lane_change is nan"):
+    with pytest.raises(
+        ActionError, match=r"agent_0: relative_target_pose \(lane_relative\) action component lane_change is nan"
+    ):
         env.step({"agent_0": np.array([0.0, np.nan], np.float32)})
     with pytest.raises(ActionError, match=r"expected 2 \(speed, lane_change\)"):
         env.step({"agent_0": np.zeros(3, np.float32)})

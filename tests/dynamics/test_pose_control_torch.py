@@ -32,8 +32,18 @@ def random_state(seed: int, reverse: bool) -> tuple[VehicleTable, np.ndarray]:
     heading[: N // 20] *= -1.0
     speed = rng.uniform(-8.0 if reverse else 0.0, 30.0, N)
     rows = np.array(
-        [table.add(f"car{i}", owner=0, role=Role.AGENT, x=float(rng.uniform(-800, 800)), y=float(rng.uniform(-800, 800)),
-                   heading=float(heading[i]), speed=float(speed[i])) for i in range(N)]  # fmt: skip
+        [
+            table.add(
+                f"car{i}",
+                owner=0,
+                role=Role.AGENT,
+                x=float(rng.uniform(-800, 800)),
+                y=float(rng.uniform(-800, 800)),
+                heading=float(heading[i]),
+                speed=float(speed[i]),
+            )
+            for i in range(N)
+        ]  # fmt: skip
     )
     table.accel[rows] = rng.normal(0.0, 3.0, N)
     order = rng.permutation(N)  # rows in any order
@@ -53,8 +63,11 @@ def random_requests(table: VehicleTable, rows: np.ndarray, seed: int, world_fram
     h = table.heading[rows]
     c, s = np.cos(h), np.sin(h)
     return np.stack(
-        [table.x[rows] + c * req[:, 0] - s * req[:, 1], table.y[rows] + s * req[:, 0] + c * req[:, 1],
-         h + req[:, 2] + rng.choice([0.0, 2 * math.pi, -2 * math.pi], n)],  # fmt: skip
+        [
+            table.x[rows] + c * req[:, 0] - s * req[:, 1],
+            table.y[rows] + s * req[:, 0] + c * req[:, 1],
+            h + req[:, 2] + rng.choice([0.0, 2 * math.pi, -2 * math.pi], n),
+        ],  # fmt: skip
         axis=1,
     )
 

@@ -29,7 +29,9 @@ def _specs() -> list:
 
 def _commands(slots: int) -> list[np.ndarray]:
     rng = np.random.default_rng(0)
-    return [rng.uniform([0.5, -0.05, -0.02], [1.5, 0.05, 0.02], size=(slots, 3)).astype(np.float32) for _ in range(STEPS)]
+    return [
+        rng.uniform([0.5, -0.05, -0.02], [1.5, 0.05, 0.02], size=(slots, 3)).astype(np.float32) for _ in range(STEPS)
+    ]
 
 
 def _single_env_episodes(spec, copy: int, slot_of: dict, commands: list) -> list[dict]:
@@ -60,7 +62,11 @@ def test_a_sumo_copy_beside_built_in_ones_plays_its_single_env_in_both_adapters(
     vec = SmartsVecEnv(specs, seed=SEED)
     try:
         assert len(tr.driving.shards) == 1 and tr.driving.shards[0].copies == [1]  # SUMO in its worker
-        assert tr.slots == vec.slot_agents == [(0, "agent_0"), (0, "agent_1"), (1, "agent_0"), (2, "agent_0"), (2, "agent_1")]
+        assert (
+            tr.slots
+            == vec.slot_agents
+            == [(0, "agent_0"), (0, "agent_1"), (1, "agent_0"), (2, "agent_0"), (2, "agent_1")]
+        )
         check_env_specs(tr)
         slot_of = {key: j for j, key in enumerate(vec.slot_agents)}
         commands = _commands(len(slot_of))
@@ -85,13 +91,17 @@ def test_a_sumo_copy_beside_built_in_ones_plays_its_single_env_in_both_adapters(
                     continue
                 row = per_step[t]
                 for j, ego in row["obs"].items():
-                    np.testing.assert_array_equal(nxt["observation", "ego"][j].numpy(), ego, err_msg=f"step {t} slot {j}")
+                    np.testing.assert_array_equal(
+                        nxt["observation", "ego"][j].numpy(), ego, err_msg=f"step {t} slot {j}"
+                    )
                     assert rewards[j] == np.float32(row["reward"][j])
             sumo = slot_of[(1, "agent_0")]
             if dones[sumo]:  # the SUMO copy restarted within the step (SB3) / waits for torchrl's reset
                 restarts += 1
                 assert infos[sumo]["TimeLimit.truncated"] and infos[sumo]["episode"]["l"] == 15
-                np.testing.assert_array_equal(infos[sumo]["terminal_observation"]["ego"], nxt["observation", "ego"][sumo].numpy())
+                np.testing.assert_array_equal(
+                    infos[sumo]["terminal_observation"]["ego"], nxt["observation", "ego"][sumo].numpy()
+                )
             td = tr.step_mdp(td)
             if td["done"].any():
                 td = tr.reset(td.set("_reset", td["done"].clone()))

@@ -23,7 +23,12 @@ AGENTS = [
 
 
 def _spec():
-    return make_spec(AGENTS, map_name="straight_3lane", traffic={"engine": "builtin", "flows": [{"id": "f", "route": ["main"], "rate": 3600, "depart_lane": "random"}]}, episode_steps=200)
+    return make_spec(
+        AGENTS,
+        map_name="straight_3lane",
+        traffic={"engine": "builtin", "flows": [{"id": "f", "route": ["main"], "rate": 3600, "depart_lane": "random"}]},
+        episode_steps=200,
+    )
 
 
 def _actions(env, k):
@@ -63,7 +68,9 @@ def _state(env):
         "clock": (sim.step_count, sim.time),
         "agents": (list(env.agents), sim.agent_active.copy(), sim.agent_events.copy(), sim.agent_done.copy()),
         "route": (sim.route_index.copy(), sim.route_progress.copy()),
-        "lane_relative": tuple(a.copy() for a in (ctl.track, ctl.pending, ctl.profile_start, ctl.profile_age, ctl.branch)),
+        "lane_relative": tuple(
+            a.copy() for a in (ctl.track, ctl.pending, ctl.profile_start, ctl.profile_age, ctl.branch)
+        ),
         "lane_offset": provider.lane_offset.copy(),
         "physics": None if physics is None else tuple(np.array(v) for v in physics),
         "traffic_rng": [p.rng.bit_generator.state for p in sim.providers[1:] if hasattr(p, "rng")],
@@ -98,12 +105,32 @@ def _assert_same_step(one, other):
 
 
 BAD = [
-    ("agent_1", np.array([0.3, np.nan, 0.0]), r"agent_1: continuous action component brake is nan; expected finite numbers"),
-    ("agent_0", np.array([1.0, 0.0]), r"agent_0: relative_target_pose action has 2 components; expected 3 \(dx, dy, dheading\)"),
-    ("agent_2", np.array([0.0, np.inf], np.float32), r"agent_2: continuous \(lane_relative\) action component lane_change is inf"),
-    ("agent_3", np.zeros(3), r"agent_3: target_pose \(lane_relative\) action has 3 components; expected 2 \(speed, lane_change\)"),
+    (
+        "agent_1",
+        np.array([0.3, np.nan, 0.0]),
+        r"agent_1: continuous action component brake is nan; expected finite numbers",
+    ),
+    (
+        "agent_0",
+        np.array([1.0, 0.0]),
+        r"agent_0: relative_target_pose action has 2 components; expected 3 \(dx, dy, dheading\)",
+    ),
+    (
+        "agent_2",
+        np.array([0.0, np.inf], np.float32),
+        r"agent_2: continuous \(lane_relative\) action component lane_change is inf",
+    ),
+    (
+        "agent_3",
+        np.zeros(3),
+        r"agent_3: target_pose \(lane_relative\) action has 3 components; expected 2 \(speed, lane_change\)",
+    ),
     ("agent_4", np.array([[9.0, 0.0]]), r"agent_4: lane action has shape \(1, 2\); expected shape \(2,\)"),
-    ("agent_1", np.array([1 + 1j, 0, 0]), r"agent_1: continuous action .* is complex numbers .*expected 3 real numbers"),
+    (
+        "agent_1",
+        np.array([1 + 1j, 0, 0]),
+        r"agent_1: continuous action .* is complex numbers .*expected 3 real numbers",
+    ),
     ("agent_0", "fast", r"agent_0: relative_target_pose action 'fast' is not numbers"),
     ("agent_4", None, r"agent_4: lane action None is not numbers"),
 ]
@@ -142,8 +169,11 @@ def test_every_bad_agent_of_every_group_is_named_at_once():
     with pytest.raises(ActionError) as err:
         env.step(actions)
     assert sorted(err.value.agent_ids) == ["agent_0", "agent_2", "agent_4"]
-    for text in ("agent_0: relative_target_pose action component dx is nan", "agent_2: continuous (lane_relative) action has 5 components",
-                 "agent_4: lane action component target_speed is inf"):
+    for text in (
+        "agent_0: relative_target_pose action component dx is nan",
+        "agent_2: continuous (lane_relative) action has 5 components",
+        "agent_4: lane action component target_speed is inf",
+    ):
         assert text in str(err.value)
     assert env.sim.step_count == 0 and env.sim.time == 0.0
     env.close()

@@ -173,9 +173,12 @@ def test_worker_processes_give_the_same_rollout_as_in_process_copies():
 
 def test_one_action_space_for_one_policy():
     mixed = make_spec([agent(lane=0), agent(lane=1, action_space="target_pose")])
-    with pytest.raises(BatchedSetupError, match=r"SB3 trains one policy with one Box action space.*2 different.*"
-                                                r"slot 0 \(copy 0, test-scenario, agent_0\): Box.*"
-                                                r"slot 1 \(copy 0, test-scenario, agent_1\): Box"):
+    with pytest.raises(
+        BatchedSetupError,
+        match=r"SB3 trains one policy with one Box action space.*2 different.*"
+        r"slot 0 \(copy 0, test-scenario, agent_0\): Box.*"
+        r"slot 1 \(copy 0, test-scenario, agent_1\): Box",
+    ):
         SmartsVecEnv([mixed])
 
 

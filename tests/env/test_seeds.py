@@ -58,8 +58,13 @@ def _seed(what, env, seed):
 @pytest.mark.parametrize("seed, problem", BAD, ids=[repr(s) for s, _ in BAD])
 @pytest.mark.parametrize(
     "what",
-    ["DrivingParallelEnv.reset(seed=...)", "DrivingEnv.reset(seed=...)", "SmartsTorchRLEnv.set_seed(seed)",
-     "SmartsBatchedEnv.set_seed(seed)", "SmartsVecEnv.seed(seed)"],
+    [
+        "DrivingParallelEnv.reset(seed=...)",
+        "DrivingEnv.reset(seed=...)",
+        "SmartsTorchRLEnv.set_seed(seed)",
+        "SmartsBatchedEnv.set_seed(seed)",
+        "SmartsVecEnv.seed(seed)",
+    ],
 )
 def test_bad_seeds_are_refused_naming_the_argument_and_the_value(envs, what, seed, problem):
     with pytest.raises(ValueError, match=re.escape(what) + ": " + EXPECTED + problem):

@@ -81,16 +81,28 @@ def test_take_over_a_trip_and_hand_it_back_at_the_goal(engine):
 
 def test_a_pedestrian_walking_into_a_car_is_a_collision():
     spec = make_spec(
-        [{"mission": {"start": {"road": "south_in", "offset": 20.0, "speed": 0.0, "heading": 0.0}, "goal": {"endless": True}}}],
+        [
+            {
+                "mission": {
+                    "start": {"road": "south_in", "offset": 20.0, "speed": 0.0, "heading": 0.0},
+                    "goal": {"endless": True},
+                }
+            }
+        ],
         map_name="intersection_4way_1lane_peds",
-        traffic={"engine": "sumo", "pedestrians": [{"id": "walker", "origin": "south_in", "destination": "north_out", "rate": 60}]},
+        traffic={
+            "engine": "sumo",
+            "pedestrians": [{"id": "walker", "origin": "south_in", "destination": "north_out", "rate": 60}],
+        },
         events={"terminate_on": ["collision"]},
     )
     env = DrivingParallelEnv(spec)
     env.reset(seed=0)
     t, row = env.sim.table, env.sim.agent_row[0]
     for _ in range(300):  # move onto the sidewalk (pointing east) and wait for the walker
-        obs, rewards, terms, truncs, infos = env.step({"agent_0": np.array([0.2, 0, 0]) if t.x[row] < 4.5 else np.zeros(3)})
+        obs, rewards, terms, truncs, infos = env.step(
+            {"agent_0": np.array([0.2, 0, 0]) if t.x[row] < 4.5 else np.zeros(3)}
+        )
         if terms["agent_0"]:
             break
     assert "collision" in infos["agent_0"]["events"]
@@ -100,7 +112,9 @@ def test_a_pedestrian_walking_into_a_car_is_a_collision():
 
 
 def test_the_signal_ahead_is_in_the_observation():
-    spec = make_spec([agent("west_in", offset=20.0, speed=8.0, goal={"road": "east_out"})], map_name="intersection_4way_1lane_signal")
+    spec = make_spec(
+        [agent("west_in", offset=20.0, speed=8.0, goal={"road": "east_out"})], map_name="intersection_4way_1lane_signal"
+    )
     env = DrivingParallelEnv(spec)
     obs, _ = env.reset(seed=0)
     signal = obs["agent_0"]["signal"]

@@ -115,9 +115,7 @@ def test_channels_isolate_and_the_action_can_pick_the_channel():
 def test_connected_traffic_is_heard_from_reset_and_social_agents_only_listen():
     trip = {"id": "lead", "route": ["main"], "depart": 0, "depart_lane": 0, "depart_pos": 40, "depart_speed": 5}
     agents = [agent(lane=0, offset=10.0), agent(lane=1, offset=20.0, policy="zoo:keep-lane")]
-    spec = _spec(
-        {"message_size": 3, "penetration": 1.0}, agents, traffic={"engine": "builtin", "trips": [trip]}
-    )
+    spec = _spec({"message_size": 3, "penetration": 1.0}, agents, traffic={"engine": "builtin", "trips": [trip]})
     env = DrivingParallelEnv(spec)
     obs, infos = env.reset(seed=0)
     assert env.possible_agents == ["agent_0"] and infos["agent_0"]["messages_received"] == 1

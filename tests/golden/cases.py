@@ -119,13 +119,18 @@ def _agents(action_space: str, controller: str = "direct", interface: dict | Non
 FEATURE_SCENARIOS: dict[str, dict] = {
     "feature_occlusion_flag": {
         **_SIGNAL_JUNCTION,
-        "agents": _agents("relative_target_pose", interface={
-            "neighbours": {"count": 6, "radius": 40, "extended": True},
-            "occlusion": {"enabled": True, "mode": "flag", "range": 40},
-            "lidar": {"rays": 32, "range": 25, "noise": 0.05},
-            "rasters": {"size": 32, "resolution": 1.0, "layers": ["drivable", "occupancy", "occlusion"]},
-            "ego": {"extended": True}, "signals": True, "ahead": True,
-        }),
+        "agents": _agents(
+            "relative_target_pose",
+            interface={
+                "neighbours": {"count": 6, "radius": 40, "extended": True},
+                "occlusion": {"enabled": True, "mode": "flag", "range": 40},
+                "lidar": {"rays": 32, "range": 25, "noise": 0.05},
+                "rasters": {"size": 32, "resolution": 1.0, "layers": ["drivable", "occupancy", "occlusion"]},
+                "ego": {"extended": True},
+                "signals": True,
+                "ahead": True,
+            },
+        ),
     },  # fmt: skip
     "feature_target_pose": {**_SIGNAL_JUNCTION, "agents": _agents("target_pose")},
     "feature_continuous": {**_SIGNAL_JUNCTION, "agents": _agents("continuous")},
@@ -264,8 +269,13 @@ def _is_sumo(spec) -> bool:
 
 # ---------------------------------------------------------------------------- the driver
 def golden_actions(
-    obs: dict[str, np.ndarray], kinds: list[tuple[str, str]], poses: np.ndarray, local_index: np.ndarray,
-    step: int, dt: float, message_size: int = 0,
+    obs: dict[str, np.ndarray],
+    kinds: list[tuple[str, str]],
+    poses: np.ndarray,
+    local_index: np.ndarray,
+    step: int,
+    dt: float,
+    message_size: int = 0,
 ) -> np.ndarray:
     """Actions of n agents: ``obs`` {key: [n, ...]}, ``kinds[i]`` (action space, controller),
     ``poses`` float64[n, 3] world x, y, heading, ``local_index`` the agent's index in its scenario,
@@ -282,7 +292,9 @@ def golden_actions(
     out = np.zeros((n, 3 + message_size))
     for i, (space, controller) in enumerate(kinds):
         if controller == "lane_relative":
-            change = 1.0 if (step + local_index[i]) % 60 == 30 else (-1.0 if (step + local_index[i]) % 60 == 50 else 0.0)
+            change = (
+                1.0 if (step + local_index[i]) % 60 == 30 else (-1.0 if (step + local_index[i]) % 60 == 50 else 0.0)
+            )
             out[i, :2] = (7.0 + 2.0 * math.sin(0.05 * step + local_index[i]), change)
             width = 2
         elif space == "relative_target_pose":
@@ -306,7 +318,7 @@ def golden_actions(
             out[i, :2] = (8.0 + local_index[i], change)
             width = 2
         if message_size:
-            out[i, width:width + message_size] = np.sin(0.1 * step + np.arange(message_size) + local_index[i])
+            out[i, width : width + message_size] = np.sin(0.1 * step + np.arange(message_size) + local_index[i])
     return out.astype(np.float32)
 
 

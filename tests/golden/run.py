@@ -56,16 +56,16 @@ class EpisodeRecord:
         theirs = golden["steps"]
 
         def part(code: str) -> str:
-            return "".join(code[2 * i:2 * i + 2] for i in keep)
+            return "".join(code[2 * i : 2 * i + 2] for i in keep)
 
         if mine["steps"] != theirs and len(mine["steps"]) != len(theirs):
             pass
         for k in range(max(len(self.steps), len(theirs) // width)):
-            a, b = mine["steps"][k * width:(k + 1) * width], theirs[k * width:(k + 1) * width]
+            a, b = mine["steps"][k * width : (k + 1) * width], theirs[k * width : (k + 1) * width]
             if not a or not b:
                 return f"length {len(self.steps)} steps, golden {len(theirs) // width}"
             if part(a) != part(b):
-                differ = [STREAMS[i] for i in keep if a[2 * i:2 * i + 2] != b[2 * i:2 * i + 2]]
+                differ = [STREAMS[i] for i in keep if a[2 * i : 2 * i + 2] != b[2 * i : 2 * i + 2]]
                 return f"step {k}: {', '.join(differ)}"
         differ = [s for s in streams if mine[s] != golden[s]]
         return f"chained digests of {', '.join(differ)}" if differ else None
@@ -150,7 +150,9 @@ def _run_single(env, spec, seed: int, max_steps: int) -> EpisodeRecord:
         rows = sim.agent_row[[sim.agent_index[a] for a in ids]]
         poses = np.stack([t.x[rows], t.y[rows], t.heading[rows]], axis=1)
         kinds = _kinds(spec, ids)
-        acts = golden_actions(batch, kinds, poses, np.array([local[a] for a in ids]), step - 1, spec.step_length, message)
+        acts = golden_actions(
+            batch, kinds, poses, np.array([local[a] for a in ids]), step - 1, spec.step_length, message
+        )
         actions = {a: acts[i, : _width(kinds[i]) + message] for i, a in enumerate(ids)}
         obs, rewards, terms, truncs, _ = env.step(actions)
         acted = list(rewards)
@@ -216,12 +218,17 @@ def _run_batched(bd, specs: list, seeds: list[int], max_steps: int) -> list[Epis
         return out
 
     def events_of(sel: np.ndarray) -> np.ndarray:
-        rows = [slot_agent[j][0].agent_events[slot_agent[j][1]] if slot_agent[j] else obs["events"][j] > 0 for j in sel.tolist()]
+        rows = [
+            slot_agent[j][0].agent_events[slot_agent[j][1]] if slot_agent[j] else obs["events"][j] > 0
+            for j in sel.tolist()
+        ]
         return np.array(rows, dtype=bool).reshape(len(sel), -1)
 
     def listener() -> None:
         seen["tables"] = tables()
-        seen["events"] = {j: s.agent_events[a].copy() for j, sa in enumerate(slot_agent) if sa for s, a in [sa] if s.agent_active[a]}
+        seen["events"] = {
+            j: s.agent_events[a].copy() for j, sa in enumerate(slot_agent) if sa for s, a in [sa] if s.agent_active[a]
+        }
 
     bd.add_step_listener(listener)
     obs = bd.reset(seeds)
@@ -252,9 +259,14 @@ def _run_batched(bd, specs: list, seeds: list[int], max_steps: int) -> list[Epis
                 seen["tables"][c],
                 obs_bytes([{k: v[j] for k, v in obs.items()} for j in sel]),
                 reward_bytes(result.reward[sel]),
-                events_bytes(np.array([seen["events"][j] if j in seen["events"] else obs["events"][j] > 0
-                                       for j in sel.tolist()], dtype=bool).reshape(len(sel), -1),
-                             result.terminated[sel], result.truncated[sel]),
+                events_bytes(
+                    np.array(
+                        [seen["events"][j] if j in seen["events"] else obs["events"][j] > 0 for j in sel.tolist()],
+                        dtype=bool,
+                    ).reshape(len(sel), -1),
+                    result.terminated[sel],
+                    result.truncated[sel],
+                ),
             )
             if result.restarted[slot_copy == c].any():
                 done_copies[c] = True
@@ -280,13 +292,18 @@ def _run_engine(engine, specs: list, max_steps: int) -> list[EpisodeRecord]:
     n = len(specs)
     learner = engine.learner
     kinds = [_kinds(specs[b], [aid])[0] for b, aid in zip(sim.agent_episode.tolist(), sim.local_agent_ids)]
-    local = np.array([[a.id for a in specs[b].agents].index(aid) for b, aid in zip(sim.agent_episode.tolist(), sim.local_agent_ids)])
+    local = np.array(
+        [[a.id for a in specs[b].agents].index(aid) for b, aid in zip(sim.agent_episode.tolist(), sim.local_agent_ids)]
+    )
     message = np.array([len(link.message_components) if link is not None else 0 for link in engine.links])
     width = int(max(engine.action_space(a).shape[0] for a in range(len(sim.agent_ids))))
     seen: dict = {}
 
     def tables() -> list[bytes]:
-        return [table_bytes(v.table.ids, v.table.alive, v.table.x, v.table.y, v.table.heading, v.table.speed) for v in sim.views]
+        return [
+            table_bytes(v.table.ids, v.table.alive, v.table.x, v.table.y, v.table.heading, v.table.speed)
+            for v in sim.views
+        ]
 
     def listener(s) -> None:
         seen["tables"] = tables()

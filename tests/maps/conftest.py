@@ -29,13 +29,16 @@ CROSS_NODES = """<nodes>
   <node id="E" x="100" y="0"/>
   <node id="W" x="-100" y="0"/>
 </nodes>"""
-CROSS_EDGES = """<edges>
-""" + "\n".join(
-    f'  <edge id="{a}{b}" from="{a}" to="{b}" numLanes="1" speed="13.89"/>'
-    for a, b in [("W", "C"), ("C", "W"), ("E", "C"), ("C", "E"),
-                 ("N", "C"), ("C", "N"), ("S", "C"), ("C", "S")]
-) + """
+CROSS_EDGES = (
+    """<edges>
+"""
+    + "\n".join(
+        f'  <edge id="{a}{b}" from="{a}" to="{b}" numLanes="1" speed="13.89"/>'
+        for a, b in [("W", "C"), ("C", "W"), ("E", "C"), ("C", "E"), ("N", "C"), ("C", "N"), ("S", "C"), ("C", "S")]
+    )
+    + """
 </edges>"""
+)
 
 # One 100 m road heading east from (10, 20) with two right-hand driving lanes: -1 (3.5 m wide,
 # next to the reference line) and -2 (3.0 m, outermost, so it becomes the rightmost lane).
@@ -73,9 +76,12 @@ def build_net(out_dir: Path, name: str, nodes: str, edges: str) -> Path:
     subprocess.run(
         [
             netconvert_binary(),
-            "--node-files", str(nod),
-            "--edge-files", str(edg),
-            "--output-file", str(net),
+            "--node-files",
+            str(nod),
+            "--edge-files",
+            str(edg),
+            "--output-file",
+            str(net),
             "--no-turnarounds",
             "--offset.disable-normalization",
         ],

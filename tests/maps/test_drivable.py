@@ -40,9 +40,7 @@ def test_every_lanepoint_is_on_road(cross_map: RoadMap) -> None:
 
 def test_raster_coarsens_to_respect_the_cell_budget() -> None:
     poly = [np.array([[0.0, 0.0], [1000.0, 1000.0]])]
-    origin, resolution, raster = build_drivable_raster(
-        poly, np.array([4.0]), [], resolution=0.25, max_cells=100_000
-    )
+    origin, resolution, raster = build_drivable_raster(poly, np.array([4.0]), [], resolution=0.25, max_cells=100_000)
     assert raster.size <= 100_000
     assert resolution > 0.25
     assert raster.any()

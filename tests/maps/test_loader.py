@@ -177,9 +177,7 @@ def test_writer_killed_before_the_rename_leaves_no_entry(tmp_path: Path, straigh
     assert m.lane_ids == ["AB_1", "AB_2"] and RoadMap.load(entry).lane_ids == m.lane_ids
 
 
-def test_damaged_converted_network_of_an_xodr_is_rebuilt(
-    tmp_path: Path, straight_xodr: Path
-) -> None:
+def test_damaged_converted_network_of_an_xodr_is_rebuilt(tmp_path: Path, straight_xodr: Path) -> None:
     cache_dir = tmp_path / "cache"
     net = sumo_net_path(straight_xodr, cache_dir)
     whole = net.read_bytes()
@@ -192,9 +190,7 @@ def test_damaged_converted_network_of_an_xodr_is_rebuilt(
     assert load_map(straight_xodr, cache_dir=cache_dir).num_lanes == 2
 
 
-def test_corrupt_user_map_is_an_error_naming_the_file(
-    tmp_path: Path, straight_net: Path, straight_xodr: Path
-) -> None:
+def test_corrupt_user_map_is_an_error_naming_the_file(tmp_path: Path, straight_net: Path, straight_xodr: Path) -> None:
     cache_dir = tmp_path / "cache"
     net = tmp_path / "half.net.xml"
     whole = straight_net.read_bytes()
@@ -313,9 +309,7 @@ def test_a_failed_conversion_is_cached_and_fails_fast_with_the_same_message(
     assert len(netconvert_runs) == 4
 
 
-def test_a_failure_recorded_by_another_netconvert_is_retried(
-    tmp_path: Path, netconvert_runs: list
-) -> None:
+def test_a_failure_recorded_by_another_netconvert_is_retried(tmp_path: Path, netconvert_runs: list) -> None:
     import json
 
     bad = tmp_path / "broken.xodr"

@@ -15,7 +15,8 @@ def test_signal_programs_and_controlled_connections_are_compiled():
     assert (m.conn_tls == 0).all()
     assert sorted(m.conn_link.tolist()) == list(range(16))
     west_to_north = [
-        k for k in range(len(m.conn_from))
+        k
+        for k in range(len(m.conn_from))
         if m.lane_ids[m.conn_from[k]] == "west_in_0" and m.lane_ids[m.conn_to[k]] == "north_out_0"
     ]
     (k,) = west_to_north

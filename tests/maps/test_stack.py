@@ -69,7 +69,9 @@ def test_routes_missions_flows_and_signals_on_a_window_are_the_maps_own(maps, st
     m, w, base = maps[k], stack.windows[k], int(stack.lane_base[k])
     a, b = m.lane("west_in_0"), m.lane("east_out_0")
     np.testing.assert_array_equal(shortest_route(w, a + base, b + base), np.asarray(shortest_route(m, a, b)) + base)
-    spec = make_spec([agent(start_road="west_in", goal={"road": "north_out"})], map_name="intersection_4way_2lane_signal")
+    spec = make_spec(
+        [agent(start_road="west_in", goal={"road": "north_out"})], map_name="intersection_4way_2lane_signal"
+    )
     mission = spec.agents[0].mission
     alone, stacked = resolve_mission(m, "a", mission, "m"), resolve_mission(w, "a", mission, "m")
     np.testing.assert_array_equal(stacked.route, alone.route + base)

@@ -36,9 +36,7 @@ def test_neighbours_index_plus_one_is_left(straight_map: RoadMap) -> None:
 def test_cross_has_internal_lanes_and_successors_go_through_them(cross_map: RoadMap) -> None:
     m = cross_map
     normal = [m.lane_ids[i] for i in np.flatnonzero(~m.lane_internal)]
-    assert sorted(normal) == sorted(
-        f"{a}{b}_0" for a, b in ["WC", "CW", "EC", "CE", "NC", "CN", "SC", "CS"]
-    )
+    assert sorted(normal) == sorted(f"{a}{b}_0" for a, b in ["WC", "CW", "EC", "CE", "NC", "CN", "SC", "CS"])
     internal = np.flatnonzero(m.lane_internal)
     assert len(internal) >= 12  # right, straight and left from each of 4 approaches
     assert all(m.lane_ids[i].startswith(":") for i in internal)
@@ -153,9 +151,7 @@ def test_network_without_lanes_is_rejected(tmp_path: Path) -> None:
 
 
 def test_bad_shape_names_file_and_lane(tmp_path: Path, straight_net: Path) -> None:
-    text = straight_net.read_text().replace(
-        'shape="0.00,1.75 200.00,1.75"', 'shape="0.00,1.75 200.00;1.75"'
-    )
+    text = straight_net.read_text().replace('shape="0.00,1.75 200.00,1.75"', 'shape="0.00,1.75 200.00;1.75"')
     assert "200.00;1.75" in text
     path = tmp_path / "bad_shape.net.xml"
     path.write_text(text)

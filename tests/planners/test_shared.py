@@ -40,8 +40,23 @@ def test_odometry_dead_reckons_a_quarter_circle():
 
 def test_collision_forecast_corner_in_box_and_forecast_steps():
     def hit(x, y, heading=0.0, speed=0.0, ego_speed=0.0, steps=5, l_front=5.0):
-        return bool(collision_forecast(ego_speed, 4.6, 1.9, np.array([[x, y]]), np.array([heading]),
-                                       np.array([speed]), np.array([4.6]), np.array([1.9]), l_front, 1.25, 1.25, steps)[0])
+        return bool(
+            collision_forecast(
+                ego_speed,
+                4.6,
+                1.9,
+                np.array([[x, y]]),
+                np.array([heading]),
+                np.array([speed]),
+                np.array([4.6]),
+                np.array([1.9]),
+                l_front,
+                1.25,
+                1.25,
+                steps,
+            )[0]
+        )
+
     assert hit(9.0, 0.0)  # rear bumper 6.7 m ahead: inside 2.3 + 5 m
     assert not hit(10.0, 0.0)  # rear bumper at 7.7 m: beyond the box
     assert hit(10.0, 0.0, ego_speed=10.0)  # the ego closes 5 m in 0.5 s
@@ -99,12 +114,14 @@ def test_path_projection_extension_and_reference():
 
 def test_tracker_keeps_ids_through_occlusion():
     tracker = NeighbourTracker()
+
     def obs(xs, present):
         nb = np.zeros((3, 9))
         nb[:, 0], nb[:, 1], nb[:, 2] = xs, [0.0, 3.2, -3.2], 1.0
         nb[:, 4] = [-2.0, 1.0, 0.0]  # relative vx with the ego at 10 m/s: 8, 11, 10 m/s
         nb[:, 6:8] = [4.6, 1.9]
         return nb, np.array(present, dtype=float)
+
     odo = Odometry()
     first = None
     xs = np.array([20.0, 5.0, -10.0])

@@ -244,10 +244,14 @@ def waymo_scenario(scenario_id: str = WAYMO_ID):
             f.lane.polyline.add(x=float(x), y=y, z=0.0)
         f.lane.exit_lanes.extend(exits)
         if feature_id % 2:  # the right lanes know both boundaries, the left lanes only the right one
-            f.lane.right_boundaries.add(lane_start_index=0, lane_end_index=10, boundary_feature_id=3001, boundary_type=0)
+            f.lane.right_boundaries.add(
+                lane_start_index=0, lane_end_index=10, boundary_feature_id=3001, boundary_type=0
+            )
             f.lane.left_boundaries.add(lane_start_index=0, lane_end_index=10, boundary_feature_id=3002, boundary_type=1)
         else:
-            f.lane.right_boundaries.add(lane_start_index=0, lane_end_index=10, boundary_feature_id=3002, boundary_type=1)
+            f.lane.right_boundaries.add(
+                lane_start_index=0, lane_end_index=10, boundary_feature_id=3002, boundary_type=1
+            )
         for side, other in ((f.lane.left_neighbors, left), (f.lane.right_neighbors, right)):
             if other is not None:
                 side.add(feature_id=other, self_start_index=0, self_end_index=10, neighbor_start_index=0,
@@ -298,7 +302,10 @@ def waymo_junction(scenario_id: str = JUNCTION_ID, jitter: bool = True, pedestri
             x, y = xy_at(k)
             x1, y1 = xy_at(min(k + 1, 90))
             x0, y0 = xy_at(max(k - 1, 0))
-            vx, vy = (x1 - x0) / (0.1 * (min(k + 1, 90) - max(k - 1, 0))), (y1 - y0) / (0.1 * (min(k + 1, 90) - max(k - 1, 0)))
+            vx, vy = (
+                (x1 - x0) / (0.1 * (min(k + 1, 90) - max(k - 1, 0))),
+                (y1 - y0) / (0.1 * (min(k + 1, 90) - max(k - 1, 0))),
+            )
             h = float(np.arctan2(vy, vx)) if np.hypot(vx, vy) > 0.1 else heading
             t.states.add(center_x=x, center_y=y, center_z=0.5, length=length + 0.02 * (k % 3), width=width,
                          height=1.6, heading=h, velocity_x=vx, velocity_y=vy, valid=bool(valid(k)))  # fmt: skip

@@ -25,7 +25,9 @@ def scenario(tmp_path: Path, replay: dict, agents: list | None = None, **extra) 
         "episode_steps": 200,
         "replay": {"format": "ngsim", "path": "traj.csv", **ALIGN, **replay},
         "agents": agents
-        or [{"id": "ego", "mission": {"start": {"road": "main", "lane": 1, "offset": 250.0}, "goal": {"endless": True}}}],
+        or [
+            {"id": "ego", "mission": {"start": {"road": "main", "lane": 1, "offset": 250.0}, "goal": {"endless": True}}}
+        ],
         **extra,
     }
     path = tmp_path / "scenario.yaml"
@@ -77,7 +79,9 @@ def test_coordinate_options(csv_file):
     assert swapped.track(0)[0, :3] == pytest.approx([local_y - 2.25, local_x, 0.0], abs=0.01)
     moved = read_recording("ngsim", csv_file, **ALIGN, offset=(5.0, -2.0))
     assert moved.track(0)[0, :2] == pytest.approx([20.0 + 5.0, LANE0_Y - 2.0], abs=0.01)
-    glob = read_recording("ngsim", csv_file, coordinates="global", **ALIGN, offset=(-GLOBAL_SHIFT[1] * FEET, GLOBAL_SHIFT[0] * FEET))
+    glob = read_recording(
+        "ngsim", csv_file, coordinates="global", **ALIGN, offset=(-GLOBAL_SHIFT[1] * FEET, GLOBAL_SHIFT[0] * FEET)
+    )
     assert glob.track(0)[0, :2] == pytest.approx([20.0, LANE0_Y], abs=0.01)
 
 
@@ -90,7 +94,10 @@ def test_noisy_positions_give_smooth_heading_and_speed(tmp_path):
     track = rec.track(0)
     raw_heading = np.arctan2(np.diff(v["y"]), np.diff(v["x"]))
     assert np.abs(track[5:-5, 2]).max() < 0.5 * np.abs(raw_heading).max()
-    assert np.abs(track[5:-5, 3] - 15.0).max() < 0.5 * np.abs(np.hypot(np.diff(v["x"]), np.diff(v["y"])) / 0.1 - 15.0).max()
+    assert (
+        np.abs(track[5:-5, 3] - 15.0).max()
+        < 0.5 * np.abs(np.hypot(np.diff(v["x"]), np.diff(v["y"])) / 0.1 - 15.0).max()
+    )
 
 
 def test_missing_columns_name_the_file_and_columns(tmp_path):
@@ -115,7 +122,9 @@ def test_bad_values_name_the_file_and_column(tmp_path):
     path.write_text("\n".join(lines) + "\n")
     with pytest.raises(ReplayError) as err:
         read_recording("ngsim", path)
-    assert str(path) in str(err.value) and "column Local_X: expected a number, got 'abc' in data row 3" in str(err.value)
+    assert str(path) in str(err.value) and "column Local_X: expected a number, got 'abc' in data row 3" in str(
+        err.value
+    )
     with pytest.raises(ReplayError, match="does not exist"):
         read_recording("ngsim", tmp_path / "nothing.csv")
 
@@ -197,7 +206,9 @@ def test_replay_is_deterministic_across_resets(tmp_path, csv_file):
 
 
 def test_an_agent_collides_with_a_replayed_vehicle(tmp_path, csv_file):
-    agents = [{"id": "ego", "mission": {"start": {"road": "main", "lane": 0, "offset": 60.0}, "goal": {"endless": True}}}]
+    agents = [
+        {"id": "ego", "mission": {"start": {"road": "main", "lane": 0, "offset": 60.0}, "goal": {"endless": True}}}
+    ]
     sim = build_simulation(load_scenario(scenario(tmp_path, {}, agents=agents)))
     sim.reset()
     from smarts.core.events import Event
@@ -272,7 +283,9 @@ def test_scenario_file_checks_of_the_replay_section(tmp_path, csv_file):
 # ---------------------------------------------------------------------------- reactive hand-over
 def test_reactive_vehicle_switches_to_traffic_keeping_its_state(tmp_path, csv_file):
     # the agent stands in lane 0 at 60 m; vehicle 1 comes up behind it in the same lane
-    agents = [{"id": "ego", "mission": {"start": {"road": "main", "lane": 0, "offset": 60.0}, "goal": {"endless": True}}}]
+    agents = [
+        {"id": "ego", "mission": {"start": {"road": "main", "lane": 0, "offset": 60.0}, "goal": {"endless": True}}}
+    ]
     path = scenario(tmp_path, {"reactive": "interaction", "reactive_distance": 15.0}, agents=agents)
     sim = build_simulation(load_scenario(path))
     replay = sim.providers[1]
@@ -339,7 +352,9 @@ def test_always_reactive_hands_every_vehicle_over_as_it_enters(tmp_path, csv_fil
 def test_replayed_vehicles_are_neighbours_in_the_agents_observation(tmp_path, csv_file):
     from smarts.env import DrivingParallelEnv
 
-    agents = [{"id": "ego", "mission": {"start": {"road": "main", "lane": 1, "offset": 40.0}, "goal": {"endless": True}}}]
+    agents = [
+        {"id": "ego", "mission": {"start": {"road": "main", "lane": 1, "offset": 40.0}, "goal": {"endless": True}}}
+    ]
     env = DrivingParallelEnv(str(scenario(tmp_path, {"vehicles": ["1"]}, agents=agents)))
     try:
         obs, _ = env.reset(seed=0)
@@ -369,7 +384,9 @@ def test_scenario_validate_checks_the_replay_section(tmp_path, csv_file):
 
 
 def test_reactive_vehicles_go_to_sumo_when_sumo_drives_the_traffic(tmp_path, csv_file):
-    agents = [{"id": "ego", "mission": {"start": {"road": "main", "lane": 0, "offset": 60.0}, "goal": {"endless": True}}}]
+    agents = [
+        {"id": "ego", "mission": {"start": {"road": "main", "lane": 0, "offset": 60.0}, "goal": {"endless": True}}}
+    ]
     path = scenario(tmp_path, {"reactive": "interaction", "reactive_distance": 15.0}, agents=agents,
                     traffic={"engine": "sumo"})  # fmt: skip
     sim = build_simulation(load_scenario(path))

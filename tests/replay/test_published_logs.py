@@ -291,7 +291,9 @@ def test_a_pedestrian_cannot_be_taken_over(tmp_path):
 # ---------------------------------------------------------------------------- marks on the map
 def test_crosswalks_bike_lanes_and_speed_bumps_are_in_the_road_map(tmp_path):
     m = compile_lane_map(read_recording("waymo", write_waymo(tmp_path / "j.tfrecord", [waymo_junction()])).road_map)
-    assert len(m.marks(MARK_CROSSWALK)) == 1 and len(m.marks(MARK_BIKE_LANE)) == 1 and len(m.marks(MARK_SPEED_BUMP)) == 1
+    assert (
+        len(m.marks(MARK_CROSSWALK)) == 1 and len(m.marks(MARK_BIKE_LANE)) == 1 and len(m.marks(MARK_SPEED_BUMP)) == 1
+    )
     cross = m.marks(MARK_CROSSWALK)[0]
     assert cross[:, 0].min() == 238.0 and cross[:, 0].max() == 242.0
     assert "501" not in m.lane_index_of  # the bike lane is a mark, not a lane cars drive
@@ -299,7 +301,9 @@ def test_crosswalks_bike_lanes_and_speed_bumps_are_in_the_road_map(tmp_path):
     again = RoadMap.load(tmp_path / "map.npz")
     np.testing.assert_array_equal(again.mark_points, m.mark_points)
     assert again.mark_kind.tolist() == m.mark_kind.tolist()
-    rec = read_recording("argoverse2", write_av2(tmp_path / "scn", map_data=av2_map_with_crossings(drivable_as_list=True)))
+    rec = read_recording(
+        "argoverse2", write_av2(tmp_path / "scn", map_data=av2_map_with_crossings(drivable_as_list=True))
+    )
     av2 = compile_lane_map(rec.road_map)
     assert len(av2.marks(MARK_CROSSWALK)) == 1 and len(av2.marks(MARK_BIKE_LANE)) == 1
     assert "901" not in av2.lane_index_of and len(av2.junction_shapes) == 1  # the drivable area, given as a list

@@ -45,7 +45,7 @@ def test_show_draws_the_vehicles_where_they_are(tmp_path, capsys):
     assert main(args) == 0
     image = np.asarray(Image.open(out).convert("RGB")).astype(int)
     # the canvas spans the map (x -1.6 .. 301.6 m) with 5 m margins in 620 pixels
-    blue = (np.abs(image - [80, 170, 255]).sum(axis=2) < 30)
+    blue = np.abs(image - [80, 170, 255]).sum(axis=2) < 30
     cols = np.flatnonzero(blue.any(axis=0))
     xs = cols / (620 / 313.2) - 6.6
     # at 3.5 s: vehicle 1 at 55 m, vehicle 2 (12 m truck) at 40 m, vehicle 3 at 104 m
@@ -89,7 +89,10 @@ def test_show_draws_edges_crosswalks_pedestrians_and_signal_states(tmp_path):
     images = {}
     for t in ("3.0", "6.0"):  # 201's signal is red at 3 s, green at 6 s
         out = tmp_path / f"j{t}.png"
-        assert main(["replay", "show", str(tf), "--format", "waymo", "--time", t, "--width", "1600", "--out", str(out)]) == 0
+        assert (
+            main(["replay", "show", str(tf), "--format", "waymo", "--time", t, "--width", "1600", "--out", str(out)])
+            == 0
+        )
         images[t] = np.asarray(Image.open(out).convert("RGB")).astype(int)
     image = images["3.0"]
     # the map spans x -5 .. 335 m in 1600 pixels (the north road makes it tall)
@@ -135,7 +138,10 @@ def test_show_follows_the_ego_in_videos_with_a_hud_and_a_legend(tmp_path, capsys
 
     path = write_waymo(tmp_path / "j.tfrecord", [waymo_junction()])
     out = tmp_path / "v.gif"
-    assert main(["replay", "show", str(path), "--format", "waymo", "--out", str(out), "--duration", "2", "--fps", "5"]) == 0
+    assert (
+        main(["replay", "show", str(path), "--format", "waymo", "--out", str(out), "--duration", "2", "--fps", "5"])
+        == 0
+    )
     gif = Image.open(out)
     assert gif.size == (800, 560) and gif.n_frames == 11  # 800 x 500 of road at 6 px/m, HUD and legend bands
     top, view = 36, (800, 500)
@@ -150,5 +156,8 @@ def test_show_follows_the_ego_in_videos_with_a_hud_and_a_legend(tmp_path, capsys
                  "--follow", "none"]) == 0  # fmt: skip
     assert Image.open(tmp_path / "w.gif").size != (800, 560)
     capsys.readouterr()
-    assert main(["replay", "show", str(path), "--format", "waymo", "--out", str(tmp_path / "x.gif"), "--follow", "99"]) == 2
+    assert (
+        main(["replay", "show", str(path), "--format", "waymo", "--out", str(tmp_path / "x.gif"), "--follow", "99"])
+        == 2
+    )
     assert "--follow 99: no road user of that id in the recording (ego: 1)" in capsys.readouterr().err

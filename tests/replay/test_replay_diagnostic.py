@@ -12,7 +12,20 @@ from smarts.diagnostic.replay_step import replay_step_benchmark
 
 def test_diagnostic_writes_replay_cases(tmp_path, capsys):
     out = tmp_path / "diag.json"
-    args = ["--agents", "1", "--traffic", "none", "--sensors", "none", "--replay", "0,3,12+", "--steps", "5", "--warmup", "1"]
+    args = [
+        "--agents",
+        "1",
+        "--traffic",
+        "none",
+        "--sensors",
+        "none",
+        "--replay",
+        "0,3,12+",
+        "--steps",
+        "5",
+        "--warmup",
+        "1",
+    ]
     assert main([*args, "--out", str(out)]) == 0
     rows = json.loads(out.read_text())["replay_cases"]
     assert [(r["n_vehicles"], r["take_over"]) for r in rows] == [(0, False), (3, False), (12, True)]

@@ -29,7 +29,9 @@ def test_a_folder_of_waymo_files_becomes_a_suite_that_the_benchmark_runs(tmp_pat
     write_waymo(logs / "training.tfrecord-00001-of-00002", [waymo_junction("third", jitter=False)])
     (logs / "notes.txt").write_text("not a recording")  # other files are not read
     out = tmp_path / "suites" / "womd.yaml"
-    assert main(["replay", "suite", str(logs), "--format", "waymo", "--out", str(out), "--reactive", "interaction"]) == 0
+    assert (
+        main(["replay", "suite", str(logs), "--format", "waymo", "--out", str(out), "--reactive", "interaction"]) == 0
+    )
     assert "wrote" in capsys.readouterr().out
     data = yaml.safe_load(out.read_text())
     assert data["task"] == "collaborative" and data["name"] == "womd"

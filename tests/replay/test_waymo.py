@@ -82,8 +82,12 @@ def test_truncated_and_corrupted_records_name_file_and_record(tmp_path):
     cut.write_bytes(data[: second + 100])
     with pytest.raises(ReplayError) as err:
         list(read_records(cut))
-    assert str(cut) in str(err.value) and f"record 1 at byte {second}: truncated (the header claims {first_len} " \
-        "data bytes and a 4-byte checksum; 88 bytes follow it)" in str(err.value)
+    assert (
+        str(cut) in str(err.value)
+        and f"record 1 at byte {second}: truncated (the header claims {first_len} "
+        "data bytes and a 4-byte checksum; 88 bytes follow it)"
+        in str(err.value)
+    )
     bad = bytearray(data)
     bad[40] ^= 0xFF
     (tmp_path / "bad.tfrecord").write_bytes(bytes(bad))

@@ -28,9 +28,7 @@ def built_maps(map_cache_dir: Path) -> dict[str, Path]:
 
 @pytest.fixture(scope="session")
 def sumo_nets(built_maps: dict[str, Path]) -> dict[str, sumolib.net.Net]:
-    return {
-        name: sumolib.net.readNet(str(path), withInternal=True) for name, path in built_maps.items()
-    }
+    return {name: sumolib.net.readNet(str(path), withInternal=True) for name, path in built_maps.items()}
 
 
 def _lane_table_map(path: Path, net: sumolib.net.Net) -> RoadMap:

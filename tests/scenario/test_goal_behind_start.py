@@ -64,7 +64,9 @@ def test_validate_and_the_env_refuse_a_goal_behind_the_start_naming_the_agent(tm
 def test_a_goal_ahead_on_the_same_road_is_reached_by_driving_not_at_once(tmp_path):
     from smarts.env import DrivingParallelEnv
 
-    file = scenario(tmp_path, {"start": {"road": "main", "offset": 50, "speed": 10}, "goal": {"road": "main", "offset": 60}})
+    file = scenario(
+        tmp_path, {"start": {"road": "main", "offset": 50, "speed": 10}, "goal": {"road": "main", "offset": 60}}
+    )
     assert validate_scenario(file).valid
     env = DrivingParallelEnv(str(file))
     env.reset(seed=0)
@@ -123,7 +125,9 @@ def test_on_a_ring_a_position_behind_the_start_is_reached_round_the_ring_and_not
 
 def test_on_a_ring_a_road_goal_behind_the_start_is_still_refused(tmp_path, ring):
     """Even where a route could come back, the goal test would count the vehicle as arrived at once."""
-    file = scenario(tmp_path, {"start": {"road": "AB", "offset": 50}, "goal": {"road": "AB", "offset": 10}}, map_=str(ring))
+    file = scenario(
+        tmp_path, {"start": {"road": "AB", "offset": 50}, "goal": {"road": "AB", "offset": 10}}, map_=str(ring)
+    )
     result = validate_scenario(file)
     assert len(result.problems) == 1
     assert result.problems[0].startswith(f"{file}: agents[0].mission.goal: offset 10 on road 'AB' {BEHIND}")

@@ -16,8 +16,6 @@ CROSS = {
 }
 
 
-
-
 BOUNDS = [
     # (field, value, expected message after "inline: <field>: ")
     ("agents__0__mission__start__speed", 1e30, "input should be less than or equal to 70, got 1e+30"),
@@ -32,7 +30,11 @@ BOUNDS = [
     ("vehicle_capacity", 10**9, "input should be less than or equal to 100000, got 1000000000"),
     ("traffic__flows__0__rate", 1e9, "input should be less than or equal to 10000, got 1000000000.0"),
     ("traffic__flows__0__end", 1e300, "input should be less than or equal to 10000000, got 1e+300"),
-    ("traffic__flows__0__depart_speed", 200.0, "expected one of max, desired, random or a speed in m/s from 0 to 70, got 200.0"),
+    (
+        "traffic__flows__0__depart_speed",
+        200.0,
+        "expected one of max, desired, random or a speed in m/s from 0 to 70, got 200.0",
+    ),
     ("traffic__flows__0__depart_speed", 56.0, "expected at most vehicle type 'car''s max_speed (55 m/s), got 56"),
     ("traffic__trips__0__depart", 1e12, "input should be less than or equal to 10000000, got 1000000000000.0"),
     ("traffic__vehicle_types__fast__max_speed", 100.0, "input should be less than or equal to 70, got 100.0"),
@@ -53,7 +55,10 @@ def test_physical_fields_are_bounded_naming_the_field(dotted, value, expected):
     ScenarioSpec.from_dict(data, source="inline")  # valid as it is
     with pytest.raises(ScenarioError) as info:
         ScenarioSpec.from_dict(with_(data, **{dotted: value}), source="inline")
-    assert str(info.value) == f"inline: {dotted.replace('__', '.').replace('.0.', '[0].').replace('.0', '[0]')}: {expected}"
+    assert (
+        str(info.value)
+        == f"inline: {dotted.replace('__', '.').replace('.0.', '[0].').replace('.0', '[0]')}: {expected}"
+    )
 
 
 def test_the_bounds_are_at_their_documented_values():
@@ -62,6 +67,8 @@ def test_the_bounds_are_at_their_documented_values():
 
     assert (reader.MAX_SPEED, reader.MAX_FLOW_RATE, reader.MAX_EPISODE_STEPS) == (70.0, 10_000.0, 10_000_000)
     assert reader.SEED_MAX == SEED_MAX == 2**64 - 1
-    edge = with_(CROSS, seed=2**64 - 1, episode_steps=10_000_000, step_length=1.0, agents__0__mission__start__speed=70.0)
+    edge = with_(
+        CROSS, seed=2**64 - 1, episode_steps=10_000_000, step_length=1.0, agents__0__mission__start__speed=70.0
+    )
     spec = ScenarioSpec.from_dict(edge)
     assert (spec.seed, spec.episode_steps, spec.agents[0].mission.start.speed) == (2**64 - 1, 10_000_000, 70.0)

@@ -141,17 +141,13 @@ def test_highway_merge_exit_topology(sumo_nets):
 
 def test_highway_6lane_ramp_dimensions(sumo_nets):
     net = sumo_nets["highway_6lane_ramp"]
-    assert net.getNode("end").getCoord()[0] - net.getNode("start").getCoord()[0] == pytest.approx(
-        455.0
-    )
+    assert net.getNode("end").getCoord()[0] - net.getNode("start").getCoord()[0] == pytest.approx(455.0)
     assert net.getEdge("ramp").getLength() == pytest.approx(135.0, abs=5.0)
     assert [c.getToLane().getID() for c in net.getLane("ramp_0").getOutgoing()] == ["main_1_0"]
     path, _ = net.getShortestPath(net.getEdge("main_0"), net.getEdge("main_2"))
     assert [e.getID() for e in path] == ["main_0", "main_1", "main_2"]
     for i in range(6):  # every through lane continues beside the acceleration lane
-        assert [c.getToLane().getID() for c in net.getLane(f"main_0_{i}").getOutgoing()] == [
-            f"main_1_{i + 1}"
-        ]
+        assert [c.getToLane().getID() for c in net.getLane(f"main_0_{i}").getOutgoing()] == [f"main_1_{i + 1}"]
 
 
 def test_node_coordinates_are_kept(built_maps):
@@ -257,8 +253,6 @@ def test_truncated_netconvert_output_in_the_cache_is_rebuilt(tmp_path, built_map
     rebuilt = [r for r in caplog.records if "rebuilding the cached built-in map" in r.getMessage()]
     assert len(rebuilt) == 1 and "does not match its recorded SHA-256" in rebuilt[0].getMessage()
     assert os.listdir(cache_root(tmp_path)) == [net.parent.name]
-
-
 
 
 @pytest.mark.parametrize("damage", ["manifest removed", "input removed", "entry is a file"])

@@ -31,8 +31,7 @@ def test_scenario_show_prints_the_validated_spec_as_yaml(capsys):
 def test_scenario_show_accepts_a_file(tmp_path, capsys):
     path = tmp_path / "solo.yaml"
     path.write_text(
-        "map: builtin:straight_3lane\n"
-        "agents:\n  - mission: {start: {road: main, lane: 2}, goal: {endless: true}}\n",
+        "map: builtin:straight_3lane\nagents:\n  - mission: {start: {road: main, lane: 2}, goal: {endless: true}}\n",
         encoding="utf-8",
     )
     assert main(["scenario", "show", str(path)]) == 0
@@ -77,9 +76,7 @@ def test_python_dash_m_smarts_runs(library_maps_available):
     assert "highway_merge" in result.stdout
 
 
-def test_scenario_show_build_counts_roads_and_checks_missions(
-    capsys, monkeypatch, map_cache_dir, built_maps
-):
+def test_scenario_show_build_counts_roads_and_checks_missions(capsys, monkeypatch, map_cache_dir, built_maps):
     """``show --build`` compiles the map with the real map compiler."""
     monkeypatch.setenv("SMARTS_CACHE_DIR", str(map_cache_dir))
     assert main(["scenario", "show", "t_junction_left", "--build"]) == 0

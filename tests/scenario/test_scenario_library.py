@@ -69,12 +69,8 @@ def test_library_missions_are_routable(name, sumo_nets, library_scenario):
         start_road = start.road if start.take_over is None else trips[start.take_over].roads[0]
         waypoints = [start_road, *mission.route_via]
         for a, b in zip(waypoints[:-1], waypoints[1:], strict=True):
-            assert net.getShortestPath(net.getEdge(a), net.getEdge(b))[0], (
-                f"{name}/{agent.id}: {a}->{b}"
-            )
-        reachable = [
-            net.getShortestPath(net.getEdge(waypoints[-1]), net.getEdge(e))[0] for e in goal_edges
-        ]
+            assert net.getShortestPath(net.getEdge(a), net.getEdge(b))[0], f"{name}/{agent.id}: {a}->{b}"
+        reachable = [net.getShortestPath(net.getEdge(waypoints[-1]), net.getEdge(e))[0] for e in goal_edges]
         assert any(reachable), f"{name}/{agent.id}: goal not reachable"
 
 
@@ -84,9 +80,7 @@ def test_intersection_left_turn_crosses_the_oncoming_agent(sumo_nets):
     turner, straight = spec.agents
     direction = {
         c.getTo().getID(): c.getDirection()
-        for c in net.getEdge(turner.mission.start.road).getConnections(
-            net.getEdge(turner.mission.goal.road)
-        )
+        for c in net.getEdge(turner.mission.start.road).getConnections(net.getEdge(turner.mission.goal.road))
     }
     assert direction == {turner.mission.goal.road: "l"}
     assert (straight.mission.start.road, straight.mission.goal.road) == ("east_in", "west_out")
@@ -101,8 +95,7 @@ def test_position_goals_sit_on_the_intended_lane_centre(sumo_nets):
         spec = load_scenario(name)
         goal = spec.agents[0].mission.goal
         near = {
-            lane.getID(): dist
-            for lane, dist in sumo_nets[spec.builtin_map].getNeighboringLanes(*goal.position, r=1.0)
+            lane.getID(): dist for lane, dist in sumo_nets[spec.builtin_map].getNeighboringLanes(*goal.position, r=1.0)
         }
         assert near[lane_id] < 0.05, (name, near)
 

@@ -80,15 +80,11 @@ def test_dict_and_yaml_round_trip(tmp_path):
     data["events"] = {"terminate_on": ["collision", "wrong_way"], "not_moving_distance": 0.5}
     data["agents"][0]["mission"]["start"]["heading"] = 0.25
     data["agents"][0]["mission"]["goal"] = {"road": "north_out", "lane": 1, "offset": 12.5}
-    data["agents"].append(
-        {"id": "cruiser", "mission": {"start": {"road": "south_in"}, "goal": {"endless": True}}}
-    )
+    data["agents"].append({"id": "cruiser", "mission": {"start": {"road": "south_in"}, "goal": {"endless": True}}})
     spec = ScenarioSpec.from_yaml(write_yaml(tmp_path, data))
     assert ScenarioSpec.from_dict(spec.to_dict()) == spec
     assert ScenarioSpec.from_dict(yaml.safe_load(spec.to_yaml())) == spec
-    again = ScenarioSpec.from_yaml(
-        write_yaml(tmp_path, yaml.safe_load(spec.to_yaml()), "again.yaml")
-    )
+    again = ScenarioSpec.from_yaml(write_yaml(tmp_path, yaml.safe_load(spec.to_yaml()), "again.yaml"))
     assert again == spec and again.to_dict() == spec.to_dict()
     assert spec.to_dict()["agents"][2]["mission"]["goal"] == {"endless": True}
 
@@ -193,9 +189,7 @@ BAD_SPECS = [
 ]
 
 
-@pytest.mark.parametrize(
-    "dotted,value,path,fragment", BAD_SPECS, ids=[f"{b[0]}={b[1]!r}" for b in BAD_SPECS]
-)
+@pytest.mark.parametrize("dotted,value,path,fragment", BAD_SPECS, ids=[f"{b[0]}={b[1]!r}" for b in BAD_SPECS])
 def test_bad_spec_names_file_and_field(tmp_path, dotted, value, path, fragment):
     file = write_yaml(tmp_path, _set(BASE, dotted, value))
     with pytest.raises(ScenarioError) as info:
@@ -230,13 +224,13 @@ def test_invalid_yaml_and_missing_file_name_the_file(tmp_path):
         ScenarioSpec.from_yaml(tmp_path / "absent.yaml")
     scalar = tmp_path / "scalar.yaml"
     scalar.write_text("42\n", encoding="utf-8")
-    with pytest.raises(
-        ScenarioError, match=r"scalar\.yaml: expected a mapping at the top level, got int"
-    ):
+    with pytest.raises(ScenarioError, match=r"scalar\.yaml: expected a mapping at the top level, got int"):
         ScenarioSpec.from_yaml(scalar)
     binary = tmp_path / "binary.yaml"
     binary.write_bytes(b"name: \xff\n")
-    with pytest.raises(ScenarioError, match=r"binary\.yaml: not a YAML text file \(not UTF-8: byte 0xff at offset 6\)$"):
+    with pytest.raises(
+        ScenarioError, match=r"binary\.yaml: not a YAML text file \(not UTF-8: byte 0xff at offset 6\)$"
+    ):
         ScenarioSpec.from_yaml(binary)
     empty = tmp_path / "empty.yaml"
     empty.write_text("", encoding="utf-8")
@@ -311,8 +305,7 @@ MAP_ERRORS = [
     (
         "agents[1].mission.route_via",
         ["nowhere"],
-        "agents[1].mission.route_via[0]: map 'intersection_4way_2lane.net.xml' "
-        "has no road 'nowhere'",
+        "agents[1].mission.route_via[0]: map 'intersection_4way_2lane.net.xml' has no road 'nowhere'",
     ),
     (
         "agents[1].mission.goal.position",
@@ -334,14 +327,10 @@ def test_check_map_with_the_map_compiler(built_maps, map_cache_dir):
     """The spec checked against the map the real compiler builds."""
     from smarts import maps
 
-    road_map = maps.load_map(
-        built_maps["intersection_4way_2lane"], cache_dir=map_cache_dir / "maps"
-    )
+    road_map = maps.load_map(built_maps["intersection_4way_2lane"], cache_dir=map_cache_dir / "maps")
     spec = ScenarioSpec.from_dict(BASE, source="intersection.yaml")
     spec.check_map(road_map)
-    with pytest.raises(
-        ScenarioError, match=r"agents\[0\]\.mission\.start\.lane: road 'west_in' has 2 lanes"
-    ):
+    with pytest.raises(ScenarioError, match=r"agents\[0\]\.mission\.start\.lane: road 'west_in' has 2 lanes"):
         ScenarioSpec.from_dict(_set(BASE, "agents[0].mission.start.lane", 3)).check_map(road_map)
 
 
@@ -370,13 +359,18 @@ def test_every_problem_is_reported_at_once_each_with_file_and_field(tmp_path):
         ("agents[0].mission.goal.raod", "agents[0].mission.goal.raod: unknown field; did you mean 'road'?"),
         ("agents[1].mission.start.ofset", "agents[1].mission.start.ofset: unknown field; did you mean 'offset'?"),
         ("agents[0].interface.lidar.rayz", "agents[0].interface.lidar.rayz: unknown field; did you mean 'rays'?"),
-        ("traffic.vehicle_types.calm.max_sped", "traffic.vehicle_types.calm.max_sped: unknown field; did you mean 'max_speed'?"),
+        (
+            "traffic.vehicle_types.calm.max_sped",
+            "traffic.vehicle_types.calm.max_sped: unknown field; did you mean 'max_speed'?",
+        ),
         ("traffic.flows[0].vehicle_typ", "traffic.flows[0].vehicle_typ: unknown field; did you mean 'vehicle_type'?"),
         ("comms.latncy", "comms.latncy: unknown field; did you mean 'latency'?"),
     ],
 )
 def test_a_misspelt_key_at_a_nested_path_gets_a_did_you_mean(dotted, expected):
-    data = _set(BASE, "traffic", {"vehicle_types": {"calm": {}}, "flows": [{"id": "f", "route": ["west_in"], "rate": 60}]})
+    data = _set(
+        BASE, "traffic", {"vehicle_types": {"calm": {}}, "flows": [{"id": "f", "route": ["west_in"], "rate": 60}]}
+    )
     data = _set(data, "agents[0].interface", {"lidar": {}})
     data = _set(data, "comms", {})
     with pytest.raises(ScenarioError) as info:
@@ -388,7 +382,11 @@ def test_a_misspelt_key_at_a_nested_path_gets_a_did_you_mean(dotted, expected):
     "dotted,value,expected",
     [
         ("step_length", True, "step_length: input should be a valid number, got True"),
-        ("agents[0].mission.start.offset", False, "agents[0].mission.start.offset: input should be a valid number, got False"),
+        (
+            "agents[0].mission.start.offset",
+            False,
+            "agents[0].mission.start.offset: input should be a valid number, got False",
+        ),
         ("seed", True, "seed: input should be a valid integer, got True"),
         ("agents[0].mission.start.lane", "1", "agents[0].mission.start.lane: input should be a valid integer, got '1'"),
         ("reward.goal_bonus", "10", "reward.goal_bonus: input should be a valid number, got '10'"),

@@ -89,6 +89,7 @@ BASE = {
     },
 }
 
+
 class _Delete:
     """Marks a field to remove (its repr names it, so test ids are the same in every process)."""
 
@@ -379,10 +380,7 @@ MAP_ERRORS = [
     (
         "traffic.trips[0].depart_pos",
         150,
-        (
-            "traffic.trips[0].depart_pos: lane 1 of road 'west_in' is 99.6 m long, "
-            "got depart_pos 150"
-        ),
+        ("traffic.trips[0].depart_pos: lane 1 of road 'west_in' is 99.6 m long, got depart_pos 150"),
     ),
     (
         "traffic.flows[0].depart_pos",

@@ -24,7 +24,9 @@ ROOT = Path(__file__).resolve().parents[2]
 TWO_WAY = {
     "name": "two_way",
     "map": "builtin:straight_2lane_twoway",
-    "agents": [{"mission": {"start": {"road": "eastbound", "offset": 10}, "goal": {"road": "eastbound", "offset": 200}}}],
+    "agents": [
+        {"mission": {"start": {"road": "eastbound", "offset": 10}, "goal": {"road": "eastbound", "offset": 200}}}
+    ],
 }
 """A 300 m two-way road: 'eastbound' and 'westbound', one lane each, no way to turn around."""
 
@@ -46,8 +48,6 @@ def write(folder: Path, data, name: str = "scenario.yaml") -> Path:
     return path
 
 
-
-
 def validate_cli(capsys, *files) -> tuple[int, list[str], str]:
     code = main(["scenario", "validate", *map(str, files)])
     captured = capsys.readouterr()
@@ -67,14 +67,19 @@ def test_show_build_makes_the_same_checks(tmp_path, capsys):
     assert main(["scenario", "show", str(file), "--build"]) == 2  # as validate: one code for one kind of error
     captured = capsys.readouterr()
     assert "# roads: 2 (+0 inside junctions), lanes: 2" in captured.out
-    assert captured.err == f"error: {file}: agents[0].mission.goal: no route from road 'eastbound' lane 0 to road 'westbound'\n"
+    assert (
+        captured.err
+        == f"error: {file}: agents[0].mission.goal: no route from road 'eastbound' lane 0 to road 'westbound'\n"
+    )
 
 
 def test_a_valid_scenario_exits_0(tmp_path, capsys):
     file = write(tmp_path, TWO_WAY)
     code, out, _ = validate_cli(capsys, file)
     assert code == 0
-    assert out == [f"{file}: valid (1 agent; map builtin:straight_2lane_twoway: roads: 2 (+0 inside junctions), lanes: 2)"]
+    assert out == [
+        f"{file}: valid (1 agent; map builtin:straight_2lane_twoway: roads: 2 (+0 inside junctions), lanes: 2)"
+    ]
 
 
 def test_every_problem_of_every_file_is_reported(tmp_path, capsys):
@@ -115,14 +120,19 @@ def test_a_goal_position_no_route_reaches(tmp_path, capsys):
     file = write(tmp_path, with_(TWO_WAY, agents__0__mission__goal={"position": [150.0, 1.6]}))
     code, out, _ = validate_cli(capsys, file)
     assert code == 2 and len(out) == 1
-    assert out[0].startswith(f"{file}: agents[0].mission.goal: no route from road 'eastbound' lane 0 to the goal position (150, 1.6) on road 'westbound' lane 0"), out
+    assert out[0].startswith(
+        f"{file}: agents[0].mission.goal: no route from road 'eastbound' lane 0 to the goal position (150, 1.6) on road 'westbound' lane 0"
+    ), out
 
 
 def test_the_reach_limits_bound_only_the_spaces_that_obey_them():
     data = with_(
         {"name": "fast", "map": "builtin:highway_merge_exit", "agents": []},
         agents=[
-            {"action_space": space, "mission": {"start": {"road": "main_0", "offset": 10, "speed": 30}, "goal": {"endless": True}}}
+            {
+                "action_space": space,
+                "mission": {"start": {"road": "main_0", "offset": 10, "speed": 30}, "goal": {"endless": True}},
+            }
             for space in ACTION_SPACES
         ],
     )  # main_0 allows 25 m/s: 30 is within its limit times 1.5, above the pose spaces' 22.22
@@ -136,7 +146,9 @@ def test_the_simulation_refuses_what_validate_reports(tmp_path):
     from smarts.env.parallel_env import DrivingParallelEnv
 
     file = write(tmp_path, with_(TWO_WAY, agents__0__mission__goal={"road": "westbound"}))
-    with pytest.raises(ScenarioError, match=r"agents\[0\]\.mission\.goal: no route from road 'eastbound' lane 0 to road 'westbound'"):
+    with pytest.raises(
+        ScenarioError, match=r"agents\[0\]\.mission\.goal: no route from road 'eastbound' lane 0 to road 'westbound'"
+    ):
         DrivingParallelEnv(str(file))
 
 
@@ -165,7 +177,10 @@ def _bad_inputs(folder: Path) -> dict[str, tuple[Path, str]]:
         "no file": (folder / "absent.yaml", "cannot read scenario file"),
         "empty": (write(folder, "", "empty.yaml"), "map: required field missing"),
         "a list": (write(folder, "- 1\n", "list.yaml"), "expected a mapping at the top level"),
-        "unknown road": (write(folder, "map: builtin:straight_2lane\n" + agents, "road.yaml"), "agents[0].mission.start.road: "),
+        "unknown road": (
+            write(folder, "map: builtin:straight_2lane\n" + agents, "road.yaml"),
+            "agents[0].mission.start.road: ",
+        ),
     }
 
 
@@ -198,7 +213,10 @@ def test_a_huge_sumo_flow_rate_names_its_field_before_sumo_starts(tmp_path, caps
     data = with_(CROSS, traffic={"engine": "sumo", "flows": [{"id": "f", "route": ["west_in"], "rate": 1e9}]})
     file = write(tmp_path, data)
     code, out, _ = validate_cli(capsys, file)
-    assert (code, out) == (2, [f"{file}: traffic.flows[0].rate: input should be less than or equal to 10000, got 1000000000.0"])
+    assert (code, out) == (
+        2,
+        [f"{file}: traffic.flows[0].rate: input should be less than or equal to 10000, got 1000000000.0"],
+    )
 
 
 def test_a_depart_speed_far_above_the_lane_limit_names_its_field(tmp_path, capsys):

@@ -85,7 +85,10 @@ def test_every_sensor_adds_keys_or_trailing_columns():
         ({"lidar": {"range": -1}}, "agents[1].interface.lidar.range: input should be greater than 0"),
         ({"lidar": {"noise": -0.1}}, "agents[1].interface.lidar.noise: input should be greater than or equal to 0"),
         ({"lidar": {"rayz": 3}}, "agents[1].interface.lidar.rayz: unknown field; did you mean 'rays'?"),
-        ({"rasters": {"layers": ["drivable", "roads"]}}, "agents[1].interface.rasters.layers[1]: input should be 'drivable', 'lanes'"),
+        (
+            {"rasters": {"layers": ["drivable", "roads"]}},
+            "agents[1].interface.rasters.layers[1]: input should be 'drivable', 'lanes'",
+        ),
         ({"rasters": {"layers": ["route", "route"]}}, "agents[1].interface.rasters.layers[1]: 'route' is listed twice"),
         ({"rasters": {"layers": "route"}}, "agents[1].interface.rasters.layers: input should be a valid list"),
         ({"rasters": {"layers": []}}, "agents[1].interface.rasters: expected at least one layer or rgb: true"),
@@ -94,9 +97,18 @@ def test_every_sensor_adds_keys_or_trailing_columns():
         ({"rasters": {"rgb": "yes"}}, "agents[1].interface.rasters.rgb: input should be a valid boolean"),
         ({"occlusion": {"mode": "ghost"}}, "agents[1].interface.occlusion.mode: input should be 'hide' or 'flag'"),
         ({"occlusion": []}, "agents[1].interface.occlusion: input should be a valid dictionary"),
-        ({"neighbours": {"count": -2}}, "agents[1].interface.neighbours.count: input should be greater than or equal to 1"),
-        ({"neighbours": {"radius": True}}, "agents[1].interface.neighbours.radius: input should be a valid number, got True"),
-        ({"waypoints": {"spacing": 0}}, "agents[1].interface.waypoints.spacing: input should be greater than or equal to 1"),
+        (
+            {"neighbours": {"count": -2}},
+            "agents[1].interface.neighbours.count: input should be greater than or equal to 1",
+        ),
+        (
+            {"neighbours": {"radius": True}},
+            "agents[1].interface.neighbours.radius: input should be a valid number, got True",
+        ),
+        (
+            {"waypoints": {"spacing": 0}},
+            "agents[1].interface.waypoints.spacing: input should be greater than or equal to 1",
+        ),
         ({"signals": 1}, "agents[1].interface.signals: input should be a valid boolean, got 1"),
         ({"lidars": {}}, "agents[1].interface.lidars: unknown field; did you mean 'lidar'?"),
         ([1, 2], "agents[1].interface: input should be a valid dictionary"),

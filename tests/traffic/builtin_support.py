@@ -28,8 +28,7 @@ def traffic_sim(
     """(simulation, provider) after reset. A simulation starts with an agent: it stands on
     ``agent_road`` and, unless ``keep_agent``, leaves right after the reset. ``signals``: the
     traffic obeys the map's fixed-time signal programs."""
-    spec = make_spec([agent(agent_road, **agent_kw)], map_name=map_name, seed=seed,
-                     vehicle_capacity=capacity)
+    spec = make_spec([agent(agent_road, **agent_kw)], map_name=map_name, seed=seed, vehicle_capacity=capacity)
     sim = build_simulation(spec)
     state = getattr(sim, "signals", None)  # the assembly may already run the map's signals
     if signals and state is None:

@@ -44,8 +44,7 @@ def test_probability_flow_departs_at_random_but_at_its_mean_rate():
 
 
 def test_trip_departs_at_its_time_lane_position_and_speed():
-    trip = TripSpec("lead", route=["main"], depart=2.0, depart_lane=1, depart_pos=40.0,
-                    depart_speed=12.0)
+    trip = TripSpec("lead", route=["main"], depart=2.0, depart_lane=1, depart_pos=40.0, depart_speed=12.0)
     sim, provider = traffic_sim("straight_3lane", TrafficSpec(trips=[trip]), "main")
     step(sim, 19)
     assert "lead" not in sim.table.row_of
@@ -67,8 +66,9 @@ def test_a_trip_at_time_zero_exists_right_after_reset():
 def test_departure_waits_until_its_spot_is_clear():
     # A stopped agent stands on the spot: the trip cannot enter until it is gone.
     trip = TripSpec("blocked", route=["eastbound"], depart_pos=10.0)
-    sim, provider = traffic_sim("straight_2lane_twoway", TrafficSpec(trips=[trip]), "eastbound",
-                                keep_agent=True, offset=12.0, speed=0.0)
+    sim, provider = traffic_sim(
+        "straight_2lane_twoway", TrafficSpec(trips=[trip]), "eastbound", keep_agent=True, offset=12.0, speed=0.0
+    )
     step(sim, 10)
     assert "blocked" not in sim.table.row_of and provider.pending.sum() == 1
     sim.agent_done[:] = True

@@ -16,12 +16,12 @@ def _bumper_gap(sim, follower: str, leader: str) -> float:
 
 
 def test_follower_converges_to_the_leader_speed_at_a_safe_gap():
-    types = {"slow": VehicleTypeSpec("slow", max_speed=6.0, **STEADY),
-             "fast": VehicleTypeSpec("fast", **STEADY)}
-    trips = [TripSpec("leader", route=["eastbound"], depart_pos=60.0, vehicle_type="slow"),
-             TripSpec("follower", route=["eastbound"], vehicle_type="fast")]
-    sim, _ = traffic_sim("straight_2lane_twoway", TrafficSpec(vehicle_types=types, trips=trips),
-                         "westbound")
+    types = {"slow": VehicleTypeSpec("slow", max_speed=6.0, **STEADY), "fast": VehicleTypeSpec("fast", **STEADY)}
+    trips = [
+        TripSpec("leader", route=["eastbound"], depart_pos=60.0, vehicle_type="slow"),
+        TripSpec("follower", route=["eastbound"], vehicle_type="fast"),
+    ]
+    sim, _ = traffic_sim("straight_2lane_twoway", TrafficSpec(vehicle_types=types, trips=trips), "westbound")
     gaps = []
     for _ in range(300):
         step(sim)
@@ -37,8 +37,9 @@ def test_follower_converges_to_the_leader_speed_at_a_safe_gap():
 
 def test_traffic_stops_behind_an_agent_standing_on_its_lane():
     trip = TripSpec("car", route=["eastbound"], depart_speed=13.0)
-    sim, _ = traffic_sim("straight_2lane_twoway", TrafficSpec(trips=[trip]), "eastbound",
-                         keep_agent=True, offset=120.0, speed=0.0)
+    sim, _ = traffic_sim(
+        "straight_2lane_twoway", TrafficSpec(trips=[trip]), "eastbound", keep_agent=True, offset=120.0, speed=0.0
+    )
     agent_row = sim.agent_row[0]
     gaps = []
     for _ in range(250):
@@ -51,12 +52,12 @@ def test_traffic_stops_behind_an_agent_standing_on_its_lane():
 
 
 def test_faster_vehicle_changes_lane_to_pass_a_slow_one():
-    types = {"slow": VehicleTypeSpec("slow", max_speed=5.0, **STEADY),
-             "fast": VehicleTypeSpec("fast", **STEADY)}
-    trips = [TripSpec("slow", route=["main"], depart_pos=50.0, depart_lane=0, vehicle_type="slow"),
-             TripSpec("fast", route=["main"], depart_lane=0, vehicle_type="fast")]
-    sim, _ = traffic_sim("straight_2lane", TrafficSpec(vehicle_types=types, trips=trips), "main",
-                         lane=1, offset=295.0)
+    types = {"slow": VehicleTypeSpec("slow", max_speed=5.0, **STEADY), "fast": VehicleTypeSpec("fast", **STEADY)}
+    trips = [
+        TripSpec("slow", route=["main"], depart_pos=50.0, depart_lane=0, vehicle_type="slow"),
+        TripSpec("fast", route=["main"], depart_lane=0, vehicle_type="fast"),
+    ]
+    sim, _ = traffic_sim("straight_2lane", TrafficSpec(vehicle_types=types, trips=trips), "main", lane=1, offset=295.0)
     lanes, passed = set(), False
     for _ in range(250):
         step(sim)
@@ -83,8 +84,10 @@ def test_vehicles_bound_for_the_exit_change_lanes_to_reach_it():
 
 
 def test_ramp_vehicles_merge_onto_the_highway():
-    flows = [FlowSpec("main", route=["main_0", "main_4"], rate=1800, depart_lane="random"),
-             FlowSpec("ramp", route=["ramp", "main_4"], rate=600)]
+    flows = [
+        FlowSpec("main", route=["main_0", "main_4"], rate=1800, depart_lane="random"),
+        FlowSpec("ramp", route=["ramp", "main_4"], rate=600),
+    ]
     sim, provider = traffic_sim("highway_merge_exit", TrafficSpec(flows=flows), "exit")
     for _ in range(900):
         step(sim)

@@ -52,8 +52,7 @@ def test_an_off_lane_vehicle_cannot_be_taken_over():
 
 def test_released_vehicles_are_no_longer_driven():
     trip = TripSpec("car", route=["main"], depart_pos=20.0)
-    sim, provider = traffic_sim("straight_2lane", TrafficSpec(trips=[trip]), "main", lane=1,
-                                offset=290.0)
+    sim, provider = traffic_sim("straight_2lane", TrafficSpec(trips=[trip]), "main", lane=1, offset=290.0)
     row = sim.table.row_of["car"]
     step(sim, 5)
     provider.release(sim, np.array([row]))

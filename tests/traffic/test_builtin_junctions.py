@@ -18,8 +18,7 @@ SOUTH_TO_NORTH_LINK = 9  # intersection_4way_1lane_signal: red for 45 s from t =
 
 def test_red_light_stops_traffic_before_the_stop_line_and_green_releases_it():
     trip = TripSpec("car", route=["south_in", "north_out"], depart_pos=10.0)
-    sim, provider = traffic_sim("intersection_4way_1lane_signal", TrafficSpec(trips=[trip]),
-                                "west_in", signals=True)
+    sim, provider = traffic_sim("intersection_4way_1lane_signal", TrafficSpec(trips=[trip]), "west_in", signals=True)
     signals = provider.signals
     link = int(np.flatnonzero(signals.link == SOUTH_TO_NORTH_LINK)[0])
     south_in = sim.road_map.lane("south_in_0")
@@ -81,22 +80,21 @@ def _assert_no_overlap(sim, provider, steps):
 
 
 def test_merging_and_weaving_traffic_never_overlaps():
-    flows = [FlowSpec("through", route=["main_0", "main_4"], rate=2400, depart_lane="random"),
-             FlowSpec("leaving", origin="main_0", destination="exit", rate=600,
-                      depart_lane="random"),
-             FlowSpec("joining", route=["ramp", "main_4"], rate=900)]
-    sim, provider = traffic_sim("highway_merge_exit", TrafficSpec(flows=flows), "exit",
-                                capacity=300)
+    flows = [
+        FlowSpec("through", route=["main_0", "main_4"], rate=2400, depart_lane="random"),
+        FlowSpec("leaving", origin="main_0", destination="exit", rate=600, depart_lane="random"),
+        FlowSpec("joining", route=["ramp", "main_4"], rate=900),
+    ]
+    sim, provider = traffic_sim("highway_merge_exit", TrafficSpec(flows=flows), "exit", capacity=300)
     assert _assert_no_overlap(sim, provider, 1500) > 40
     joined = sum(1 for n in range(provider.count[2]) if f"joining.{n}" not in sim.table.row_of)
     assert joined > 20  # the ramp traffic got onto the highway and through
 
 
-@pytest.mark.parametrize(
-    "map_name", ["t_junction", "intersection_4way_1lane", "intersection_4way_2lane_signal"]
-)
+@pytest.mark.parametrize("map_name", ["t_junction", "intersection_4way_1lane", "intersection_4way_2lane_signal"])
 def test_dense_junction_traffic_never_overlaps(map_name):
-    sim, provider = traffic_sim(map_name, TrafficSpec(density="high"), "west_out",
-                                signals=map_name.endswith("signal"), capacity=300)
+    sim, provider = traffic_sim(
+        map_name, TrafficSpec(density="high"), "west_out", signals=map_name.endswith("signal"), capacity=300
+    )
     assert _assert_no_overlap(sim, provider, 1200) > 25
     assert provider.count.sum() - provider.mine.sum() > 30  # vehicles went through and left

@@ -7,22 +7,20 @@ from tests.traffic.builtin_support import step, traffic_rows, traffic_sim
 
 TRAFFIC = TrafficSpec(
     density="high",
-    flows=[FlowSpec("extra", route=["west_in", "north_out"], probability=0.2,
-                    depart_lane="random", depart_speed="random")],
+    flows=[
+        FlowSpec("extra", route=["west_in", "north_out"], probability=0.2, depart_lane="random", depart_speed="random")
+    ],
 )
 
 
 def _trajectories(seed: int, steps: int = 400) -> dict[str, list]:
-    sim, provider = traffic_sim("intersection_4way_2lane_signal", TRAFFIC, "west_out",
-                                signals=True, seed=seed)
+    sim, provider = traffic_sim("intersection_4way_2lane_signal", TRAFFIC, "west_out", signals=True, seed=seed)
     out: dict[str, list] = {}
     for _ in range(steps):
         step(sim)
         t = sim.table
         for row in traffic_rows(provider):
-            out.setdefault(t.ids[row], []).append(
-                (sim.step_count, t.x[row], t.y[row], t.heading[row], t.speed[row])
-            )
+            out.setdefault(t.ids[row], []).append((sim.step_count, t.x[row], t.y[row], t.heading[row], t.speed[row]))
     return out
 
 
@@ -35,9 +33,7 @@ def test_same_seed_gives_identical_traffic():
 
 def test_another_seed_gives_other_traffic():
     a, b = _trajectories(7), _trajectories(8)
-    assert a.keys() != b.keys() or any(
-        not np.array_equal(np.array(a[v]), np.array(b[v])) for v in a
-    )
+    assert a.keys() != b.keys() or any(not np.array_equal(np.array(a[v]), np.array(b[v])) for v in a)
 
 
 def test_reset_replays_the_episode():

@@ -19,8 +19,7 @@ def crossing():
 
 def _all_od_flows():
     return [
-        FlowSpec(f"{a}_{b}", origin=f"{a}_in", destination=f"{b}_out", rate=100)
-        for a in ARMS for b in ARMS if a != b
+        FlowSpec(f"{a}_{b}", origin=f"{a}_in", destination=f"{b}_out", rate=100) for a in ARMS for b in ARMS if a != b
     ] + [FlowSpec(f"{a}_route", route=[f"{a}_in"], rate=100) for a in ARMS]
 
 
@@ -51,6 +50,4 @@ def test_lazy_packing_gives_the_arrays_of_packing_after_every_route(crossing):
     lane = crossing.lane("west_in_0")
     route = lazy.add_from_lane(crossing.successors(lane)[0])
     assert lazy.slot_int.shape[1] > before and lazy.pack_count == 2
-    assert lazy.slot_int[0, lazy.slot(route, int(crossing.successors(lane)[0]))] == int(
-        crossing.successors(lane)[0]
-    )
+    assert lazy.slot_int[0, lazy.slot(route, int(crossing.successors(lane)[0]))] == int(crossing.successors(lane)[0])

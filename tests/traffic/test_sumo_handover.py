@@ -58,13 +58,9 @@ class Scripted(ProviderBase):
 
 def _sim(traffic, scripted):
     # the learning agent waits out of the way on the westbound road
-    sim = build_simulation(
-        make_spec([agent("westbound", offset=20.0, speed=0.0)], map_name="straight_2lane_twoway")
-    )
+    sim = build_simulation(make_spec([agent("westbound", offset=20.0, speed=0.0)], map_name="straight_2lane_twoway"))
     sim.add_provider(scripted)  # before SUMO, so SUMO sees this step's poses
-    provider = SumoTrafficProvider(
-        traffic, sim.road_map, sumo_net_path(sim.road_map.source), sim.dt
-    )
+    provider = SumoTrafficProvider(traffic, sim.road_map, sumo_net_path(sim.road_map.source), sim.dt)
     sim.add_provider(provider)
     return sim, provider
 
@@ -117,12 +113,8 @@ def test_vehicle_sumo_never_saw_is_inserted_at_its_pose_when_handed_over():
         sim.hand_over(np.array([row]), sumo, Role.TRAFFIC)
         sim.step(STOP)
         fx, fy = ls.vehicle.getPosition("scripted")
-        assert fx == pytest.approx(x0 + t.length[row] / 2, abs=1.0) and fy == pytest.approx(
-            -1.6, abs=0.2
-        )
-        assert t.x[row] == pytest.approx(x0, abs=1.0) and t.speed[row] == pytest.approx(
-            6.0, abs=0.5
-        )
+        assert fx == pytest.approx(x0 + t.length[row] / 2, abs=1.0) and fy == pytest.approx(-1.6, abs=0.2)
+        assert t.x[row] == pytest.approx(x0, abs=1.0) and t.speed[row] == pytest.approx(6.0, abs=0.5)
         for _ in range(20):
             sim.step(STOP)
         assert t.x[row] > x0 + 12.0 and t.owner[row] == sumo.provider_id
@@ -227,9 +219,7 @@ def test_agent_takes_over_a_sumo_trip_and_hands_it_back_at_mission_end():
         sim.reset()
         t = sim.table
         row = sim.agent_row[0]
-        assert (
-            t.ids[row] == "lead" and t.owner[row] != sumo.provider_id and t.role[row] == Role.AGENT
-        )
+        assert t.ids[row] == "lead" and t.owner[row] != sumo.provider_id and t.role[row] == Role.AGENT
         assert ls.vehicle.getSpeedMode("lead") == 0  # SUMO keeps it as the agent's twin
         for _ in range(200):
             sim.step({"agent_0": np.array([1.0, 0.0, 0.0])})  # 10 m/s straight on

@@ -26,9 +26,7 @@ STOP = np.zeros(3)  # relative target pose: stay where you are
 @contextmanager
 def sumo_sim(traffic, agents, map_name, **extra):
     sim = build_simulation(make_spec(agents, map_name=map_name, **extra))
-    provider = SumoTrafficProvider(
-        traffic, sim.road_map, sumo_net_path(sim.road_map.source), sim.dt
-    )
+    provider = SumoTrafficProvider(traffic, sim.road_map, sumo_net_path(sim.road_map.source), sim.dt)
     sim.add_provider(provider)
     try:
         yield sim, provider
@@ -68,9 +66,7 @@ def test_flows_appear_as_traffic_rows_on_the_road():
         cars = rows[[i.startswith("cars.") for i in ids]]
         buses = rows[[i.startswith("buses.") for i in ids]]
         assert len(cars) and len(buses)
-        assert (t.vtype[cars] == VehicleType.PASSENGER).all() and (
-            t.vtype[buses] == VehicleType.BUS
-        ).all()
+        assert (t.vtype[cars] == VehicleType.PASSENGER).all() and (t.vtype[buses] == VehicleType.BUS).all()
         assert t.length[cars] == pytest.approx(4.6) and t.width[cars] == pytest.approx(1.9)
         assert t.length[buses] == pytest.approx(11.0) and t.width[buses] == pytest.approx(2.55)
         assert (t.lane[rows] >= 0).all()
@@ -87,9 +83,7 @@ def test_pose_conversion_front_bumper_and_angle():
             TripSpec("west", route=["westbound"], depart_pos=80.0, depart_speed=5.0),
         ]
     )
-    with sumo_sim(
-        traffic, [agent("eastbound", offset=250.0, speed=0.0)], "straight_2lane_twoway"
-    ) as (sim, _):
+    with sumo_sim(traffic, [agent("eastbound", offset=250.0, speed=0.0)], "straight_2lane_twoway") as (sim, _):
         sim.reset()
         rm, t = sim.road_map, sim.table
         east = t.row_of["east"]
@@ -111,9 +105,7 @@ def test_pose_conversion_front_bumper_and_angle():
 
 
 def test_traffic_stops_behind_a_stopped_agent_without_passing_through():
-    traffic = TrafficSpec(
-        trips=[TripSpec("follower", route=["eastbound"], depart_pos=10.0, depart_speed=12.0)]
-    )
+    traffic = TrafficSpec(trips=[TripSpec("follower", route=["eastbound"], depart_pos=10.0, depart_speed=12.0)])
     stopped = agent("eastbound", offset=120.0, speed=0.0)
     with sumo_sim(traffic, [stopped], "straight_2lane_twoway") as (sim, _):
         sim.reset()
@@ -134,9 +126,7 @@ def test_traffic_stops_behind_a_stopped_agent_without_passing_through():
 def test_sumo_inserts_no_vehicle_onto_an_agent_near_the_road_start(depart_lane):
     """The agent's twin is on its lane before SUMO's first insertion, so a flow starting at the
     road's beginning is not inserted behind (or into) an agent 8 m in at full speed."""
-    traffic = TrafficSpec(
-        engine="sumo", flows=[FlowSpec("cars", route=["main"], rate=1800, depart_lane=depart_lane)]
-    )
+    traffic = TrafficSpec(engine="sumo", flows=[FlowSpec("cars", route=["main"], rate=1800, depart_lane=depart_lane)])
     stopped = agent("main", lane=0, offset=8.0, speed=0.0)
     with sumo_sim(traffic, [stopped], "straight_2lane") as (sim, _):
         sim.reset()
@@ -172,9 +162,7 @@ def test_same_seed_same_traffic_other_seed_other_traffic():
             sim.reset(seed=seed)
             _run(sim, 80)
             rows = _traffic_rows(sim)
-            return {
-                sim.table.ids[r]: (sim.table.x[r], sim.table.y[r], sim.table.speed[r]) for r in rows
-            }
+            return {sim.table.ids[r]: (sim.table.x[r], sim.table.y[r], sim.table.speed[r]) for r in rows}
 
         first = snapshot(1)
         assert len(first) >= 2
@@ -204,9 +192,7 @@ def test_bad_input_is_raised_at_construction_naming_the_field():
 def test_sumo_start_up_failure_is_a_scenario_error_and_sumo_can_start_again():
     sim = build_simulation(make_spec([agent()], map_name="straight_2lane"))
     other_net = sumo_net_path(
-        build_simulation(
-            make_spec([agent("eastbound")], map_name="straight_2lane_twoway")
-        ).road_map.source
+        build_simulation(make_spec([agent("eastbound")], map_name="straight_2lane_twoway")).road_map.source
     )
     traffic = TrafficSpec(trips=[TripSpec("t", route=["main"])])
     provider = SumoTrafficProvider(traffic, sim.road_map, other_net, sim.dt)  # has no road 'main'
@@ -232,9 +218,7 @@ def test_one_open_provider_per_process():
     with sumo_sim(TrafficSpec(), [agent()], "straight_2lane") as (sim, _):
         sim.reset()
         with pytest.raises(RuntimeError, match="one SUMO simulation per process"):
-            SumoTrafficProvider(
-                TrafficSpec(), sim.road_map, sumo_net_path(sim.road_map.source), sim.dt
-            )
+            SumoTrafficProvider(TrafficSpec(), sim.road_map, sumo_net_path(sim.road_map.source), sim.dt)
     # closed: a new provider may start
     with sumo_sim(TrafficSpec(), [agent()], "straight_2lane") as (sim, _):
         sim.reset()
@@ -255,9 +239,7 @@ def test_resets_reuse_sumo_and_start_each_episode_afresh():
 
 
 def test_vehicles_leaving_the_map_lose_their_rows():
-    traffic = TrafficSpec(
-        trips=[TripSpec("t", route=["main"], depart_pos=250.0, depart_speed=13.0)]
-    )
+    traffic = TrafficSpec(trips=[TripSpec("t", route=["main"], depart_pos=250.0, depart_speed=13.0)])
     with sumo_sim(traffic, [agent(lane=1, offset=20.0, speed=0.0)], "straight_2lane") as (sim, _):
         sim.reset()
         assert "t" in sim.table.row_of
@@ -286,20 +268,22 @@ def test_offsets_mean_the_same_place_to_sumo_when_its_lane_length_differs(long_l
         {
             "name": "long-lanes",
             "map": str(long_lanes_net),
-            "agents": [{
-                "action_space": "relative_target_pose",
-                "mission": {"start": {"road": "AB", "lane": 1, "offset": 70.0, "speed": 0.0},
-                            "goal": {"endless": True}},
-            }],
+            "agents": [
+                {
+                    "action_space": "relative_target_pose",
+                    "mission": {
+                        "start": {"road": "AB", "lane": 1, "offset": 70.0, "speed": 0.0},
+                        "goal": {"endless": True},
+                    },
+                }
+            ],
         },
         source="long-lanes",
     )
     sim = build_simulation(spec)
     rm = sim.road_map
     assert rm.lane_length[0] == pytest.approx(100.0) and rm.lane_sumo_length[0] == pytest.approx(120.0)
-    traffic = TrafficSpec(
-        trips=[TripSpec("mid", route=["AB"], depart_pos=50.0, depart_speed=0.0, depart_lane=0)]
-    )
+    traffic = TrafficSpec(trips=[TripSpec("mid", route=["AB"], depart_pos=50.0, depart_speed=0.0, depart_lane=0)])
     provider = SumoTrafficProvider(traffic, rm, sumo_net_path(rm.source), sim.dt)
     sim.add_provider(provider)
     try:

@@ -34,9 +34,7 @@ def test_vehicle_types_flows_and_trips_are_written_with_sumo_attributes(tmp_path
     rm = _map("intersection_4way_1lane")
     traffic = TrafficSpec(
         engine="sumo",
-        vehicle_types={
-            "calm": VehicleTypeSpec("calm", base="truck", max_speed=20.0, tau=1.8, width=2.4)
-        },
+        vehicle_types={"calm": VehicleTypeSpec("calm", base="truck", max_speed=20.0, tau=1.8, width=2.4)},
         flows=[
             FlowSpec("late", route=["south_in", "north_out"], probability=0.2, begin=5.0, end=50.0),
             FlowSpec(
@@ -49,11 +47,7 @@ def test_vehicle_types_flows_and_trips_are_written_with_sumo_attributes(tmp_path
                 depart_pos=20.0,
             ),
         ],
-        trips=[
-            TripSpec(
-                "solo", origin="north_in", destination="west_out", depart=2.0, depart_speed="max"
-            )
-        ],
+        trips=[TripSpec("solo", origin="north_in", destination="west_out", depart=2.0, depart_speed="max")],
     )
     root = _write(traffic, rm, tmp_path)
     vtypes = {v.get("id"): v.attrib for v in root.iter("vType")}
@@ -123,9 +117,7 @@ def test_lane_index_counts_car_lanes_only_when_roads_have_sidewalks(tmp_path):
 
 def test_pedestrian_flow_walks_between_roads(tmp_path):
     rm = _map("intersection_4way_1lane_peds")
-    traffic = TrafficSpec(
-        pedestrians=[PedestrianFlowSpec("p", "south_in", "north_out", rate=120, speed=1.1)]
-    )
+    traffic = TrafficSpec(pedestrians=[PedestrianFlowSpec("p", "south_in", "north_out", rate=120, speed=1.1)])
     root = _write(traffic, rm, tmp_path)
     flow = root.find("personFlow")
     assert flow.get("perHour") == "120"
@@ -164,15 +156,11 @@ def test_density_level_flows_are_in_the_route_file(tmp_path):
             "traffic.flows[0].origin",
         ),
         (
-            TrafficSpec(
-                trips=[TripSpec("t", route=["west_in", "east_out"], vehicle_type="hovercraft")]
-            ),
+            TrafficSpec(trips=[TripSpec("t", route=["west_in", "east_out"], vehicle_type="hovercraft")]),
             "traffic.trips[0].vehicle_type",
         ),
         (
-            TrafficSpec(
-                flows=[FlowSpec("f", route=["west_in", "east_out"], rate=10, probability=0.1)]
-            ),
+            TrafficSpec(flows=[FlowSpec("f", route=["west_in", "east_out"], rate=10, probability=0.1)]),
             "traffic.flows[0]",
         ),
         (

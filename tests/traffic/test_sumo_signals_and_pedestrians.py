@@ -16,24 +16,16 @@ STOP = {"agent_0": np.zeros(3)}
 
 
 def _sim(traffic, map_name, start_road, signals):
-    sim = build_simulation(
-        make_spec([agent(start_road, offset=60.0, speed=0.0)], map_name=map_name)
-    )
+    sim = build_simulation(make_spec([agent(start_road, offset=60.0, speed=0.0)], map_name=map_name))
     state = SignalState(sim.road_map) if signals else None
-    provider = SumoTrafficProvider(
-        traffic, sim.road_map, sumo_net_path(sim.road_map.source), sim.dt, state
-    )
+    provider = SumoTrafficProvider(traffic, sim.road_map, sumo_net_path(sim.road_map.source), sim.dt, state)
     sim.add_provider(provider)
     return sim, provider, state
 
 
 def test_red_light_queues_traffic_before_the_stop_line_until_green():
     traffic = TrafficSpec(
-        trips=[
-            TripSpec(
-                "bus_stop", route=["south_in", "north_out"], depart_pos=30.0, depart_speed=10.0
-            )
-        ]
+        trips=[TripSpec("bus_stop", route=["south_in", "north_out"], depart_pos=30.0, depart_speed=10.0)]
     )
     sim, _, signals = _sim(traffic, "intersection_4way_1lane_signal", "west_out", signals=True)
     try:
@@ -60,9 +52,7 @@ def test_red_light_queues_traffic_before_the_stop_line_until_green():
 
 
 def test_pedestrians_walk_on_the_sidewalk_as_pedestrian_rows():
-    traffic = TrafficSpec(
-        pedestrians=[PedestrianFlowSpec("walkers", "south_in", "north_out", rate=3600)]
-    )
+    traffic = TrafficSpec(pedestrians=[PedestrianFlowSpec("walkers", "south_in", "north_out", rate=3600)])
     sim, provider, _ = _sim(traffic, "intersection_4way_1lane_peds", "west_in", signals=False)
     try:
         sim.reset()

@@ -19,9 +19,18 @@ def scene(lanes: int = 2) -> dict[str, Any]:
         "source": "hand-made",
         "bounds": [0.0, 0.0, 100.0, 4.0 * lanes],
         "lanes": [
-            {"id": f"main_{i}", "road": "main", "index": i, "internal": False, "width": 3.5, "speed_limit": 13.9,
-             "length": 100.0, "points": [[0.0, 2.0 + 4 * i], [100.0, 2.0 + 4 * i]], "successors": [],
-             "predecessors": []}  # fmt: skip
+            {
+                "id": f"main_{i}",
+                "road": "main",
+                "index": i,
+                "internal": False,
+                "width": 3.5,
+                "speed_limit": 13.9,
+                "length": 100.0,
+                "points": [[0.0, 2.0 + 4 * i], [100.0, 2.0 + 4 * i]],
+                "successors": [],
+                "predecessors": [],
+            }  # fmt: skip
             for i in range(lanes)
         ],
         "junctions": [],

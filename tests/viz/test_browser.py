@@ -85,7 +85,9 @@ def click_canvas_at(driver, x: float, y: float) -> None:
 
     canvas = driver.find_element("id", "canvas")
     rect = canvas.rect
-    ActionChains(driver).move_to_element_with_offset(canvas, x - rect["width"] / 2, y - rect["height"] / 2).click().perform()
+    ActionChains(driver).move_to_element_with_offset(
+        canvas, x - rect["width"] / 2, y - rect["height"] / 2
+    ).click().perform()
 
 
 def body_point(driver, vehicle: str) -> list[float]:
@@ -141,7 +143,11 @@ def test_click_lane_shows_its_details(browser, served, recorded):
     frame = rec.frame(0)
     xy = frame["vehicle_state"][:, :2]
     for k, lane in enumerate(lanes):  # a road lane with no vehicle near its middle
-        mid = np.asarray(lane["points"])[len(lane["points"]) // 2] if len(lane["points"]) > 2 else np.mean(lane["points"], 0)
+        mid = (
+            np.asarray(lane["points"])[len(lane["points"]) // 2]
+            if len(lane["points"]) > 2
+            else np.mean(lane["points"], 0)
+        )
         if not lane["internal"] and lane["length"] > 30 and (not len(xy) or np.hypot(*(xy - mid).T).min() > 8):
             break
     x, y = browser.execute_script("return window.viz.screenOfPoint(arguments[0], arguments[1])", *mid.tolist())
@@ -261,7 +267,9 @@ def test_live_env_streams_into_the_page(browser, tmp_path):
         time.sleep(0.2)
         assert pixel(browser, x, y)[:3] == [230, 60, 50]
         row = env.sim.table.row_of["agent_0"]
-        last = browser.execute_script("const f = window.viz.ep.frames.at(-1); return [f.step, f.x[f.ids.indexOf('agent_0')]]")
+        last = browser.execute_script(
+            "const f = window.viz.ep.frames.at(-1); return [f.step, f.x[f.ids.indexOf('agent_0')]]"
+        )
         assert last[0] == 30 and abs(last[1] - env.sim.table.x[row]) < 0.01
         env.close()
 
@@ -270,7 +278,8 @@ def test_screenshot(browser, served, tmp_path):
     open_episode(browser, served.url, "0")
     agent = browser.execute_script("return window.viz.ep.meta.agent_ids[0]")
     browser.execute_script(  # step 60, zoomed in around the junction
-        "const v = window.viz; v.goTo(60); v.view.cx = 0; v.view.cy = -10; v.view.scale *= 3; v.dirty = true;")
+        "const v = window.viz; v.goTo(60); v.view.cx = 0; v.view.cy = -10; v.view.scale *= 3; v.dirty = true;"
+    )
     x, y = browser.execute_script("return window.viz.screenOf(arguments[0])", agent)
     click_canvas_at(browser, x, y)
     wait_for(browser, "return !document.getElementById('agent-panel').hidden")

@@ -45,7 +45,9 @@ def test_agents_actions_rewards_and_observations(recorded):
     path = agent["waypoints"][0]
     first = path[~np.isnan(path[:, 0])][0]
     assert np.hypot(first[0] - x, first[1] - y) < 5.0  # waypoints start at the agent, in map coordinates
-    assert any(len(rec.frame(k)["agents"].get(rec.agent_ids[0], {}).get("neighbours", [])) for k in range(rec.num_steps))
+    assert any(
+        len(rec.frame(k)["agents"].get(rec.agent_ids[0], {}).get("neighbours", [])) for k in range(rec.num_steps)
+    )
 
 
 def test_write_read_round_trip(recorded, tmp_path):
@@ -54,7 +56,9 @@ def test_write_read_round_trip(recorded, tmp_path):
     assert again.meta == rec.meta and again.scene == rec.scene
     for name, values in rec.arrays.items():
         np.testing.assert_array_equal(again.arrays[name], values, err_msg=name)
-    assert json.dumps(again.page_json()["frames"], allow_nan=False) == json.dumps(rec.page_json()["frames"], allow_nan=False)
+    assert json.dumps(again.page_json()["frames"], allow_nan=False) == json.dumps(
+        rec.page_json()["frames"], allow_nan=False
+    )
 
 
 def _rewrite(src, dst, change):
@@ -112,7 +116,13 @@ def _edit_json(name: str, edit):
         (_edit_json("metadata", lambda m: m.__setitem__("scenario", {"html": "<b>"})), "'scenario'"),
         (_edit_json("metadata", lambda m: m.__setitem__("events", 5)), "'events'"),
     ],
-    ids=["successor out of range", "lanes not a list", "unknown lane field", "scenario not a string", "events not a list"],
+    ids=[
+        "successor out of range",
+        "lanes not a list",
+        "unknown lane field",
+        "scenario not a string",
+        "events not a list",
+    ],
 )
 def test_recording_map_and_names_are_checked_as_the_page_reads_them(recorded, tmp_path, change, fragment):
     """The page draws a recording's map and lists its names as they are: a file that would break

@@ -151,7 +151,11 @@ def test_page_has_a_content_security_policy(server):
     policy = dict(part.strip().split(" ", 1) for part in headers["content-security-policy"].split(";"))
     assert policy["default-src"] == "'self'" and policy["script-src"] == "'self'" and policy["object-src"] == "'none'"
     assert "unsafe" not in headers["content-security-policy"]
-    assert policy["connect-src"].split() == ["'self'", f"ws://127.0.0.1:{server.port}", f"wss://127.0.0.1:{server.port}"]
+    assert policy["connect-src"].split() == [
+        "'self'",
+        f"ws://127.0.0.1:{server.port}",
+        f"wss://127.0.0.1:{server.port}",
+    ]
     assert headers["x-content-type-options"] == "nosniff"
     html = (STATIC_DIR / "index.html").read_text()
     assert not re.search(r"<script(?![^>]*\bsrc=)", html) and "<style" not in html  # nothing inline to allow
@@ -183,8 +187,11 @@ MALFORMED = [
     ("extra meta field", text(episode(onload="alert(1)")), "meta.onload"),
     ("lanes not a list", text({**episode(), "scene": {**scene(), "lanes": "<b>"}}), "scene.lanes"),
     ("NaN bounds", text(episode()).replace('"bounds": [0.0', '"bounds": [NaN'), "scene.bounds.0"),
-    ("successor out of range", text({**episode(), "scene": {**scene(), "lanes": [
-        {**scene()["lanes"][0], "successors": [7]}]}}), "successors"),  # fmt: skip
+    (
+        "successor out of range",
+        text({**episode(), "scene": {**scene(), "lanes": [{**scene()["lanes"][0], "successors": [7]}]}}),
+        "successors",
+    ),  # fmt: skip
     ("deep nesting", '{"type": "episode", "meta": ' + "[" * 5000 + "]" * 5000 + "}", "recursion"),
     ("frame before the episode", text(frame()), "before any episode"),
 ]

@@ -60,7 +60,9 @@ def test_episode_list_and_recording(server, recorded):
     assert sorted(frame["ids"]) == sorted(truth)
     i = frame["ids"].index("agent_0")
     assert frame["speed"][i] == pytest.approx(truth["agent_0"][2], abs=0.01)
-    assert {"id", "road", "index", "width", "speed_limit", "successors", "predecessors"} <= set(episode["scene"]["lanes"][0])
+    assert {"id", "road", "index", "width", "speed_limit", "successors", "predecessors"} <= set(
+        episode["scene"]["lanes"][0]
+    )
 
 
 def test_benchmark_log_episode_has_map_and_metrics(server):

@@ -36,12 +36,8 @@ def main(argv: list[str] | None = None) -> int:
         description="Score benchmark episode logs (.npz files, or folders searched recursively), "
         "each agent and task on its own.",
     )
-    parser.add_argument(
-        "paths", nargs="+", help="episode .npz files and/or folders holding them"
-    )
-    parser.add_argument(
-        "--config", help="metrics YAML (default: configs/benchmark/metrics.yaml)"
-    )
+    parser.add_argument("paths", nargs="+", help="episode .npz files and/or folders holding them")
+    parser.add_argument("--config", help="metrics YAML (default: configs/benchmark/metrics.yaml)")
     parser.add_argument(
         "--json",
         action="store_true",
@@ -52,13 +48,8 @@ def main(argv: list[str] | None = None) -> int:
         params = load_params(args.config)
         logs = read_episodes(args.paths)
         if not logs:
-            raise ValueError(
-                f"no .npz episode logs found under {', '.join(args.paths)}"
-            )
-        scored = [
-            (agent, task, score_suite(group, params))
-            for (agent, task), group in group_logs(logs).items()
-        ]
+            raise ValueError(f"no .npz episode logs found under {', '.join(args.paths)}")
+        scored = [(agent, task, score_suite(group, params)) for (agent, task), group in group_logs(logs).items()]
     except (LogError, MetricParamsError, ValueError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

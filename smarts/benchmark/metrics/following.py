@@ -22,9 +22,7 @@ def _following(params: MetricParams | FollowingParams) -> FollowingParams:
     return params.following if isinstance(params, MetricParams) else params
 
 
-def follow_margin(
-    speed: np.ndarray | float, params: MetricParams | FollowingParams
-) -> np.ndarray | float:
+def follow_margin(speed: np.ndarray | float, params: MetricParams | FollowingParams) -> np.ndarray | float:
     """FM in metres for ego ``speed`` (m/s; negative speeds count as 0)."""
     f = _following(params)
     margin = f.standstill_distance_m + f.safe_headway_s * np.maximum(speed, 0.0)

@@ -181,9 +181,7 @@ class AgentTrace:
 
     def columns(self) -> dict[str, np.ndarray]:
         """The present standard columns, in the documented order."""
-        return {
-            n: getattr(self, n) for n in ALL_COLUMNS if getattr(self, n) is not None
-        }
+        return {n: getattr(self, n) for n in ALL_COLUMNS if getattr(self, n) is not None}
 
     @classmethod
     def empty(cls, with_following: bool = False) -> AgentTrace:
@@ -199,7 +197,6 @@ class AgentTrace:
         value = getattr(self, name)
         return np.zeros(self.num_steps, dtype=bool) if value is None else value
 
-
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, AgentTrace):
             return NotImplemented
@@ -208,9 +205,7 @@ class AgentTrace:
             return False
         pairs = [(mine[k], theirs[k]) for k in mine]
         pairs += [(self.extra[k], other.extra[k]) for k in self.extra]
-        return all(
-            np.array_equal(a, b, equal_nan=a.dtype.kind == "f") for a, b in pairs
-        )
+        return all(np.array_equal(a, b, equal_nan=a.dtype.kind == "f") for a, b in pairs)
 
 
 @dataclass(eq=False)
@@ -315,9 +310,7 @@ class EpisodeLog:
             "time_limit": float(self.time_limit),
             "goal_radius": float(self.goal_radius),
             "agent_ids": self.agent_ids,
-            "initial_route_distance": {
-                a: float(d) for a, d in self.initial_route_distance.items()
-            },
+            "initial_route_distance": {a: float(d) for a, d in self.initial_route_distance.items()},
             "failure": self.failure,
             "end_time": None if self.end_time is None else float(self.end_time),
             "signals": int(self.signals),
@@ -419,12 +412,7 @@ def _validate_metadata(log: EpisodeLog) -> None:
         raise bad("seed", f"expected an integer or null, got {log.seed!r}")
     for name, low_ok in (("dt", False), ("time_limit", False), ("goal_radius", True)):
         value = getattr(log, name)
-        if (
-            not _is_number(value)
-            or not math.isfinite(value)
-            or value < 0
-            or (value == 0 and not low_ok)
-        ):
+        if not _is_number(value) or not math.isfinite(value) or value < 0 or (value == 0 and not low_ok):
             need = ">= 0" if low_ok else "> 0"
             raise bad(name, f"expected a finite number {need}, got {value!r}")
     if log.failure is not None and not isinstance(log.failure, str):
@@ -440,9 +428,7 @@ def _validate_metadata(log: EpisodeLog) -> None:
         )
     for agent_id in log.agents:
         if not isinstance(agent_id, str) or not agent_id:
-            raise bad(
-                "agent_ids", f"expected non-empty string agent ids, got {agent_id!r}"
-            )
+            raise bad("agent_ids", f"expected non-empty string agent ids, got {agent_id!r}")
     if not log.agents and not log.failed:
         raise bad("agent_ids", "an episode that did not fail needs at least one agent")
     dist = log.initial_route_distance
@@ -491,18 +477,12 @@ def _validate_trace(
         return LogError(problem, source=src, agent=agent, column=column)
 
     # A failed episode is scored as worst without reading its traces, so it needs no following columns.
-    required = REQUIRED_COLUMNS + (
-        FOLLOW_COLUMNS if task == "adaptive" and not failed else ()
-    )
+    required = REQUIRED_COLUMNS + (FOLLOW_COLUMNS if task == "adaptive" and not failed else ())
     for name in ALL_COLUMNS:
         value = getattr(trace, name)
         if value is None:
             if name in required:
-                why = (
-                    " (required for the adaptive task)"
-                    if name in FOLLOW_COLUMNS
-                    else ""
-                )
+                why = " (required for the adaptive task)" if name in FOLLOW_COLUMNS else ""
                 raise bad(name, f"missing column{why}")
             continue
         if value.ndim != 1:
@@ -513,9 +493,7 @@ def _validate_trace(
         elif value.dtype.kind not in "fiu":
             raise bad(name, f"expected numbers, got dtype {value.dtype}")
     n = trace.time.shape[0]
-    for name, value in list(trace.columns().items()) + [
-        (f"extra.{k}", v) for k, v in trace.extra.items()
-    ]:
+    for name, value in list(trace.columns().items()) + [(f"extra.{k}", v) for k, v in trace.extra.items()]:
         if value.ndim != 1 or value.shape[0] != n:
             raise bad(
                 name,
@@ -579,7 +557,9 @@ def _validate_trace(
     )
     if trace.left_map is not None and trace.left_map[:-1].any():
         step = int(np.argmax(trace.left_map))
-        raise bad("left_map", f"set on row {step} of {n}; a vehicle that left the map has no rows after (only the last row)")
+        raise bad(
+            "left_map", f"set on row {step} of {n}; a vehicle that left the map has no rows after (only the last row)"
+        )
     if (
         trace.follow_time_gap is not None
         and trace.lead_in_lane_and_visible is not None
@@ -597,26 +577,18 @@ def _validate_trace(
         )
 
 
-def _check_range(
-    ok: np.ndarray, value: np.ndarray, bad, column: str, need: str
-) -> None:
+def _check_range(ok: np.ndarray, value: np.ndarray, bad, column: str, need: str) -> None:
     if not ok.all():
         step = int(np.argmin(ok))
-        raise bad(
-            column, f"value {value[step].item()!r} at step {step}; expected {need}"
-        )
+        raise bad(column, f"value {value[step].item()!r} at step {step}; expected {need}")
 
 
 def _is_int(value: Any) -> bool:
-    return isinstance(value, (int, np.integer)) and not isinstance(
-        value, (bool, np.bool_)
-    )
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
 def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
-        value, (bool, np.bool_)
-    )
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
 
 
 # ------------------------------------------------------------------------------ reading/writing
@@ -667,9 +639,7 @@ def read_episode(path: str | os.PathLike) -> EpisodeLog:
     try:
         meta = json.loads(str(arrays.pop("metadata")))
     except json.JSONDecodeError as exc:
-        raise LogError(
-            f"metadata is not valid JSON ({exc})", source=src, column="metadata"
-        ) from None
+        raise LogError(f"metadata is not valid JSON ({exc})", source=src, column="metadata") from None
     if not isinstance(meta, dict):
         raise LogError("metadata must be a JSON object", source=src, column="metadata")
     if meta.get("format") != FORMAT_NAME:
@@ -697,13 +667,9 @@ def read_episode(path: str | os.PathLike) -> EpisodeLog:
     )
     for key in keys:
         if key not in meta:
-            raise LogError(
-                "missing metadata field", source=src, column=f"metadata.{key}"
-            )
+            raise LogError("missing metadata field", source=src, column=f"metadata.{key}")
     agent_ids = meta["agent_ids"]
-    if not isinstance(agent_ids, list) or len(set(map(str, agent_ids))) != len(
-        agent_ids
-    ):
+    if not isinstance(agent_ids, list) or len(set(map(str, agent_ids))) != len(agent_ids):
         raise LogError(
             f"expected a list of distinct agent ids, got {agent_ids!r}",
             source=src,
@@ -723,18 +689,16 @@ def read_episode(path: str | os.PathLike) -> EpisodeLog:
             )
         for name in REQUIRED_COLUMNS:
             if name not in cols:
-                raise LogError(
-                    "missing column", source=src, agent=agent_id, column=name
-                )
+                raise LogError("missing column", source=src, agent=agent_id, column=name)
         xprefix = f"extra/{index}/"
-        extra = {
-            k[len(xprefix) :]: v for k, v in arrays.items() if k.startswith(xprefix)
-        }
+        extra = {k[len(xprefix) :]: v for k, v in arrays.items() if k.startswith(xprefix)}
         agents[agent_id] = AgentTrace(**cols, extra=extra)
     scene = _read_scene(arrays, meta.get("scene"), src)
-    known = tuple(f"agents/{i}/" for i in range(len(agent_ids))) + tuple(
-        f"extra/{i}/" for i in range(len(agent_ids))
-    ) + ("scene/",)
+    known = (
+        tuple(f"agents/{i}/" for i in range(len(agent_ids)))
+        + tuple(f"extra/{i}/" for i in range(len(agent_ids)))
+        + ("scene/",)
+    )
     stray = sorted(k for k in arrays if not k.startswith(known))
     if stray:
         raise LogError(
@@ -815,10 +779,7 @@ def export_jsonl(log: EpisodeLog, path: str | os.PathLike) -> Path:
     path = Path(path)
     with path.open("w", encoding="utf-8") as fh:
         for row in _rows(log):
-            clean = {
-                k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-                for k, v in row.items()
-            }
+            clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
             fh.write(json.dumps(clean, allow_nan=False) + "\n")
     return path
 

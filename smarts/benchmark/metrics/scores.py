@@ -170,18 +170,14 @@ def comfort_cost(trace: AgentTrace, penalty_steps: int, params: MetricParams) ->
     return float(comfort_window(dyn > 1.0, penalty_steps).sum()) / total
 
 
-def lane_centre_cost(
-    lane_offset: np.ndarray, lane_width: np.ndarray, off_road: np.ndarray, scale: float
-) -> np.ndarray:
+def lane_centre_cost(lane_offset: np.ndarray, lane_width: np.ndarray, off_road: np.ndarray, scale: float) -> np.ndarray:
     """Per-step lane-centre cost: 1 off road, else offset over ``scale`` lane widths, capped at 1."""
     with np.errstate(invalid="ignore"):
         ratio = np.minimum(np.abs(lane_offset) / (scale * lane_width), 1.0)
     return np.where(off_road, 1.0, ratio)
 
 
-def overspeed_cost(
-    speed: np.ndarray, speed_limit: np.ndarray, scale: float
-) -> np.ndarray:
+def overspeed_cost(speed: np.ndarray, speed_limit: np.ndarray, scale: float) -> np.ndarray:
     """Per-step speeding cost: excess over the limit in units of ``scale * limit``, capped at 1."""
     return np.minimum(np.maximum(speed - speed_limit, 0.0) / (scale * speed_limit), 1.0)
 
@@ -274,9 +270,7 @@ def penalty_steps(dt: float, params: MetricParams) -> int:
     return round(params.humanness.penalty_period_s / dt)
 
 
-def agent_costs(
-    log: EpisodeLog, params: MetricParams | None = None
-) -> dict[str, AgentCosts]:
+def agent_costs(log: EpisodeLog, params: MetricParams | None = None) -> dict[str, AgentCosts]:
     """Every mission vehicle's cost terms; a failed episode gives the worst costs to each agent."""
     params = load_params() if params is None else params
     validate_episode(log)
@@ -312,19 +306,13 @@ def agent_costs(
                     params.humanness.lane_offset_scale,
                 ).mean()
             ),
-            overspeed=float(
-                overspeed_cost(
-                    tr.speed, tr.speed_limit, params.rules.overspeed_scale
-                ).mean()
-            ),
+            overspeed=float(overspeed_cost(tr.speed, tr.speed_limit, params.rules.overspeed_scale).mean()),
             wrong_way=float(tr.wrong_way.any()),
             # leaving the map at its route's end is not leaving the road
             off_road=float(((tr.partial_off_road | tr.off_road) & ~tr.flag("left_map")).any()),
             red_light=float(tr.flag("red_light").any()) if log.signals > 0 else None,
             rule_weights=weights,
-            time=time_cost(tr.time, tr.goal_reached, float(log.time_limit))
-            if log.task == "collaborative"
-            else None,
+            time=time_cost(tr.time, tr.goal_reached, float(log.time_limit)) if log.task == "collaborative" else None,
             follow_gap=follow,
         )
     return out
@@ -344,9 +332,7 @@ def s_bench(metrics: dict[str, float], task: str, params: MetricParams) -> float
     return sum(wi * m for wi, m in pairs) / sum(wi for wi, _ in pairs)
 
 
-def score_episode(
-    log: EpisodeLog, params: MetricParams | None = None
-) -> dict[str, float]:
+def score_episode(log: EpisodeLog, params: MetricParams | None = None) -> dict[str, float]:
     """One episode's metrics and mean inner costs.
 
     Keys: ``PR``, ``RC``, ``Humanness``, ``MTE`` or ``SFD``, ``S_bench`` (each in [0, 1], higher
@@ -506,10 +492,7 @@ class SuiteScores:
         if self.failed:
             verb = "excluded" if self.policy == "exclude" else "scored as worst"
             lines.append(f"failed episodes ({verb}):")
-            lines += [
-                f"  {f['scenario']} #{f['episode']} (seed {f.get('seed')}): {f['failure']}"
-                for f in self.failed
-            ]
+            lines += [f"  {f['scenario']} #{f['episode']} (seed {f.get('seed')}): {f['failure']}" for f in self.failed]
         return "\n".join(lines)
 
 
@@ -536,9 +519,7 @@ def score_suite(
     if len(tasks) != 1 or tasks[0] not in TASK_METRIC:
         for log in logs:
             validate_episode(log)
-        raise ValueError(
-            f"score_suite: logs mix tasks {tasks}; score each task's logs separately"
-        )
+        raise ValueError(f"score_suite: logs mix tasks {tasks}; score each task's logs separately")
     task = tasks[0]
 
     seen: dict[tuple[str, int], str | None] = {}
@@ -560,8 +541,13 @@ def score_suite(
         seed = None if log.seed is None else int(log.seed)
         seeds.setdefault(log.scenario, {})[int(log.episode)] = seed
         episode_scores.setdefault(log.scenario, []).append(
-            {"episode": int(log.episode), "seed": seed, "failed": log.failed,
-             "excluded": log.failed and exclude, **{m: scores[m] for m in names}}  # fmt: skip
+            {
+                "episode": int(log.episode),
+                "seed": seed,
+                "failed": log.failed,
+                "excluded": log.failed and exclude,
+                **{m: scores[m] for m in names},
+            }  # fmt: skip
         )
         if log.failed:
             failed.append(
@@ -578,19 +564,14 @@ def score_suite(
                 continue
         per_scenario.setdefault(log.scenario, []).append(scores)
     if not per_scenario:
-        raise ValueError(
-            "score_suite: every episode failed and failed episodes are excluded; nothing to score"
-        )
+        raise ValueError("score_suite: every episode failed and failed episodes are excluded; nothing to score")
 
     scenarios: dict[str, dict[str, float]] = {}
     for name in sorted(per_scenario):
         rows = per_scenario[name]
         keys = dict.fromkeys(k for r in rows for k in r)  # cost.red_light: not in a failed episode's worst row
         scenarios[name] = {k: float(np.mean([r[k] for r in rows if k in r])) for k in keys}
-    overall = {
-        m: float(np.mean([row[m] for row in scenarios.values()]))
-        for m in names[:-1]
-    }
+    overall = {m: float(np.mean([row[m] for row in scenarios.values()])) for m in names[:-1]}
     overall["S_bench"] = s_bench(overall, task, params)
     overall_ci, scenario_ci = bootstrap_ci(per_scenario, task, params, ci_level, resamples, ci_seed)
     failed.sort(key=lambda f: (f["scenario"], f["episode"]))
@@ -604,6 +585,13 @@ def score_suite(
         overall_ci=overall_ci,
         scenario_ci=scenario_ci,
         seeds={name: dict(sorted(seeds[name].items())) for name in sorted(seeds)},
-        episode_scores={name: sorted(rows, key=lambda r: r["episode"]) for name, rows in sorted(episode_scores.items())},
-        ci={"level": ci_level, "resamples": resamples, "seed": ci_seed, "method": ci_method(ci_level, resamples, ci_seed)},
+        episode_scores={
+            name: sorted(rows, key=lambda r: r["episode"]) for name, rows in sorted(episode_scores.items())
+        },
+        ci={
+            "level": ci_level,
+            "resamples": resamples,
+            "seed": ci_seed,
+            "method": ci_method(ci_level, resamples, ci_seed),
+        },
     )

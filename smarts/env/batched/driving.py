@@ -109,7 +109,9 @@ class BatchedDriving:
         self.specs = [as_spec(s) for s in scenarios]
         self.limits = limits or ReachLimits()
         self.copy_ids = list(range(len(self.specs))) if copy_ids is None else list(copy_ids)
-        self.slots: list[tuple[int, str]] = [(i, a.id) for i, s in enumerate(self.specs) for a in s.agents if not a.is_social]
+        self.slots: list[tuple[int, str]] = [
+            (i, a.id) for i, s in enumerate(self.specs) for a in s.agents if not a.is_social
+        ]
         if not self.slots:
             raise BatchedSetupError(f"{self.specs[0].source}: every agent has a policy; at least one must learn")
         slot_index = {key: j for j, key in enumerate(self.slots)}
@@ -206,7 +208,9 @@ class BatchedDriving:
         """Copy ``copy``'s current episode as a single simulation (its agents by their scenario
         ids), for per-episode readers such as the benchmark's ``EpisodeRecorder``."""
         if self.copy_place[copy] is None:
-            raise ValueError(f"copy {copy} ({self.specs[copy].source}) runs in a worker process; its episodes are read there")
+            raise ValueError(
+                f"copy {copy} ({self.specs[copy].source}) runs in a worker process; its episodes are read there"
+            )
         g, b = self.copy_place[copy]
         return self.groups[g].sim.episode_sim(b)
 
@@ -329,7 +333,11 @@ class BatchedDriving:
             flags = self._buffer.arrays
             for shard in self.shards:
                 j = shard.rows
-                reward[j], terminated[j], truncated[j] = flags["reward"][j], flags["terminated"][j], flags["truncated"][j]
+                reward[j], terminated[j], truncated[j] = (
+                    flags["reward"][j],
+                    flags["terminated"][j],
+                    flags["truncated"][j],
+                )
                 acted[j], restarted[j] = flags["acted"][j], flags["restarted"][j]
         if out is self._obs and not acted.all():
             for v in out.values():
@@ -358,8 +366,13 @@ def is_sumo(spec: ScenarioSpec) -> bool:
     return spec.traffic is not None and spec.traffic.engine == "sumo"
 
 
-STEP_FLAGS = {"reward": np.float32, "terminated": np.bool_, "truncated": np.bool_, "acted": np.bool_,
-              "restarted": np.bool_}
+STEP_FLAGS = {
+    "reward": np.float32,
+    "terminated": np.bool_,
+    "truncated": np.bool_,
+    "acted": np.bool_,
+    "restarted": np.bool_,
+}
 """The per-slot results of a step besides the observations, as they lie in the shared buffer."""
 
 
@@ -395,7 +408,11 @@ class SharedArrays:
             nbytes = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
             size += -(-max(nbytes, 1) // self.ALIGN) * self.ALIGN
         self.owner = name is None
-        self.shm = shared_memory.SharedMemory(create=True, size=max(size, 1)) if self.owner else shared_memory.SharedMemory(name=name)
+        self.shm = (
+            shared_memory.SharedMemory(create=True, size=max(size, 1))
+            if self.owner
+            else shared_memory.SharedMemory(name=name)
+        )
         self.arrays = {key: np.ndarray(shape, dtype=np.dtype(dtype), buffer=self.shm.buf, offset=offsets[key])
                        for key, (shape, dtype) in layout.items()}  # fmt: skip
         if self.owner:
@@ -574,9 +591,16 @@ def _serve(conn, specs: list, copy_ids: list[int], options: dict) -> None:
 
 def _space_difference(first: gym.spaces.Dict, other: gym.spaces.Dict) -> str:
     """The keys one observation space has and the other lacks, or the first key whose shape differs."""
-    only_first, only_other = sorted(set(first.spaces) - set(other.spaces)), sorted(set(other.spaces) - set(first.spaces))
+    only_first, only_other = (
+        sorted(set(first.spaces) - set(other.spaces)),
+        sorted(set(other.spaces) - set(first.spaces)),
+    )
     if only_first or only_other:
-        parts = [f"{', '.join(keys)} only in {where}" for keys, where in ((only_first, "the first"), (only_other, "this one")) if keys]
+        parts = [
+            f"{', '.join(keys)} only in {where}"
+            for keys, where in ((only_first, "the first"), (only_other, "this one"))
+            if keys
+        ]
         return "; ".join(parts)
     for key in first.spaces:
         if first.spaces[key] != other.spaces[key]:

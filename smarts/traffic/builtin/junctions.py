@@ -100,8 +100,9 @@ def junction_table(road_map: RoadMap) -> JunctionTable:
         lo = np.array([b[1].reshape(-1, 2).min(axis=0) for b in bodies]) - reach
         hi = np.array([b[1].reshape(-1, 2).max(axis=0) for b in bodies]) + reach
         for i in range(len(paths)):
-            near = np.flatnonzero((lo[:, 0] <= hi[i, 0]) & (hi[:, 0] >= lo[i, 0])
-                                  & (lo[:, 1] <= hi[i, 1]) & (hi[:, 1] >= lo[i, 1]))
+            near = np.flatnonzero(
+                (lo[:, 0] <= hi[i, 0]) & (hi[:, 0] >= lo[i, 0]) & (lo[:, 1] <= hi[i, 1]) & (hi[:, 1] >= lo[i, 1])
+            )
             for j in near[near > i]:
                 j = int(j)
                 zones = _zones(bodies[i], bodies[j])
@@ -138,9 +139,7 @@ def junction_table(road_map: RoadMap) -> JunctionTable:
     return table
 
 
-def _joined_polyline(
-    m: RoadMap, src: int, path: tuple[int, ...], dst: int
-) -> tuple[np.ndarray, float]:
+def _joined_polyline(m: RoadMap, src: int, path: tuple[int, ...], dst: int) -> tuple[np.ndarray, float]:
     """The path's points from APPROACH_PIECE before its start to APPROACH_PIECE after its end,
     and the arc length of its start within them."""
     before = _piece(m.lane_polyline(src), -APPROACH_PIECE, None)
@@ -188,7 +187,7 @@ def _zones(a, b) -> tuple[tuple[float, float], tuple[float, float]] | None:
     s_a, discs_a = a
     s_b, discs_b = b
     diff = discs_a[:, None, :, None, :] - discs_b[None, :, None, :, :]
-    touch = ((diff ** 2).sum(axis=-1) < (2.0 * DISC_RADIUS) ** 2).any(axis=(2, 3))  # [na, nb]
+    touch = ((diff**2).sum(axis=-1) < (2.0 * DISC_RADIUS) ** 2).any(axis=(2, 3))  # [na, nb]
     on_a = np.flatnonzero(touch.any(axis=1))
     if on_a.size == 0:
         return None

@@ -295,18 +295,18 @@ def set_routes(sets, t):  # pragma: no cover - compiled
     """Set ``t``'s ``Routes`` out of ``RouteSets`` ``sets`` (views)."""
     tb, b = sets.tables, sets.bounds
     return Routes(
-        slot_int=tb.slot_int[:, b.slot_int[t]:b.slot_int[t + 1]],
-        slot_cost=tb.slot_cost[b.slot_cost[t]:b.slot_cost[t + 1]],
-        conn_int=tb.conn_int[:, b.conn_int[t]:b.conn_int[t + 1]],
-        conn_len=tb.conn_len[b.conn_len[t]:b.conn_len[t + 1]],
-        clanes_off=tb.clanes_off[b.clanes_off[t]:b.clanes_off[t + 1]],
-        clanes=tb.clanes[b.clanes[t]:b.clanes[t + 1]],
-        conn_of_lane=tb.conn_of_lane[b.conn_of_lane[t]:b.conn_of_lane[t + 1]],
-        offset_of_lane=tb.offset_of_lane[b.offset_of_lane[t]:b.offset_of_lane[t + 1]],
-        foe_off=tb.foe_off[b.foe_off[t]:b.foe_off[t + 1]],
-        foe=tb.foe[b.foe[t]:b.foe[t + 1]],
-        foe_kind=tb.foe_kind[b.foe_kind[t]:b.foe_kind[t + 1]],
-        zone=tb.zone[:, b.zone[t]:b.zone[t + 1]],
+        slot_int=tb.slot_int[:, b.slot_int[t] : b.slot_int[t + 1]],
+        slot_cost=tb.slot_cost[b.slot_cost[t] : b.slot_cost[t + 1]],
+        conn_int=tb.conn_int[:, b.conn_int[t] : b.conn_int[t + 1]],
+        conn_len=tb.conn_len[b.conn_len[t] : b.conn_len[t + 1]],
+        clanes_off=tb.clanes_off[b.clanes_off[t] : b.clanes_off[t + 1]],
+        clanes=tb.clanes[b.clanes[t] : b.clanes[t + 1]],
+        conn_of_lane=tb.conn_of_lane[b.conn_of_lane[t] : b.conn_of_lane[t + 1]],
+        offset_of_lane=tb.offset_of_lane[b.offset_of_lane[t] : b.offset_of_lane[t + 1]],
+        foe_off=tb.foe_off[b.foe_off[t] : b.foe_off[t + 1]],
+        foe=tb.foe[b.foe[t] : b.foe[t + 1]],
+        foe_kind=tb.foe_kind[b.foe_kind[t] : b.foe_kind[t + 1]],
+        zone=tb.zone[:, b.zone[t] : b.zone[t + 1]],
     )
 
 
@@ -502,8 +502,12 @@ def build_occupancy(own, others, data, state, lanes, routes, raw, occ):  # pragm
         s, half, v = st[S, r], 0.5 * data[_LENGTH, r], data[_V, r]
         n = _put(raw, n, lane, s, half, v, r, PRIMARY)
         src = si[LC_FROM, r]
-        if (st[LC_PROG, r] < 1.0 and si[LC_LANE, r] == lane and src >= 0
-                and abs(st[LAT, r]) > 0.5 * (lane_f[WIDTH, lane] - data[_WIDTH, r]) - 0.2):
+        if (
+            st[LC_PROG, r] < 1.0
+            and si[LC_LANE, r] == lane
+            and src >= 0
+            and abs(st[LAT, r]) > 0.5 * (lane_f[WIDTH, lane] - data[_WIDTH, r]) - 0.2
+        ):
             s_src = s * lane_f[LEN, src] / max(lane_f[LEN, lane], 1e-9)
             n = _put(raw, n, src, s_src, half, v, r, DUPLICATE)
         prev = si[PREV_LANE, r]
@@ -639,8 +643,10 @@ def _judge_foe(mover, zone, user, a_min, guard):  # pragma: no cover - compiled
                 return min(a_min, a_courtesy), min(guard, gap)
         if not ahead:  # it is behind on the merged path: go if it can follow comfortably
             gap_wv = -delta - h - h_w
-            if gap_wv > SAFE_GAP and idm(v_w, max(v_w, w_v0, 1.0), gap_wv, v, max(w_accel, 1.0),
-                                          w_decel, 1.0, 2.5) >= -w_decel * bold:
+            if (
+                gap_wv > SAFE_GAP
+                and idm(v_w, max(v_w, w_v0, 1.0), gap_wv, v, max(w_accel, 1.0), w_decel, 1.0, 2.5) >= -w_decel * bold
+            ):
                 return a_min, guard
     t_vin = travel_time(zin - extra_v - p_v, v, accel, v0)
     t_vout = travel_time(zout + extra_v - p_v, v, accel, v0)
@@ -698,8 +704,14 @@ def _junction(jv, me, c, p_v, a_min, guard):  # pragma: no cover - compiled
         len_f = conn_len[fc]
         first = conn_int[C_FIRST, fc]
         z = Zone(
-            kind=foe_kind[f], zin=zone[0, f], zout=zone[1, f], fin=zone[2, f], fout=fout,
-            major=conn_int[C_MAJOR, fc], merge=conn_int[C_MERGE_ONLY, fc] > 0, length=len_f,
+            kind=foe_kind[f],
+            zin=zone[0, f],
+            zout=zone[1, f],
+            fin=zone[2, f],
+            fout=fout,
+            major=conn_int[C_MAJOR, fc],
+            merge=conn_int[C_MERGE_ONLY, fc] > 0,
+            length=len_f,
             colour=via_colour[first],
         )
         # 1. on the foe's junction lanes
@@ -709,7 +721,11 @@ def _junction(jv, me, c, p_v, a_min, guard):  # pragma: no cover - compiled
                 w = e_row[k]
                 own_w = mine[w]
                 user = RoadUser(
-                    w=w, p=offset_of_lane[ln] + e_s[k], v=e_v[k], h=e_half[k], own=own_w,
+                    w=w,
+                    p=offset_of_lane[ln] + e_s[k],
+                    v=e_v[k],
+                    h=e_half[k],
+                    own=own_w,
                     accel=pa[ACCEL, w] if own_w else 0.0,
                     decel=pa[DECEL, w] if own_w else 4.5,
                     v0=desired_speed(w, ln, pa, st, lane_f) if own_w else e_v[k],
@@ -723,7 +739,14 @@ def _junction(jv, me, c, p_v, a_min, guard):  # pragma: no cover - compiled
             if e_s[k] - e_half[k] > beyond:
                 break
             user = RoadUser(
-                w=e_row[k], p=len_f + e_s[k], v=e_v[k], h=e_half[k], own=False, accel=0.0, decel=4.5, v0=e_v[k],
+                w=e_row[k],
+                p=len_f + e_s[k],
+                v=e_v[k],
+                h=e_half[k],
+                own=False,
+                accel=0.0,
+                decel=4.5,
+                v0=e_v[k],
                 wait=0.0,
             )
             a_min, guard = _judge_foe(mover, z, user, a_min, guard)
@@ -744,7 +767,11 @@ def _junction(jv, me, c, p_v, a_min, guard):  # pragma: no cover - compiled
                 if nxt < 0 or slot_int[S_LANE, nxt] != first:
                     break  # takes another way through the junction
             user = RoadUser(
-                w=w, p=-dist, v=e_v[k], h=e_half[k], own=own_w,
+                w=w,
+                p=-dist,
+                v=e_v[k],
+                h=e_half[k],
+                own=own_w,
                 accel=pa[ACCEL, w] if own_w else 0.0,
                 decel=pa[DECEL, w] if own_w else 4.5,
                 v0=desired_speed(w, src, pa, st, lane_f) if own_w else e_v[k],
@@ -791,8 +818,7 @@ def _try_change(cv, me, slot, nslot, d, s, a_now, lead, mode, look):  # pragma: 
         b_safe = min(decel, B_SAFE_DISCRETIONARY)
     if a_after < -b_safe and mode < 2:
         return False, 0.0, a_after, gap_nl
-    fk, fg = find_follower(nlane, s_n, r, FOLLOWER_LOOKBACK, lane_f, lane_off, e_s, e_half, e_row,
-                           pred_off, pred)
+    fk, fg = find_follower(nlane, s_n, r, FOLLOWER_LOOKBACK, lane_f, lane_off, e_s, e_half, e_row, pred_off, pred)
     gap_nf = fg - h
     a_nf_gain = 0.0
     if fk >= 0:
@@ -811,14 +837,14 @@ def _try_change(cv, me, slot, nslot, d, s, a_now, lead, mode, look):  # pragma: 
     a_of_gain = 0.0
     ok, og = -1, INF
     if d < 0:
-        ok, og = find_follower(lane, s, r, FOLLOWER_LOOKBACK, lane_f, lane_off, e_s, e_half, e_row,
-                               pred_off, pred)
+        ok, og = find_follower(lane, s, r, FOLLOWER_LOOKBACK, lane_f, lane_off, e_s, e_half, e_row, pred_off, pred)
     if ok >= 0:
         orow, vo = e_row[ok], e_v[ok]
         gap_of = og - h
         after_gap = gap_of + 2.0 * h + lead_gap if has_lead else INF
-        a_of_gain = (_other_accel(orow, vo, after_gap, lead_v, lane, mine, pa, st, lane_f)
-                     - _other_accel(orow, vo, gap_of, v, lane, mine, pa, st, lane_f))
+        a_of_gain = _other_accel(orow, vo, after_gap, lead_v, lane, mine, pa, st, lane_f) - _other_accel(
+            orow, vo, gap_of, v, lane, mine, pa, st, lane_f
+        )
     incentive = a_after - a_now + pa[POLITE, r] * (a_nf_gain + a_of_gain)
     return True, incentive, a_after, gap_nl
 
@@ -857,14 +883,42 @@ def step_vehicles(own, data, state, out, occ, lanes, routes, via_colour, dt, ste
     conn_of_lane, offset_of_lane = routes.conn_of_lane, routes.offset_of_lane
     arrived, acc, guard_out, change, turn = out.arrived, out.acc, out.guard, out.change, out.turn
     jv = JunctionView(
-        si=si, st=st, pa=pa, mine=mine, lane_off=lane_off, e_s=e_s, e_half=e_half, e_v=e_v, e_row=e_row,
-        e_kind=e_kind, lane_f=lane_f, slot_int=slot_int, conn_int=routes.conn_int, conn_len=routes.conn_len,
-        clanes_off=routes.clanes_off, clanes=routes.clanes, offset_of_lane=offset_of_lane, foe_off=routes.foe_off,
-        foe=routes.foe, foe_kind=routes.foe_kind, zone=routes.zone, via_colour=via_colour,
+        si=si,
+        st=st,
+        pa=pa,
+        mine=mine,
+        lane_off=lane_off,
+        e_s=e_s,
+        e_half=e_half,
+        e_v=e_v,
+        e_row=e_row,
+        e_kind=e_kind,
+        lane_f=lane_f,
+        slot_int=slot_int,
+        conn_int=routes.conn_int,
+        conn_len=routes.conn_len,
+        clanes_off=routes.clanes_off,
+        clanes=routes.clanes,
+        offset_of_lane=offset_of_lane,
+        foe_off=routes.foe_off,
+        foe=routes.foe,
+        foe_kind=routes.foe_kind,
+        zone=routes.zone,
+        via_colour=via_colour,
     )
     cv = ChangeView(
-        pa=pa, st=st, mine=mine, lane_off=lane_off, e_s=e_s, e_half=e_half, e_v=e_v, e_row=e_row, lane_f=lane_f,
-        slot_int=slot_int, pred_off=lanes.pred_off, pred=lanes.pred,
+        pa=pa,
+        st=st,
+        mine=mine,
+        lane_off=lane_off,
+        e_s=e_s,
+        e_half=e_half,
+        e_v=e_v,
+        e_row=e_row,
+        lane_f=lane_f,
+        slot_int=slot_int,
+        pred_off=lanes.pred_off,
+        pred=lanes.pred,
     )
     n = own.shape[0]
     for i in range(n):
@@ -892,8 +946,12 @@ def step_vehicles(own, data, state, out, occ, lanes, routes, via_colour, dt, ste
         # still partly on the lane being left: only avoid running into what is ahead there
         # (no time headway: the vehicle is on its way out of that lane)
         src = si[LC_FROM, r]
-        if (st[LC_PROG, r] < 1.0 and si[LC_LANE, r] == lane and src >= 0
-                and abs(st[LAT, r]) > 0.5 * (lane_f[WIDTH, lane] - data[_WIDTH, r]) - 0.2):
+        if (
+            st[LC_PROG, r] < 1.0
+            and si[LC_LANE, r] == lane
+            and src >= 0
+            and abs(st[LAT, r]) > 0.5 * (lane_f[WIDTH, lane] - data[_WIDTH, r]) - 0.2
+        ):
             s_src = s * lane_f[LEN, src] / max(lane_f[LEN, lane], 1e-9)
             k2 = _first_ahead(src, s_src, r, lane_off, e_s, e_row)
             if k2 >= 0:
@@ -1099,7 +1157,18 @@ def place_vehicle(frozen_lanes, frozen_routes, frozen_state, data, r):  # pragma
 
 @numba.njit(cache=True, nogil=True)
 def clearance(
-    frozen_lanes, frozen_routes, frozen_state, data, own, f_rows, f_lane, f_s, lanes, spots, next_lanes, half,
+    frozen_lanes,
+    frozen_routes,
+    frozen_state,
+    data,
+    own,
+    f_rows,
+    f_lane,
+    f_s,
+    lanes,
+    spots,
+    next_lanes,
+    half,
 ):  # pragma: no cover - compiled
     """Room around entry spots (``lanes``, arc lengths ``spots``, the lane after each on the
     route, -1 none) for a new vehicle of half length ``half``: float64[4, n] of gap ahead, speed

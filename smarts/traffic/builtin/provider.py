@@ -103,9 +103,7 @@ class BuiltinTrafficProvider(ProviderBase):
         self.dt = float(dt)
         self.signals = signals
         if traffic.pedestrians:
-            raise ScenarioError(
-                "traffic.pedestrians: the builtin engine has no pedestrians; use engine: sumo"
-            )
+            raise ScenarioError("traffic.pedestrians: the builtin engine has no pedestrians; use engine: sumo")
         self.routes = RouteTable(road_map)
         self.junctions = junction_table(road_map)
         self.sources = self._compile_sources(traffic)
@@ -125,8 +123,7 @@ class BuiltinTrafficProvider(ProviderBase):
         self.frozen_lanes = K.freeze(self.lanes)
         jt = self.junctions
         self.conn_int = np.ascontiguousarray(
-            np.stack([jt.conn_from, jt.conn_to, jt.conn_first, jt.conn_major, jt.conn_merge_only])
-            .reshape(5, -1)
+            np.stack([jt.conn_from, jt.conn_to, jt.conn_first, jt.conn_major, jt.conn_merge_only]).reshape(5, -1)
         )
         self.no_signals = np.zeros(m.num_lanes, dtype=np.int8)
         self._routes_fields: K.Routes | None = None  # the tables of frozen_routes()
@@ -187,8 +184,7 @@ class BuiltinTrafficProvider(ProviderBase):
         lane_choice = item.depart_lane
         if isinstance(lane_choice, bool) or not isinstance(lane_choice, (int, str)):
             raise ScenarioError(
-                f"{where}.depart_lane: expected a lane index or one of {list(DEPART_LANES)}, "
-                f"got {lane_choice!r}"
+                f"{where}.depart_lane: expected a lane index or one of {list(DEPART_LANES)}, got {lane_choice!r}"
             )
         if isinstance(lane_choice, int) and not 0 <= lane_choice < len(lanes):
             raise ScenarioError(
@@ -197,8 +193,7 @@ class BuiltinTrafficProvider(ProviderBase):
             )
         if isinstance(lane_choice, str) and lane_choice not in DEPART_LANES:
             raise ScenarioError(
-                f"{where}.depart_lane: expected a lane index or one of {list(DEPART_LANES)}, "
-                f"got {lane_choice!r}"
+                f"{where}.depart_lane: expected a lane index or one of {list(DEPART_LANES)}, got {lane_choice!r}"
             )
         speed = item.depart_speed
         if isinstance(speed, str):
@@ -206,9 +201,7 @@ class BuiltinTrafficProvider(ProviderBase):
                 raise ScenarioError(
                     f"{where}.depart_speed: expected m/s or one of {list(DEPART_SPEEDS)}, got {speed!r}"
                 )
-        elif isinstance(speed, bool) or not isinstance(speed, (int, float)) or not (
-            0.0 <= speed <= vtype.max_speed
-        ):
+        elif isinstance(speed, bool) or not isinstance(speed, (int, float)) or not (0.0 <= speed <= vtype.max_speed):
             raise ScenarioError(
                 f"{where}.depart_speed: expected 0..{vtype.max_speed} m/s (the vehicle type's "
                 f"max_speed) or one of {list(DEPART_SPEEDS)}, got {speed!r}"
@@ -216,23 +209,38 @@ class BuiltinTrafficProvider(ProviderBase):
         shortest = float(self.map.lane_length[lanes].min())
         if not 0.0 <= float(item.depart_pos) <= shortest:
             raise ScenarioError(
-                f"{where}.depart_pos: road {first_road!r} is {shortest:.1f} m long, "
-                f"got {item.depart_pos}"
+                f"{where}.depart_pos: road {first_road!r} is {shortest:.1f} m long, got {item.depart_pos}"
             )
         params = np.array(
-            [vtype.accel, vtype.decel, max(vtype.emergency_decel, vtype.decel), vtype.tau,
-             vtype.min_gap, vtype.max_speed, vtype.politeness, vtype.lc_threshold,
-             vtype.lc_keep_right],
+            [
+                vtype.accel,
+                vtype.decel,
+                max(vtype.emergency_decel, vtype.decel),
+                vtype.tau,
+                vtype.min_gap,
+                vtype.max_speed,
+                vtype.politeness,
+                vtype.lc_threshold,
+                vtype.lc_keep_right,
+            ],
             dtype=np.float64,
         )
         src = _Source(
-            id=item.id, where=where, route=route, vtype=base, params=params,
+            id=item.id,
+            where=where,
+            route=route,
+            vtype=base,
+            params=params,
             length=float(vtype.length if vtype.length is not None else dl),
             width=float(vtype.width if vtype.width is not None else dw),
             height=float(vtype.height if vtype.height is not None else dh),
-            speed_factor=float(vtype.speed_factor), speed_dev=float(vtype.speed_dev),
-            depart_lane=lane_choice, depart_speed=speed, depart_pos=float(item.depart_pos),
-            begin=0.0, end=math.inf,
+            speed_factor=float(vtype.speed_factor),
+            speed_dev=float(vtype.speed_dev),
+            depart_lane=lane_choice,
+            depart_speed=speed,
+            depart_pos=float(item.depart_pos),
+            begin=0.0,
+            end=math.inf,
         )
         if isinstance(item, TripSpec):
             if not item.depart >= 0.0:
@@ -246,13 +254,10 @@ class BuiltinTrafficProvider(ProviderBase):
             raise ScenarioError(f"{where}.rate: expected vehicles per hour > 0, got {item.rate}")
         if has_prob and not 0.0 < item.probability <= 1.0:
             raise ScenarioError(
-                f"{where}.probability: expected a probability per second in (0, 1], "
-                f"got {item.probability}"
+                f"{where}.probability: expected a probability per second in (0, 1], got {item.probability}"
             )
         if not 0.0 <= item.begin < item.end:
-            raise ScenarioError(
-                f"{where}.end: expected 0 <= begin < end, got begin {item.begin}, end {item.end}"
-            )
+            raise ScenarioError(f"{where}.end: expected 0 <= begin < end, got begin {item.begin}, end {item.end}")
         src.begin, src.end = float(item.begin), float(item.end)
         if has_rate:
             src.period = 3600.0 / float(item.rate)
@@ -289,16 +294,13 @@ class BuiltinTrafficProvider(ProviderBase):
         if item.route is not None:
             if item.origin is not None or item.destination is not None:
                 raise ScenarioError(f"{where}: give either route or origin and destination")
-            if not isinstance(item.route, (list, tuple)) or not all(
-                isinstance(r, str) for r in item.route
-            ):
+            if not isinstance(item.route, (list, tuple)) or not all(isinstance(r, str) for r in item.route):
                 raise ScenarioError(f"{where}.route: expected a list of road ids, got {item.route!r}")
             return self.routes.add_roads(list(item.route), f"{where}.route")
         for name in ("origin", "destination"):
             if not isinstance(getattr(item, name), str):
                 raise ScenarioError(
-                    f"{where}.{name}: expected a road id (or give a route), got "
-                    f"{getattr(item, name)!r}"
+                    f"{where}.{name}: expected a road id (or give a route), got {getattr(item, name)!r}"
                 )
         a = self.routes.road_index(item.origin, f"{where}.origin")
         b = self.routes.road_index(item.destination, f"{where}.destination")
@@ -317,9 +319,7 @@ class BuiltinTrafficProvider(ProviderBase):
                 f"{sorted(self.traffic.vehicle_types)}, built-in: {sorted(DEFAULT_VEHICLE_TYPES)}"
             )
         if vtype.base not in VEHICLE_BASES:
-            raise ScenarioError(
-                f"{field_path}.base: expected one of {list(VEHICLE_BASES)}, got {vtype.base!r}"
-            )
+            raise ScenarioError(f"{field_path}.base: expected one of {list(VEHICLE_BASES)}, got {vtype.base!r}")
         for attr in ("max_speed", "accel", "decel", "speed_factor"):
             if not getattr(vtype, attr) > 0:
                 raise ScenarioError(f"{field_path}.{attr}: expected > 0, got {getattr(vtype, attr)}")
@@ -374,8 +374,7 @@ class BuiltinTrafficProvider(ProviderBase):
             empty_f = np.zeros(0)
             return rows, np.zeros(0, dtype=np.int64), empty_f, empty_f, empty_f
         proj = project(self.map, table.data[_XY][:, rows].T, table.heading[rows])
-        return (rows, proj.lane.astype(np.int64), proj.s, proj.t,
-                table.heading[rows] - proj.lane_heading)
+        return (rows, proj.lane.astype(np.int64), proj.s, proj.t, table.heading[rows] - proj.lane_heading)
 
     # ------------------------------------------------------------------ departures
     def _depart(self, sim: Simulation, time: float, foreign=None, f_lane=None, f_s=None) -> None:
@@ -429,8 +428,7 @@ class BuiltinTrafficProvider(ProviderBase):
             factor = float(self.rng.normal(src.speed_factor, src.speed_dev))
         else:
             factor = src.speed_factor
-        factor = max(min(factor, src.speed_factor + 2 * src.speed_dev),
-                     src.speed_factor - 2 * src.speed_dev, 0.1)
+        factor = max(min(factor, src.speed_factor + 2 * src.speed_dev), src.speed_factor - 2 * src.speed_dev, 0.1)
         lane = int(src.spot_lane[i])
         v0 = min(src.params[K.MAX_SPEED], float(self.map.lane_speed_limit[lane]) * factor)
         want = src.depart_speed
@@ -445,23 +443,30 @@ class BuiltinTrafficProvider(ProviderBase):
             while speed > 0.0 and K.idm(speed, v0, ahead, v_ahead, accel, decel, tau, s0) < -decel:
                 speed = speed * 0.8 if speed > 1.0 else 0.0
         if behind < K.INF * 0.5 and (
-            behind < FOLLOWER_ROOM
-            or K.idm(v_behind, max(v_behind, 1.0), behind, speed, 2.6, 4.5, 1.0, 2.5) < -4.5
+            behind < FOLLOWER_ROOM or K.idm(v_behind, max(v_behind, 1.0), behind, speed, 2.6, 4.5, 1.0, 2.5) < -4.5
         ):
             return -1  # the vehicle behind could not brake for it comfortably
         vid = src.id if src.is_trip else f"{src.id}.{int(self.count[k])}"
         if vid in table.row_of:
             raise ScenarioError(f"{src.where}.id: vehicle id {vid!r} is already in use")
         row = table.add(
-            vid, owner=self.provider_id, role=Role.TRAFFIC, x=0.0, y=0.0, heading=0.0,
-            speed=speed, vtype=src.vtype, length=src.length, width=src.width, height=src.height,
+            vid,
+            owner=self.provider_id,
+            role=Role.TRAFFIC,
+            x=0.0,
+            y=0.0,
+            heading=0.0,
+            speed=speed,
+            vtype=src.vtype,
+            length=src.length,
+            width=src.width,
+            height=src.height,
         )
         self._adopt_row(row, int(src.spot_slot[i]), float(src.spot_s[i]), 0.0, factor, src.params)
         K.place_vehicle(self.frozen_lanes, self.frozen_routes(), self.frozen_state(), table.data, row)
         return row
 
-    def _adopt_row(self, row: int, slot: int, s: float, lat: float, factor: float,
-                   params: np.ndarray) -> None:
+    def _adopt_row(self, row: int, slot: int, s: float, lat: float, factor: float, params: np.ndarray) -> None:
         self.si[:, row] = (slot, -1, -1, -1)
         moving = abs(lat) > 1e-3
         self.st[:, row] = 0.0
@@ -496,8 +501,7 @@ class BuiltinTrafficProvider(ProviderBase):
         bad = rows[~self.can_accept(sim, rows)]
         if bad.size:
             raise ValueError(
-                f"builtin traffic cannot take vehicles {[sim.table.ids[r] for r in bad]}: "
-                "they are not on a lane"
+                f"builtin traffic cannot take vehicles {[sim.table.ids[r] for r in bad]}: they are not on a lane"
             )
         t = sim.table
         proj = project(self.map, t.data[_XY][:, rows].T, t.heading[rows])
@@ -508,9 +512,17 @@ class BuiltinTrafficProvider(ProviderBase):
             s = float(np.clip(proj.s[i], 0.0, self.map.lane_length[lane]))
             vtype = DEFAULT_VEHICLE_TYPES[TYPE_OF_VEHICLE.get(VehicleType(int(t.vtype[row])), "car")]
             params = np.array(
-                [vtype.accel, vtype.decel, max(vtype.emergency_decel, vtype.decel), vtype.tau,
-                 vtype.min_gap, vtype.max_speed, vtype.politeness, vtype.lc_threshold,
-                 vtype.lc_keep_right],
+                [
+                    vtype.accel,
+                    vtype.decel,
+                    max(vtype.emergency_decel, vtype.decel),
+                    vtype.tau,
+                    vtype.min_gap,
+                    vtype.max_speed,
+                    vtype.politeness,
+                    vtype.lc_threshold,
+                    vtype.lc_keep_right,
+                ],
                 dtype=np.float64,
             )
             params[K.MAX_SPEED] = max(params[K.MAX_SPEED], float(t.speed[row]))

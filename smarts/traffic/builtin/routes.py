@@ -45,8 +45,7 @@ class RouteTable:
             order[bounds[r] : bounds[r + 1]].tolist() for r in range(len(road_map.road_ids))
         ]  # per road, rightmost first (``RoadMap.road_lanes`` scans every lane per call)
         self._road_length = np.array(
-            [float(road_map.lane_length[lanes].mean()) if lanes else 0.0
-             for lanes in self._road_lanes]
+            [float(road_map.lane_length[lanes].mean()) if lanes else 0.0 for lanes in self._road_lanes]
         )
         self.routes: list[tuple[int, ...]] = []  # road sequence per route
         self.slot_of: list[dict[int, int]] = []  # per route: lane -> slot
@@ -75,9 +74,7 @@ class RouteTable:
         """Build the flat arrays the kernels read. Adding routes only appends to lists and
         marks the arrays stale; they are built on the next read, so building n routes costs
         O(n) instead of one repack of every slot per route."""
-        slot_int = np.array(
-            [self._lane, self._next, self._left, self._right, self._dir], dtype=np.int64
-        ).reshape(5, -1)
+        slot_int = np.array([self._lane, self._next, self._left, self._right, self._dir], dtype=np.int64).reshape(5, -1)
         self._packed = (slot_int, np.array(self._cost, dtype=np.float64))
         self.pack_count += 1
         return self._packed
@@ -89,9 +86,7 @@ class RouteTable:
             raise ScenarioError(f"{where}: unknown road {road_id!r} (map {m.source!r})")
         road = m.road_index_of[road_id]
         if m.lane_internal[self._road_lanes[road]].any():
-            raise ScenarioError(
-                f"{where}: road {road_id!r} lies inside a junction; name the roads around it"
-            )
+            raise ScenarioError(f"{where}: road {road_id!r} lies inside a junction; name the roads around it")
         return road
 
     def complete(self, roads: list[int], where: str) -> list[int]:
@@ -106,9 +101,7 @@ class RouteTable:
             path = self._shortest(a, b)
             if path is None:
                 m = self.map
-                raise ScenarioError(
-                    f"{where}: road {m.road_ids[a]!r} does not connect to {m.road_ids[b]!r}"
-                )
+                raise ScenarioError(f"{where}: road {m.road_ids[a]!r} does not connect to {m.road_ids[b]!r}")
             full.extend(path[1:])
         return full
 
@@ -139,8 +132,7 @@ class RouteTable:
         """Route id for a list of road ids (consecutive or just passing points, in order)."""
         if not road_ids:
             raise ScenarioError(f"{where}: a route needs at least one road")
-        roads = [self.road_index(r, f"{where}[{i}]" if len(road_ids) > 1 else where)
-                 for i, r in enumerate(road_ids)]
+        roads = [self.road_index(r, f"{where}[{i}]" if len(road_ids) > 1 else where) for i, r in enumerate(road_ids)]
         full = self.complete(roads, where)
         seen: set[int] = set()
         for road in full:
@@ -215,8 +207,7 @@ class RouteTable:
             cont: dict[int, float] = {}
             for lane in lanes_of[k]:
                 options = [
-                    (cost[t] + (MINOR_MERGE_COST if path and path[0] in self._minor else 0.0),
-                     len(path), t, path)
+                    (cost[t] + (MINOR_MERGE_COST if path and path[0] in self._minor else 0.0), len(path), t, path)
                     for path, t in self.exits[lane]
                     if int(m.lane_road[t]) == target_road
                 ]
@@ -232,8 +223,7 @@ class RouteTable:
         # Slots: road lanes first, then the junction lanes the chosen ways pass.
         direction: dict[int, int] = {}
         for k, lanes in enumerate(lanes_of):
-            cont = {ln: (cost[ln] if k == len(roads) - 1 else self._cont_cost(ln, way, cost))
-                    for ln in lanes}
+            cont = {ln: (cost[ln] if k == len(roads) - 1 else self._cont_cost(ln, way, cost)) for ln in lanes}
             for lane in lanes:
                 direction[lane] = self._best_lane(lanes, lane, cont)[1]
         for k, lanes in enumerate(lanes_of):

@@ -199,7 +199,18 @@ class _RouteSets:
 @numba.njit(cache=True, nogil=True)
 @cache_depends_on(K, _junctions)
 def _step_episodes(
-    frozen_state, frozen_lanes, frozen_sets, data, via_colour, episode_step, dt, foreign, f_lane, f_s, f_t, f_dh,
+    frozen_state,
+    frozen_lanes,
+    frozen_sets,
+    data,
+    via_colour,
+    episode_step,
+    dt,
+    foreign,
+    f_lane,
+    f_s,
+    f_t,
+    f_dh,
 ):  # pragma: no cover - compiled
     """``BuiltinTrafficProvider.step``'s compiled part for each member, on its block of rows, with
     its set's route and junction tables (views into the concatenated ones, see ``RouteSets``).
@@ -235,7 +246,7 @@ def _step_episodes(
         own = own_rows[k, : own_count[k]]
         lo, hi = f_lo[k], f_hi[k]
         others = K.Others(rows=f_local[lo:hi], lane=f_lane[lo:hi], s=f_s[lo:hi], t=f_t[lo:hi], dh=f_dh[lo:hi])
-        block = data[:, b * cap:(b + 1) * cap]
+        block = data[:, b * cap : (b + 1) * cap]
         state = K.RowState(si=stage.si[k], st=stage.st[k], pa=stage.pa[k], mine=stage.mine[k])
         raw = K.RawEntries(lane=stage.raw_lane[k], s=stage.raw_f[k, 0], half=stage.raw_f[k, 1], v=stage.raw_f[k, 2],
                            row=stage.raw_row[k], kind=stage.raw_kind[k])  # fmt: skip
