@@ -155,3 +155,9 @@ def test_both_trainers_hand_the_sim_device_to_the_batched_backend():
             assert agent_device(vec.driving) == {expected}
         finally:
             vec.close()
+
+
+def test_an_eval_video_scenario_the_suite_lacks_is_refused_before_the_run():
+    assert load_config("platoon", overrides={"eval_video_scenario": "a09_lead_turns_right_at_signal_medium"})
+    with pytest.raises(ConfigError, match="eval_video_scenario: suite 'adaptive' has no scenario 'a99'; it has a01_"):
+        load_config("platoon", overrides={"eval_video_scenario": "a99"})

@@ -142,7 +142,7 @@ def test_periodic_evaluation_selects_best_by_s_bench_and_logs_it(tmp_path):
     args = ["ppo", "--task", "drive", "--scenarios", "collaborative:c01_4way_1lane_left_free", "--total-steps", "256",
             "--frames-per-batch", "128", "--minibatch-size", "64", "--epochs", "1", "--envs", "1", "--eval-every", "128",
             "--eval-episodes", "1", "--eval-suite", str(suite), "--eval-workers", "1", "--out-dir", str(out),
-            "--quiet"]  # fmt: skip
+            "--eval-video-scenario", "t2_straight_traffic", "--quiet"]  # fmt: skip
     assert main(args) == 0
     acc = EventAccumulator(str(out / "tensorboard"), size_guidance={"scalars": 0, "images": 0})
     acc.Reload()
@@ -151,8 +151,9 @@ def test_periodic_evaluation_selects_best_by_s_bench_and_logs_it(tmp_path):
     assert all(0.0 <= v <= 1.0 for v in s_bench.values())
     assert "eval/PR" in acc.Tags()["scalars"] and "eval/MTE" in acc.Tags()["scalars"]
     assert any(t.startswith("eval_trajectories/") for t in acc.Tags()["images"])
-    # An evaluation video of the suite's first scenario at every evaluation: an animated GIF.
-    videos = acc.Images("eval_video/t1_left")
+    # An evaluation video of the chosen scenario at every evaluation: an animated GIF.
+    assert not any(t.startswith("eval_video/t1_left") for t in acc.Tags()["images"])
+    videos = acc.Images("eval_video/t2_straight_traffic")
     assert [v.step for v in videos] == [128, 256]
     from io import BytesIO
 

@@ -250,6 +250,11 @@ class TrainConfig(Schema):
         description="The benchmark suite of the evaluations (a name or a YAML path); null: the task's own (adaptive "
         "for platoon, collaborative for drive).",
     )
+    eval_video_scenario: str | None = Field(
+        None,
+        description="The evaluation suite's scenario whose follow-camera video every held-out evaluation writes to "
+        "TensorBoard; null: the suite's first with a junction, a merge or an exit.",
+    )
     eval_workers: PositiveInt = Field(
         2,
         description="Processes that run each evaluation's episodes; 1 runs them in the training process (no start-up "
@@ -348,6 +353,21 @@ class TrainConfig(Schema):
             object.__setattr__(self, "scenarios", [f"{self.suite}:*"])
             if self.eval_suite is None:
                 object.__setattr__(self, "eval_suite", self.suite)
+        return self
+
+    @model_validator(mode="after")
+    def _video_scenario(self) -> "TrainConfig":
+        if self.eval_video_scenario is not None:
+            from smarts.benchmark.suites import load_suite
+            from train.run import TASK_SUITE
+
+            suite = load_suite(self.eval_suite or TASK_SUITE[self.task])
+            names = [s.name for s in suite.scenarios]
+            if self.eval_video_scenario not in names:
+                raise ValueError(
+                    f"eval_video_scenario: suite {suite.name!r} has no scenario {self.eval_video_scenario!r}; "
+                    f"it has {', '.join(names)}"
+                )
         return self
 
     @model_validator(mode="after")

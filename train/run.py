@@ -478,12 +478,12 @@ def _evaluate(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int, 
     for figure in sorted((out / "plots").glob("trajectories_*.png"))[:3]:
         image = np.asarray(Image.open(figure).convert("RGB"))
         writer.add_image(f"eval_trajectories/{figure.stem[len('trajectories_') :]}", image, step, dataformats="HWC")
-    # A follow-camera video (HUD, legend) of an informative scenario (a junction, a merge or an exit;
-    # or the config's eval_video_scenario once it has one) at its first held-out seed, played by
-    # TensorBoard's Images tab.
+    # A follow-camera video (HUD, legend) of the config's eval_video_scenario, else an informative
+    # scenario (a junction, a merge or an exit), at its first held-out seed, played by TensorBoard's
+    # Images tab.
     from train.enjoy import episode_frames, video_scenario, write_tensorboard_video
 
-    name = video_scenario(suite, getattr(cfg, "eval_video_scenario", None))
+    name = video_scenario(suite, cfg.eval_video_scenario)
     entry = next(e for e in suite.scenarios if e.name == name)
     steps = int(round(entry.time_limit / entry.spec.step_length))
     frames = episode_frames(str(frozen), f"{cfg.eval_suite or TASK_SUITE[cfg.task]}:{entry.name}", seed=cfg.eval_seed,
