@@ -42,6 +42,8 @@ CONFIG_DIR = config_path("train")
 """The shipped task configs (``configs/train/``, installed as ``smarts.configs``)."""
 Task = Literal["platoon", "drive"]
 TASKS = typing.get_args(Task)
+TASK_SUITE = {"platoon": "adaptive", "drive": "collaborative"}
+"""The benchmark suite of each task: its held-out evaluations' default."""
 ACTION_SPACES = {"rtp": "relative_target_pose", "continuous": "continuous"}
 """The config's action-space names -> the simulator's."""
 LIBS = ("torchrl", "sb3")
@@ -359,7 +361,6 @@ class TrainConfig(Schema):
     def _video_scenario(self) -> "TrainConfig":
         if self.eval_video_scenario is not None:
             from smarts.benchmark.suites import load_suite
-            from train.run import TASK_SUITE
 
             suite = load_suite(self.eval_suite or TASK_SUITE[self.task])
             names = [s.name for s in suite.scenarios]

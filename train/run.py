@@ -41,7 +41,7 @@ from agents.checkpoint import CheckpointError, checkpoint_format, read_checkpoin
 from agents.ppo import CHECKPOINT_FORMAT, check_checkpoint
 from agents.sb3_policy import SB3_FORMAT, check_export
 from smarts.files import atomic_write_text, next_numbered, point_latest
-from train.config import ACTION_SPACES, TrainConfig
+from train.config import ACTION_SPACES, TASK_SUITE, TrainConfig
 
 SCALAR_TAGS = (
     "episode/return",  # mean return (in the reward's own units) of the episodes that ended in the batch
@@ -63,7 +63,6 @@ SCALAR_TAGS = (
 SUMMARY_KEYS = ("steps", "wall_s", *SCALAR_TAGS)
 CHECKPOINTS = ("last", "best", "final", "interrupted")
 LIBRARY_OF_FORMAT = {CHECKPOINT_FORMAT: "torchrl", SB3_FORMAT: "sb3"}
-TASK_SUITE = {"platoon": "adaptive", "drive": "collaborative"}
 TRAIN_SEED_BASE = 100_000
 """Training episodes use seeds from here up (``seed * 1_000_003`` further on); evaluation uses
 ``eval_seed`` and the benchmark suites their own seeds, so neither is seen in training."""
