@@ -282,23 +282,14 @@ class AgentProvider(ProviderBase):
             raise ActionError(f"expected real-number actions, got dtype {actions.dtype}", [])
         plans = []
         bad: list[str] = []
-        for kind, members in self.groups.items():
-            members = members[sim.agent_active[members]]
-            if agents is not None:
-                members = members[np.isin(members, agents)]
-            if members.size == 0:
-                continue
-            commanded = self.commanded[members] if self._group_commanded[kind] else None
+        for kind, members, commanded, layout in self._layout(sim, agents):
             parts = []
-            for controller in ("direct", "lane_relative"):
-                if commanded is None:
-                    chosen = members if controller == "direct" else None
-                else:
-                    chosen = members[~commanded if controller == "direct" else commanded]
-                if chosen is None or chosen.size == 0:
+            for part, direct in zip(layout, (True, False)):
+                if part is None:
                     parts.append(None)
                     continue
-                arr = np.asarray(actions[chosen, : len(action_components(kind, controller))], dtype=np.float64)
+                chosen = members if commanded is None else members[~commanded if direct else commanded]
+                arr = np.asarray(actions[chosen, : part[2]], dtype=np.float64)
                 finite = np.isfinite(arr).all(axis=1)
                 if not finite.all():
                     bad += [sim.agent_ids[a] for a in chosen[~finite].tolist()]
