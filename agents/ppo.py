@@ -69,17 +69,26 @@ class ObservationLayout:
         return torch.cat(parts, dim=-1)
 
 
-def mlp(sizes: list[int], out: int, final_gain: float = 1.0) -> nn.Sequential:
-    """torchrl's ``MLP`` (tanh between layers; its layers are named as ``nn.Sequential``'s, so
-    checkpoints keep their keys), initialised orthogonally as PPO implementations do: gain
-    sqrt(2) for hidden layers, ``final_gain`` for the output (small for the actor's mean)."""
-    from torchrl.modules import MLP
+def mlp(sizes: list[int], out: int, final_gain: float = 1.0, init: bool = True) -> nn.Sequential:
+    """Linear layers with tanh between them, initialised orthogonally as PPO implementations do:
+    gain sqrt(2) for hidden layers, ``final_gain`` for the output (small for the actor's mean).
 
-    net = MLP(in_features=sizes[0], out_features=out, num_cells=list(sizes[1:]), activation_class=nn.Tanh)
-    linears = [m for m in net if isinstance(m, nn.Linear)]
-    for layer in linears:
-        nn.init.orthogonal_(layer.weight, final_gain if layer is linears[-1] else np.sqrt(2))
-        nn.init.zeros_(layer.bias)
+    The layers and their order are those of torchrl's ``MLP``, so checkpoints keep their keys and
+    a seed gives the same weights; built from ``torch.nn`` directly because importing torchrl costs
+    seconds in every evaluation process that only loads a checkpoint. ``init=False`` skips the
+    orthogonal initialisation (a QR per layer) for networks whose weights are loaded next."""
+    widths = [*sizes, out]
+    layers: list[nn.Module] = []
+    for i in range(len(widths) - 1):
+        layers.append(nn.Linear(widths[i], widths[i + 1]))
+        if i < len(widths) - 2:
+            layers.append(nn.Tanh())
+    net = nn.Sequential(*layers)
+    if init:
+        linears = [m for m in net if isinstance(m, nn.Linear)]
+        for layer in linears:
+            nn.init.orthogonal_(layer.weight, final_gain if layer is linears[-1] else np.sqrt(2))
+            nn.init.zeros_(layer.bias)
     return net
 
 
@@ -92,10 +101,11 @@ class Actor(nn.Module):
         action_size: int,
         hidden: tuple[int, ...] = (128, 128),
         init_log_std: float | list[float] = -0.5,
+        init: bool = True,
     ):
         super().__init__()
         self.hidden = tuple(hidden)
-        self.net = mlp([obs_size, *hidden], action_size, final_gain=0.01)
+        self.net = mlp([obs_size, *hidden], action_size, final_gain=0.01, init=init)
         start = torch.as_tensor(init_log_std, dtype=torch.float32).expand(action_size).clone()
         self.log_std = nn.Parameter(start)
 
@@ -338,7 +348,7 @@ class PPOPolicy:
         self.source = source
         self.low = torch.tensor(blob["action"]["low"], dtype=torch.float32)
         self.high = torch.tensor(blob["action"]["high"], dtype=torch.float32)
-        self.actor = Actor(layout.size, len(self.low), tuple(blob["hidden"]))
+        self.actor = Actor(layout.size, len(self.low), tuple(blob["hidden"]), init=False)  # weights next
         self.normalizer = ObsNormalizer(layout.size)
         try:
             self.actor.load_state_dict(blob["actor"])
