@@ -66,9 +66,11 @@ def build_simulation(
     maps share it through a stack of their maps (``smarts.maps.stack``). ``road_map``: the map of
     every scenario, when it is loaded already. ``device``: where stages with a torch version run
     (``smarts.dynamics.pose_control_torch.resolve_device``; "cpu": the compiled kernels)."""
-    from smarts.dynamics.pose_control_torch import resolve_device
+    torch_device = None  # the compiled kernels: no torch import (seconds) for a simulation on "cpu"
+    if device != "cpu":
+        from smarts.dynamics.pose_control_torch import resolve_device
 
-    torch_device = resolve_device(device)
+        torch_device = resolve_device(device)
     specs = [specs] if not isinstance(specs, (list, tuple)) else list(specs)
     if not specs:
         raise ValueError("build_simulation needs at least one scenario")

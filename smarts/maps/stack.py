@@ -218,6 +218,23 @@ def _refuse_space(combined: RoadMap) -> None:
     combined.__dict__["_raster_lookup"] = _NoSpace()
 
 
+STACKS_KEPT = 8
+"""Stacks this process keeps for reuse (see :func:`stack_maps`)."""
+_stacks: dict[tuple[int, ...], MapStack] = {}
+
+
 def stack_maps(maps: Sequence[RoadMap]) -> MapStack:
-    """``maps`` in one lane index space (see the module docstring); distinct maps only."""
-    return MapStack(maps)
+    """``maps`` in one lane index space (see the module docstring); distinct maps only.
+
+    Maps are read-only once compiled, so the stack of the same map objects is made once per process
+    and reused: a benchmark builds one simulation per agent on the same suite, and what the stack's
+    windows compute on first use (junction tables, lane exits, routes) then carries over. The key
+    is the maps' identities; the stack holds the maps, so an identity is never reused while kept."""
+    key = tuple(id(m) for m in maps)
+    stack = _stacks.pop(key, None)
+    if stack is None:
+        stack = MapStack(maps)
+    _stacks[key] = stack  # the newest last
+    while len(_stacks) > STACKS_KEPT:
+        del _stacks[next(iter(_stacks))]
+    return stack

@@ -446,6 +446,19 @@ def cache_key(xml_files: Mapping[str, str], options: tuple[str, ...], version: s
     return h.hexdigest()
 
 
+_checked: dict[tuple[str, Path], tuple[Path, tuple[int, int] | None]] = {}
+"""Entries this process found intact, with their file's size and modification time then: a
+scenario names its map once per episode, and hashing the entry each time cost milliseconds."""
+
+
+def _stamp(path: Path) -> tuple[int, int] | None:
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (st.st_size, st.st_mtime_ns)
+
+
 def compile_map(recipe: MapRecipe, cache_dir: str | os.PathLike | None = None) -> Path:
     """Path of the recipe's .net.xml, running netconvert only when no intact cached build matches.
 
@@ -456,15 +469,21 @@ def compile_map(recipe: MapRecipe, cache_dir: str | os.PathLike | None = None) -
     an entry that fails (truncated, edited, half-copied) is rebuilt. When the cache folder cannot be
     written, the map is built in this process's temporary cache instead (see ``smarts.cache``).
     """
+    primary = cache_root(cache_dir)
+    memo = (repr(recipe), primary)  # the recipe's generator, parameters and options
+    known = _checked.get(memo)
+    if known is not None and known[1] is not None and _stamp(known[0]) == known[1]:
+        return known[0]
     xml_files = recipe.network().xml_files()
     key = cache_key(xml_files, recipe.netconvert_options, netconvert_version())
     entry_name = f"{recipe.name}-{key[:16]}"
     net_name = f"{recipe.name}.net.xml"
-    primary = cache_root(cache_dir)
     for root in cache.candidates(primary):
         problem = cache.check_manifest(root / entry_name, [net_name])
         if problem is None:
-            return root / entry_name / net_name
+            path = root / entry_name / net_name
+            _checked[memo] = (path, _stamp(path))
+            return path
         if problem != "missing":
             _log.warning("rebuilding the cached built-in map %s: %s", root / entry_name, problem)
 
