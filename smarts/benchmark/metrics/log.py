@@ -102,6 +102,7 @@ import numpy as np
 
 from smarts.core.errors import LogError
 from smarts.files import atomic_write
+from smarts.npz import read_npz, write_npz
 
 FORMAT_NAME = "smarts-episode-log"
 FORMAT_VERSION = 2
@@ -599,7 +600,8 @@ def episode_filename(log: EpisodeLog) -> str:
 
 
 def write_episode(log: EpisodeLog, path: str | os.PathLike) -> Path:
-    """Validate, then write ``log`` as one compressed .npz at ``path`` (atomically); returns it."""
+    """Validate, then write ``log`` as one compressed .npz at ``path`` (atomically; see
+    ``smarts.npz``); returns it."""
     validate_episode(log)
     path = Path(path)
     try:
@@ -619,8 +621,9 @@ def write_episode(log: EpisodeLog, path: str | os.PathLike) -> Path:
     if log.scene is not None:
         arrays.update({f"scene/{name}": value for name, value in log.scene.arrays().items()})
     path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_write(path) as fh:
-        np.savez_compressed(fh, **arrays)
+    # Not fsynced: a log lost to a power cut reads back invalid, and --resume runs its episode again.
+    with atomic_write(path, durable=False) as fh:
+        write_npz(fh, arrays)
     return path
 
 
@@ -628,8 +631,7 @@ def read_episode(path: str | os.PathLike) -> EpisodeLog:
     """Read and validate one .npz episode log; :class:`LogError` names what is wrong and where."""
     src = str(path)
     try:
-        with np.load(path, allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
+        arrays = read_npz(path)
     except FileNotFoundError:
         raise
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
