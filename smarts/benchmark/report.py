@@ -31,6 +31,8 @@ from __future__ import annotations
 import csv
 import io
 import json
+import logging
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +42,8 @@ from smarts.benchmark.metrics import load_params, read_episode, score_suite
 from smarts.benchmark.metrics.scores import CI_LEVEL, CI_RESAMPLES, CI_SEED, ci_method, metric_names
 from smarts.benchmark.suites import Suite
 from smarts.files import atomic_write_bytes, atomic_write_text
+
+_log = logging.getLogger(__name__)
 
 ZERO_WIDTH = 1e-12
 """An interval narrower than this has no spread behind it and is shown as n/a."""
@@ -206,9 +210,10 @@ def write_report(
 
     plots = out / "plots"
     plots.mkdir(parents=True, exist_ok=True)
+    drawing = _trajectory_plots(plots, suite, shown, results, label)  # drawn beside what follows
     metric_figures = _metric_plots(plots, suite, scores, names, label)
-    trajectory_figures = _trajectory_plots(plots, suite, shown, results, label)
     _tensorboard(out / "tensorboard", suite, scores, names, agent_label)
+    trajectory_figures = drawing.result()
     no_spread = any(
         not has_spread(ci)
         for s in scores.values() if s is not None
@@ -435,77 +440,174 @@ def _draw_road(ax, road_map, box) -> None:
     ax.add_collection(LineCollection(dividers, colors="white", linewidths=1.0, linestyles=(0, (4, 4)), zorder=1))
 
 
-def _trajectory_plots(plots: Path, suite: Suite, agents: list[str], results: list[dict], label) -> dict[str, Path]:
-    """Per scenario: the road around the episode, each agent's path in episode 0 (start o, end x),
-    and from the first agent's log the lead's path and the other road users'. Returns scenario ->
-    file."""
-    plt = _pyplot()
-    from smarts.env.assembly import scenario_map
+@dataclass(frozen=True)
+class _TrajectoryFigure:
+    """What one scenario's trajectory figure needs, as plain data (it may be drawn in another
+    process): the agents' episode-0 log files, in legend order, with their names and colours."""
 
+    plots: Path
+    suite: str
+    scenario: str
+    spec: Any
+    logs: tuple[tuple[str, str], ...]  # (agent, log file)
+    labels: tuple[tuple[str, str], ...]  # (agent, legend name)
+    colours: tuple[tuple[str, str], ...]
+
+
+def _trajectory_plots(plots: Path, suite: Suite, agents: list[str], results: list[dict], label) -> _Drawing:
+    """Per scenario: the road around the episode, each agent's path in episode 0 (start o, end x),
+    and from the first agent's log the lead's path and the other road users'. Drawn beside the
+    caller: :meth:`_Drawing.result` gives scenario -> file."""
     colours = _colours(agents)
-    out = {}
+    figures = []
     for entry in suite.scenarios:
-        logs = {}
+        logs = []
         for agent in agents:
             first = next((r for r in results if r["agent"] == agent and r.get("scenario") == entry.name
                           and r.get("episode") == 0 and r.get("log")), None)  # fmt: skip
             if first is not None:
-                log = read_episode(first["log"])
-                if log.agents:
-                    logs[agent] = log
-        if not logs:
-            continue
-        scene_log = next((log for log in logs.values() if log.scene is not None), None)
-        tracks, lead_tracks = {}, {}
-        if scene_log is not None:
-            scene = scene_log.scene
-            tracks = _tracks(scene)
-            lead_ids = {scene.ids.index(v) for v in scene.leads.values() if v in scene.ids}
-            lead_tracks = {i: tracks.pop(i) for i in sorted(lead_ids) if i in tracks}
-        focus = [np.stack([t.x, t.y], axis=1) for log in logs.values() for t in log.agents.values() if t.num_steps]
-        focus += list(lead_tracks.values())
-        box, to_scale = _crop(np.concatenate(focus))
-        span_x, span_y = box[1] - box[0], box[3] - box[2]
-        height = float(np.clip(8.0 * span_y / span_x, 3.2, 8.0)) if to_scale else 3.4
-        width = 8.0 if to_scale or span_x >= span_y else 4.5
-        fig, ax = plt.subplots(figsize=(width, height if span_x >= span_y or to_scale else 8.0))
-        ax.set_facecolor("#f3f6f0")
-        _draw_road(ax, scenario_map(entry.spec), box)
-        for k, xy in enumerate(tracks.values()):
-            ax.plot(xy[:, 0], xy[:, 1], color=TRAFFIC_COLOUR, linewidth=1.0, alpha=0.8, zorder=2,
-                    label=f"other road users ({len(tracks)}; square: last seen)" if k == 0 else None)  # fmt: skip
-            ax.plot(xy[-1:, 0], xy[-1:, 1], "s", color=TRAFFIC_COLOUR, markersize=3, zorder=2)
-        for k, xy in enumerate(lead_tracks.values()):
-            # Above the agents (who drive where it drove), dashed so their colours show between.
-            ax.plot(xy[:, 0], xy[:, 1], color="black", linewidth=1.6, linestyle=(0, (5, 3)), zorder=6,
-                    label="lead vehicle" if k == 0 else None)  # fmt: skip
-            ax.plot(xy[:1, 0], xy[:1, 1], "o", color="black", markersize=5, zorder=6)
-            ax.plot(xy[-1:, 0], xy[-1:, 1], "x", color="black", markersize=6, mew=1.5, zorder=6)
-        for agent, log in logs.items():
-            several = len(log.agents) > 1
-            for j, (agent_id, t) in enumerate(log.agents.items()):
-                if not t.num_steps:
-                    continue
-                style = ("-", "--", ":", "-.")[j % 4]
-                name = label(agent) + (f" · {agent_id}" if several else "")
-                ax.plot(t.x, t.y, color=colours[agent], linewidth=2.0, linestyle=style, zorder=4, label=name)
-                ax.plot(t.x[:1], t.y[:1], "o", color=colours[agent], markersize=5, zorder=5)
-                ax.plot(t.x[-1:], t.y[-1:], "x", color=colours[agent], markersize=7, mew=2, zorder=5)
-        ax.plot([], [], "ko", markersize=4, label="start")
-        ax.plot([], [], "kx", markersize=6, mew=2, label="end of the path")
-        ax.set_xlim(box[0], box[1])
-        ax.set_ylim(box[2], box[3])
-        if to_scale:
-            ax.set_aspect("equal")
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-        seed = next(iter(logs.values())).seed
-        scale = "" if to_scale else f"; not to scale: {'y' if span_x >= span_y else 'x'} stretched to show the lanes"
-        ax.set_title(f"{suite.name} · {entry.name}: episode 0 (seed {seed}{scale})", fontsize=10)
-        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-        out[entry.name] = _save(fig, plots / f"trajectories_{entry.name}.png")
-        plt.close(fig)
-    return out
+                logs.append((agent, str(first["log"])))
+        if logs:
+            figures.append(_TrajectoryFigure(plots, suite.name, entry.name, entry.spec, tuple(logs),
+                                             tuple((a, label(a)) for a, _ in logs),
+                                             tuple((a, colours[a]) for a, _ in logs)))  # fmt: skip
+    return _Drawing(figures)
+
+
+class _Drawing:
+    """Trajectory figures drawn by helper processes while the caller goes on (the metric plots,
+    TensorBoard), the caller drawing its share in :meth:`result`: each figure costs about half a
+    second of text layout and PNG encoding, and a report has one per scenario. One helper per
+    spare core, at most three; none on one core or for a few figures. Helpers are fresh
+    interpreters (``python -c``), never a fork or a re-run of the caller's script; a helper that
+    fails leaves its share to the caller."""
+
+    def __init__(self, figures: list[_TrajectoryFigure], helpers: int | None = None):
+        import os
+
+        self.figures = figures
+        if helpers is None:
+            helpers = min((os.cpu_count() or 1) - 1, 3, len(figures) // 3)
+        shares = [figures[k :: helpers + 1] for k in range(helpers + 1)]
+        self.mine = shares[0]
+        self.helpers = [(share, _start_helper(share)) for share in shares[1:]]
+
+    def result(self) -> dict[str, Path]:
+        try:
+            drawn = _draw_trajectories(self.mine)
+        finally:  # the helpers are waited for (and their files removed) whatever happens here
+            finished = [(share, *process.communicate(), process.returncode) for share, (process, _) in self.helpers]
+            for _, (_, pickled) in self.helpers:
+                pickled.unlink(missing_ok=True)
+        for share, out, err, code in finished:
+            if code == 0:
+                drawn.update({name: Path(path) for name, path in json.loads(out).items()})
+            else:
+                why = err.decode(errors="replace").strip().splitlines()[-1:] or [f"exit status {code}"]
+                _log.warning("a figure helper failed (%s); drawing its figures here", why[0])
+                drawn.update(_draw_trajectories(share))
+        return {f.scenario: drawn[f.scenario] for f in self.figures if f.scenario in drawn}
+
+
+def _start_helper(share: list[_TrajectoryFigure]):
+    """A helper drawing ``share``: (its process, the file holding its figures pickled)."""
+    import os
+    import pickle
+    import subprocess
+    import sys
+    import tempfile
+
+    import smarts
+
+    env = dict(os.environ)  # the helper imports this process's smarts, wherever it came from
+    root = str(Path(smarts.__file__).resolve().parents[1])
+    env["PYTHONPATH"] = os.pathsep.join([root, *filter(None, [env.get("PYTHONPATH")])])
+    with tempfile.NamedTemporaryFile("wb", prefix="smarts-figures-", suffix=".pickle", delete=False) as fh:
+        pickle.dump(share, fh)
+    process = subprocess.Popen(
+        [sys.executable, "-c", "from smarts.benchmark.report import _helper_main; _helper_main()", fh.name],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+    )  # fmt: skip
+    return process, Path(fh.name)
+
+
+def _helper_main() -> None:
+    """A figure helper: the figures its parent pickled (file in argv), scenario -> file as JSON out."""
+    import pickle
+    import sys
+
+    drawn = _draw_trajectories(pickle.loads(Path(sys.argv[1]).read_bytes()))
+    sys.stdout.write(json.dumps({name: str(path) for name, path in drawn.items()}))
+
+
+def _draw_trajectories(figures: list[_TrajectoryFigure]) -> dict[str, Path]:
+    return {f.scenario: path for f in figures if (path := _trajectory_figure(f)) is not None}
+
+
+def _trajectory_figure(figure: _TrajectoryFigure) -> Path | None:
+    """One scenario's trajectory figure (see :func:`_trajectory_plots`); None without agent paths."""
+    plt = _pyplot()
+    from smarts.env.assembly import scenario_map
+
+    logs = {}
+    for agent, file in figure.logs:
+        log = read_episode(file)
+        if log.agents:
+            logs[agent] = log
+    if not logs:
+        return None
+    colours, names = dict(figure.colours), dict(figure.labels)
+    scene_log = next((log for log in logs.values() if log.scene is not None), None)
+    tracks, lead_tracks = {}, {}
+    if scene_log is not None:
+        scene = scene_log.scene
+        tracks = _tracks(scene)
+        lead_ids = {scene.ids.index(v) for v in scene.leads.values() if v in scene.ids}
+        lead_tracks = {i: tracks.pop(i) for i in sorted(lead_ids) if i in tracks}
+    focus = [np.stack([t.x, t.y], axis=1) for log in logs.values() for t in log.agents.values() if t.num_steps]
+    focus += list(lead_tracks.values())
+    box, to_scale = _crop(np.concatenate(focus))
+    span_x, span_y = box[1] - box[0], box[3] - box[2]
+    height = float(np.clip(8.0 * span_y / span_x, 3.2, 8.0)) if to_scale else 3.4
+    width = 8.0 if to_scale or span_x >= span_y else 4.5
+    fig, ax = plt.subplots(figsize=(width, height if span_x >= span_y or to_scale else 8.0))
+    ax.set_facecolor("#f3f6f0")
+    _draw_road(ax, scenario_map(figure.spec), box)
+    for k, xy in enumerate(tracks.values()):
+        ax.plot(xy[:, 0], xy[:, 1], color=TRAFFIC_COLOUR, linewidth=1.0, alpha=0.8, zorder=2,
+                label=f"other road users ({len(tracks)}; square: last seen)" if k == 0 else None)  # fmt: skip
+        ax.plot(xy[-1:, 0], xy[-1:, 1], "s", color=TRAFFIC_COLOUR, markersize=3, zorder=2)
+    for k, xy in enumerate(lead_tracks.values()):
+        # Above the agents (who drive where it drove), dashed so their colours show between.
+        ax.plot(xy[:, 0], xy[:, 1], color="black", linewidth=1.6, linestyle=(0, (5, 3)), zorder=6,
+                label="lead vehicle" if k == 0 else None)  # fmt: skip
+        ax.plot(xy[:1, 0], xy[:1, 1], "o", color="black", markersize=5, zorder=6)
+        ax.plot(xy[-1:, 0], xy[-1:, 1], "x", color="black", markersize=6, mew=1.5, zorder=6)
+    for agent, log in logs.items():
+        several = len(log.agents) > 1
+        for j, (agent_id, t) in enumerate(log.agents.items()):
+            if not t.num_steps:
+                continue
+            style = ("-", "--", ":", "-.")[j % 4]
+            name = names[agent] + (f" · {agent_id}" if several else "")
+            ax.plot(t.x, t.y, color=colours[agent], linewidth=2.0, linestyle=style, zorder=4, label=name)
+            ax.plot(t.x[:1], t.y[:1], "o", color=colours[agent], markersize=5, zorder=5)
+            ax.plot(t.x[-1:], t.y[-1:], "x", color=colours[agent], markersize=7, mew=2, zorder=5)
+    ax.plot([], [], "ko", markersize=4, label="start")
+    ax.plot([], [], "kx", markersize=6, mew=2, label="end of the path")
+    ax.set_xlim(box[0], box[1])
+    ax.set_ylim(box[2], box[3])
+    if to_scale:
+        ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    seed = next(iter(logs.values())).seed
+    scale = "" if to_scale else f"; not to scale: {'y' if span_x >= span_y else 'x'} stretched to show the lanes"
+    ax.set_title(f"{figure.suite} · {figure.scenario}: episode 0 (seed {seed}{scale})", fontsize=10)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    path = _save(fig, figure.plots / f"trajectories_{figure.scenario}.png")
+    plt.close(fig)
+    return path
 
 
 def _tensorboard(folder: Path, suite: Suite, scores: dict, names: tuple[str, ...], label) -> None:

@@ -113,3 +113,35 @@ def test_episodes_that_differ_give_intervals(tmp_path):
     assert low < high  # (RC and MTE, alike in both episodes, are n/a in this row)
     doc = json.loads((tmp_path / "results.json").read_text())
     assert doc["agents"]["zoo:random"]["scores"]["overall_ci"]["S_bench"] == pytest.approx([low, high], abs=5e-4)
+
+
+def test_figures_drawn_by_a_helper_process_are_the_figures_drawn_here(adaptive_report, tmp_path, monkeypatch, caplog):
+    """Trajectory figures are shared out to helper interpreters; what a helper draws is byte for
+    byte what the report's own process draws, and a helper that fails leaves its share to it."""
+    from dataclasses import replace
+
+    from smarts.benchmark.metrics import read_episode
+    from smarts.benchmark.report import _draw_trajectories, _Drawing, _trajectory_plots
+
+    suite = load_suite(adaptive_report / "two.yaml")
+    results = []
+    for path in sorted((adaptive_report / "logs").rglob("*.npz")):
+        log = read_episode(path)
+        results.append({"agent": log.info["agent"], "scenario": log.scenario, "episode": log.episode, "log": str(path)})
+    figures = _trajectory_plots(tmp_path, suite, ["zoo:keep-lane", "zoo:random"], results, str).figures
+    assert len(figures) == 2
+    here = tmp_path / "here"
+    here.mkdir()
+    expected = _draw_trajectories([replace(f, plots=here) for f in figures])
+    drawn = _Drawing(figures, helpers=1).result()
+    assert sorted(drawn) == sorted(expected) == ["a01_straight_free", "a09_lead_turns_right_at_signal_medium"]
+    for name in drawn:
+        assert drawn[name].parent == tmp_path
+        assert drawn[name].read_bytes() == expected[name].read_bytes(), name
+    for path in drawn.values():
+        path.unlink()
+    monkeypatch.setenv("PYTHONHOME", str(tmp_path / "no-python-here"))  # the helper cannot start
+    with caplog.at_level("WARNING"):
+        again = _Drawing(figures, helpers=1).result()
+    assert "a figure helper failed" in caplog.text
+    assert {name: p.read_bytes() for name, p in again.items()} == {name: p.read_bytes() for name, p in expected.items()}
