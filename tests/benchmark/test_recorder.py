@@ -190,3 +190,21 @@ def test_a_follower_that_rams_its_lead_has_not_completed_the_scenario(tmp_path, 
     assert scores["PR"] < 0.5
     # ... and SFD counts every step it missed as lost contact.
     assert scores["SFD"] <= crash / 12.0 + 1e-9
+
+
+def test_nearest_path_points_are_numpys_argmin_bit_for_bit():
+    """The compiled nearest-point search behind route_distance_to_goal gives numpy's argmin (the
+    first of equal distances) and its squared distance exactly, ties included."""
+    from smarts.benchmark.recorder import _nearest_points
+
+    rng = np.random.default_rng(1)
+    for trial in range(60):
+        n, m = int(rng.integers(1, 200)), int(rng.integers(1, 300))
+        scale = float(rng.choice([1.0, 50.0, 300.0]))
+        xy, path = rng.normal(size=(n, 2)) * scale, rng.normal(size=(m, 2)) * scale
+        if trial % 3 == 0:  # integer grids: many equal distances
+            xy, path = np.round(xy / scale * 3), np.round(path / scale * 3)
+        d2 = ((xy[:, None, :] - path[None, :, :]) ** 2).sum(axis=2)
+        nearest = d2.argmin(axis=1)
+        got, got_d2 = _nearest_points(xy, path)
+        assert np.array_equal(got, nearest) and np.array_equal(got_d2, d2[np.arange(n), nearest]), trial
