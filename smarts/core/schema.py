@@ -44,6 +44,16 @@ def validate(model: type[M], data: Any, source: str, error: type[Exception] = Va
         raise error("\n".join(describe(model, problem, source) for problem in exc.errors())) from None
 
 
+_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+"""libyaml's parser where PyYAML has it (about 7x faster; the same safe constructors build the
+values), else the pure-Python one."""
+
+
+def parse_yaml(text: str) -> Any:
+    """YAML text as plain data (``yaml.safe_load``'s result), parsed by libyaml when available."""
+    return yaml.load(text, Loader=_SAFE_LOADER)  # noqa: S506 - a safe loader
+
+
 def load_yaml(path: str | os.PathLike, what: str, error: type[Exception] = ValueError) -> Any:
     """The parsed YAML of ``path``; unreadable files and bad YAML raise ``error`` naming the file."""
     source = str(path)
@@ -52,7 +62,7 @@ def load_yaml(path: str | os.PathLike, what: str, error: type[Exception] = Value
     except OSError as exc:
         raise error(f"{source}: cannot read {what}: {exc.strerror or exc}") from None
     try:
-        return yaml.safe_load(text)
+        return parse_yaml(text)
     except yaml.YAMLError as exc:
         raise error(f"{source}: invalid YAML: {exc}") from None
 
