@@ -407,6 +407,22 @@ class EpisodeRecorder:
         return path.s[goal_i] - path.s[nearest] + np.sqrt(d2)
 
 
+def _flags(size: int, rows: np.ndarray) -> np.ndarray:
+    """A boolean mask over ``size`` table rows, True at ``rows`` (``np.isin`` against the rows,
+    without its sort, for the per-step scene)."""
+    mask = np.zeros(size, dtype=bool)
+    mask[rows] = True
+    return mask
+
+
+def _member(values: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
+    """``np.isin(values, sorted_keys)`` for keys sorted ascending, by binary search."""
+    if not len(sorted_keys):
+        return np.zeros(len(values), dtype=bool)
+    at = np.minimum(np.searchsorted(sorted_keys, values), len(sorted_keys) - 1)
+    return sorted_keys[at] == values
+
+
 @numba.njit(cache=True)
 def _nearest_points(xy: np.ndarray, path: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For each point of ``xy``, the index of the nearest point of ``path`` (the first of equals)
@@ -492,7 +508,7 @@ class EpisodeRecorders:
         cand = everyone[live]
         rows = sim.agent_row[cand]
         lane = np.where(t.lane[rows] >= 0, t.lane[rows], self.prev_lane[cand])
-        at_end = (lane >= 0) & np.isin(cand * self.lanes + lane, self.end_keys)
+        at_end = (lane >= 0) & _member(cand * self.lanes + lane, self.end_keys)
         if at_end.any():
             a, r, lane, off = cand[at_end], rows[at_end], lane[at_end], t.lane[rows[at_end]] < 0
             front = t.s[r] + 0.5 * t.length[r]
@@ -584,13 +600,14 @@ class EpisodeRecorders:
         mine = agent_rows[(agent_rows >= 0) & sim.agent_active[all_agents]]
         lead_rows = [np.array([x for x in (r.sim.table.row_of.get(v) for v in r.follow.values()) if x is not None],
                               dtype=np.int64) for r in recs]  # fmt: skip
-        others = rows[~np.isin(rows, agent_rows[agent_rows >= 0])]
+        others = rows[~_flags(len(t.serial), agent_rows[agent_rows >= 0])[rows]]
         centres = np.concatenate([mine] + lead_rows)
         c_owner = place[centres // sim.episode_capacity]
         order = np.argsort(c_owner, kind="stable")
         centres, c_owner = centres[order], c_owner[order]
         o_owner = place[others // sim.episode_capacity]
-        near = self._near(others, o_owner, centres, c_owner, len(due)) | np.isin(others, np.concatenate(lead_rows))
+        is_lead = _flags(len(t.serial), np.concatenate(lead_rows))[others]
+        near = self._near(others, o_owner, centres, c_owner, len(due)) | is_lead
         others, o_owner = others[near], o_owner[near]
         state = np.stack([t.x[others], t.y[others], t.heading[others], t.speed[others]], axis=1).astype(np.float32)
         serial = t.serial[others]
