@@ -480,6 +480,45 @@ def _enqueue_traffic(
     return 0
 
 
+# The two steps of ``_deliver`` per receiver, inlined into it by numba.
+@numba.njit(cache=True, nogil=True, inline="always")
+def _heard(
+    q_row, q_channel, q_pose, n_sent, r, channel, rx, ry, range2, loss, seed, sent, dist2, index
+):  # pragma: no cover - compiled
+    """Which of the ``n_sent`` messages of one slot receiver row ``r`` at (rx, ry) hears: not its own,
+    on its channel (or broadcast), within range and not lost. Writes their squared distances and
+    indices into ``dist2``/``index`` and returns how many."""
+    m = 0
+    for k in range(n_sent):
+        if q_row[k] == r:
+            continue
+        ch = q_channel[k]
+        if ch >= 0 and ch != channel:
+            continue
+        ddx, ddy = q_pose[k, 0] - rx, q_pose[k, 1] - ry
+        d2 = ddx * ddx + ddy * ddy
+        if d2 > range2:
+            continue
+        if loss > 0.0 and _loss_uniform(seed, sent, k, r) < loss:
+            continue
+        dist2[m] = d2
+        index[m] = k
+        m += 1
+    return m
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _nearest_first(dist2, index, m, take):  # pragma: no cover - compiled
+    """Partial selection sort of the first ``m`` entries: the ``take`` nearest (ties: sent first) first."""
+    for j in range(take):
+        best = j
+        for q in range(j + 1, m):
+            if dist2[q] < dist2[best] or (dist2[q] == dist2[best] and index[q] < index[best]):
+                best = q
+        dist2[j], dist2[best] = dist2[best], dist2[j]
+        index[j], index[best] = index[best], index[j]
+
+
 @numba.njit(cache=True, nogil=True)
 def _deliver(
     steps,
@@ -524,33 +563,12 @@ def _deliver(
         n_sent = count[e, slot] if sent >= 0 and slot_step[e, slot] == sent else 0
         g = base[e] + r
         rx, ry, rh = data[_X, g], data[_Y, g], data[_H, g]
-        seed = seeds[e]
-        m = 0
-        for k in range(n_sent):
-            if q_row[e, slot, k] == r:
-                continue
-            ch = q_channel[e, slot, k]
-            if ch >= 0 and ch != r_channels[i]:
-                continue
-            ddx, ddy = q_pose[e, slot, k, 0] - rx, q_pose[e, slot, k, 1] - ry
-            d2 = ddx * ddx + ddy * ddy
-            if d2 > range2:
-                continue
-            if loss > 0.0 and _loss_uniform(seed, sent, k, r) < loss:
-                continue
-            dist2[m] = d2
-            index[m] = k
-            m += 1
+        m = _heard(q_row[e, slot], q_channel[e, slot], q_pose[e, slot], n_sent, r, r_channels[i], rx, ry,
+                   range2, loss, seeds[e], sent, dist2, index)  # fmt: skip
         take = min(m, limit)
+        _nearest_first(dist2, index, m, take)
         c, s = math.cos(rh), math.sin(rh)
         for j in range(take):
-            # Partial selection sort: the j-th nearest (ties: sent first) among the rest.
-            best = j
-            for q in range(j + 1, m):
-                if dist2[q] < dist2[best] or (dist2[q] == dist2[best] and index[q] < index[best]):
-                    best = q
-            dist2[j], dist2[best] = dist2[best], dist2[j]
-            index[j], index[best] = index[best], index[j]
             k = index[j]
             ddx, ddy = q_pose[e, slot, k, 0] - rx, q_pose[e, slot, k, 1] - ry
             o_row[i, j] = q_row[e, slot, k]

@@ -290,8 +290,6 @@ def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - comp
     raster_width, raster_origin = et.raster_width[m], et.raster_origin[m]
     inv_res, cell_max = et.raster_inv_res[m], et.raster_cell_max[m]
     lane_internal, lane_road, on_route_road = et.lane_internal, et.lane_road, et.on_route_road
-    goal_kind, goal_xy, goal_radius, goal_road = et.goal_kind, et.goal_xy, et.goal_radius, et.goal_road
-    goal_lane, goal_s, goal_gate = et.goal_lane, et.goal_s, et.goal_gate
     terminate_on = et.terminate_on[b]
     at_step_limit = et.episode_step[b] >= et.episode_limit[b]
     not_moving_seconds, not_moving_distance = et.not_moving_seconds[b], et.not_moving_distance[b]
@@ -306,32 +304,12 @@ def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - comp
         x, y, h = data[_X, r], data[_Y, r], data[_H, r]
         length, width = data[_LENGTH, r], data[_WIDTH, r]
         _corners(x, y, h, length, width, own)
-        radius = 0.5 * math.hypot(length, width)
-        for j in alive:
-            if j == r:
-                continue
-            dx, dy = data[_X, j] - x, data[_Y, j] - y
-            reach = radius + 0.5 * math.hypot(data[_LENGTH, j], data[_WIDTH, j])
-            if dx * dx + dy * dy >= reach * reach:
-                continue
-            _corners(data[_X, j], data[_Y, j], data[_H, j], data[_LENGTH, j], data[_WIDTH, j], other)
-            if boxes_overlap(own, other):
-                ev[COLLISION] = True
-                break
+        ev[COLLISION] = _collides(data, alive, r, x, y, 0.5 * math.hypot(length, width), own, other)
         ev[OFF_ROAD] = not on_road_at(flat_raster, raster_width, raster_origin, inv_res, cell_max, x, y)
-        for k in range(4):
-            if not on_road_at(flat_raster, raster_width, raster_origin, inv_res, cell_max, own[k, 0], own[k, 1]):
-                ev[PARTIAL_OFF_ROAD] = True
+        ev[PARTIAL_OFF_ROAD] = _corner_off_road(flat_raster, raster_width, raster_origin, inv_res, cell_max, own)
         ln = lane[r]
         road = lane_road[ln] if ln >= 0 else -1
-        left_map = (
-            ln >= 0
-            and (ev[OFF_ROAD] or ev[PARTIAL_OFF_ROAD])
-            and et.lane_succ_offsets[ln + 1] == et.lane_succ_offsets[ln]
-            and on_route_road[a, road]
-            and data[_S, r] + 0.5 * length >= et.lane_length[ln] - _END_MARGIN
-            and abs(data[_T, r]) <= 0.5 * et.lane_width[ln]
-        )
+        left_map = (ev[OFF_ROAD] or ev[PARTIAL_OFF_ROAD]) and _at_dead_end(et, a, r, ln, road, length)
         if left_map:
             ev[OFF_ROAD] = ev[PARTIAL_OFF_ROAD] = False
         if ln >= 0 and not lane_internal[ln]:  # junction lanes cross each other: no direction
@@ -339,17 +317,7 @@ def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - comp
             ev[OFF_ROUTE] = not on_route_road[a, road]
         px, py = (prev_xy[a, 0], prev_xy[a, 1]) if prev_row[a] == r else (x, y)
         prev_xy[a, 0], prev_xy[a, 1], prev_row[a] = x, y, r
-        if goal_kind[a] == 1:
-            ev[REACHED_GOAL] = (
-                segment_point_distance2(px, py, x, y, goal_xy[a, 0], goal_xy[a, 1]) <= goal_radius[a] * goal_radius[a]
-            )
-        elif goal_kind[a] == 2:
-            ev[REACHED_GOAL] = (
-                ln >= 0
-                and road == goal_road[a]
-                and (goal_lane[a] < 0 or ln == goal_lane[a])
-                and data[_S, r] >= goal_s[a]
-            ) or crosses_gate(px, py, x, y, goal_gate[a])
+        ev[REACHED_GOAL] = _reached_goal(et, a, r, ln, road, px, py, x, y)
         if ev[REACHED_GOAL]:
             ev[OFF_ROUTE] = False
         ev[NOT_MOVING] = not_moving_step(anchor, anchor_time, r, x, y, time, not_moving_seconds, not_moving_distance)
@@ -358,6 +326,67 @@ def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - comp
         for e in range(ev.shape[0]):
             finished |= ev[e] and terminate_on[e]
         done[a] = finished
+
+
+# The per-agent tests of ``episode_events``, inlined into it by numba (no call per agent).
+@numba.njit(cache=True, nogil=True, inline="always")
+def _collides(data, alive, r, x, y, radius, own, other):  # pragma: no cover - compiled
+    """Whether row ``r`` (box corners ``own``, bounding ``radius``) overlaps another ``alive`` row:
+    a circle pre-test, then separating axes (``other`` is scratch for the other box's corners)."""
+    for j in alive:
+        if j == r:
+            continue
+        dx, dy = data[_X, j] - x, data[_Y, j] - y
+        reach = radius + 0.5 * math.hypot(data[_LENGTH, j], data[_WIDTH, j])
+        if dx * dx + dy * dy >= reach * reach:
+            continue
+        _corners(data[_X, j], data[_Y, j], data[_H, j], data[_LENGTH, j], data[_WIDTH, j], other)
+        if boxes_overlap(own, other):
+            return True
+    return False
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _corner_off_road(flat_raster, raster_width, raster_origin, inv_res, cell_max, own):  # pragma: no cover - compiled
+    """Whether any of the four box corners ``own`` lies off the drivable raster."""
+    off = False
+    for k in range(4):
+        if not on_road_at(flat_raster, raster_width, raster_origin, inv_res, cell_max, own[k, 0], own[k, 1]):
+            off = True
+    return off
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _at_dead_end(et, a, r, ln, road, length):  # pragma: no cover - compiled
+    """Whether row ``r``'s front has reached the end of a lane of agent ``a``'s route that leads
+    nowhere, still within the lane's width (it has left the map, not the road)."""
+    data = et.data
+    return (
+        ln >= 0
+        and et.lane_succ_offsets[ln + 1] == et.lane_succ_offsets[ln]
+        and et.on_route_road[a, road]
+        and data[_S, r] + 0.5 * length >= et.lane_length[ln] - _END_MARGIN
+        and abs(data[_T, r]) <= 0.5 * et.lane_width[ln]
+    )
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _reached_goal(et, a, r, ln, road, px, py, x, y):  # pragma: no cover - compiled
+    """Whether agent ``a`` (row ``r``, moved from (px, py) to (x, y)) reached its goal this step:
+    kind 1 passes within the radius of the point, kind 2 is on the goal road (and lane) past
+    ``goal_s`` or crosses the goal line forwards."""
+    if et.goal_kind[a] == 1:
+        radius = et.goal_radius[a]
+        return segment_point_distance2(px, py, x, y, et.goal_xy[a, 0], et.goal_xy[a, 1]) <= radius * radius
+    if et.goal_kind[a] == 2:
+        goal_lane = et.goal_lane[a]
+        return (
+            ln >= 0
+            and road == et.goal_road[a]
+            and (goal_lane < 0 or ln == goal_lane)
+            and et.data[_S, r] >= et.goal_s[a]
+        ) or crosses_gate(px, py, x, y, et.goal_gate[a])
+    return False
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

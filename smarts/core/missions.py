@@ -8,6 +8,7 @@ then only gathers from these padded per-agent arrays.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -129,6 +130,51 @@ def resolve_mission(road_map: RoadMap, agent_id: str, mission, where: str, traff
     A mission that takes over a traffic trip starts where that trip departs (its first road, its
     depart lane when given as a number, else lane 0, and its depart position).
     """
+    start, start_lane, start_xy, heading = _resolve_start(road_map, mission, where, traffic)
+    route_parts, legs_from = _via_legs(road_map, mission, start_lane, where)
+    goal = mission.goal
+    fields = dict(
+        goal_kind=GOAL_NONE,
+        goal_xy=np.zeros(2),
+        goal_radius=0.0,
+        goal_road=-1,
+        goal_lane=-1,
+        goal_s=0.0,
+        goal_gate=np.zeros(6),
+    )
+    if getattr(goal, "endless", False):
+        tail = extend_route(road_map, legs_from, ENDLESS_ROUTE_LENGTH)
+    elif getattr(goal, "position", None) is not None:
+        tail, goal_fields = _position_goal(road_map, goal, start, start_lane, route_parts, legs_from, where)
+        fields.update(goal_fields)
+    else:
+        tail, goal_fields = _road_goal(road_map, goal, start, start_lane, legs_from, where)
+        fields.update(goal_fields)
+    route = np.concatenate(route_parts + [tail if not route_parts else tail[1:]]).astype(np.int32)
+    path = route_polyline(road_map, route, start_s=float(start.offset))
+    end = len(path.s)
+    if fields["goal_kind"] == GOAL_POSITION:  # the path ends abreast of the goal, not at its lane's end
+        end = int(np.argmin(np.hypot(*(path.xy - fields["goal_xy"]).T))) + 1
+    path_xy, path_heading, path_s, path_lane = path.xy[:end], path.heading[:end], path.s[:end], path.lane[:end]
+    return ResolvedMission(
+        agent_id=agent_id,
+        start_lane=start_lane,
+        start_xy=start_xy,
+        start_heading=heading,
+        start_speed=float(start.speed),
+        route=route,
+        path_xy=path_xy,
+        path_heading=path_heading,
+        path_s=path_s,
+        path_lane=path_lane.astype(np.int32),
+        **fields,
+        on_end=getattr(mission, "on_end", "remove"),
+        follow=getattr(mission, "follow", None),
+    )
+
+
+def _resolve_start(road_map: RoadMap, mission, where: str, traffic) -> tuple[Any, int, np.ndarray, float]:
+    """The start spec (a taken-over trip's departure when the mission names one), its lane, position and heading."""
     start = mission.start
     take_over = getattr(start, "take_over", None)
     if take_over is not None:
@@ -147,12 +193,11 @@ def resolve_mission(road_map: RoadMap, agent_id: str, mission, where: str, traff
     start_xy, heading = lane_pose_at(road_map, start_lane, start.offset)
     if getattr(start, "heading", None) is not None:
         heading = float(start.heading)
+    return start, start_lane, start_xy, heading
 
-    goal = mission.goal
-    goal_kind, goal_xy, goal_radius = GOAL_NONE, np.zeros(2), 0.0
-    goal_road, goal_lane, goal_s = -1, -1, 0.0
-    goal_gate = np.zeros(6)
-    # Legs: start lane -> each via road -> goal.
+
+def _via_legs(road_map: RoadMap, mission, start_lane: int, where: str) -> tuple[list[np.ndarray], int]:
+    """Routes start lane -> each ``route_via`` road in turn (joined without repeating lanes), and the lane they end on."""
     legs_from = start_lane
     route_parts: list[np.ndarray] = []
     for k, via in enumerate(getattr(mission, "route_via", None) or []):
@@ -163,73 +208,52 @@ def resolve_mission(road_map: RoadMap, agent_id: str, mission, where: str, traff
         leg = _best_route(road_map, legs_from, road_map.road_lanes(via_road), f"{where}.route_via[{k}]")
         route_parts.append(leg if not route_parts else leg[1:])
         legs_from = int(leg[-1])
+    return route_parts, legs_from
 
-    if getattr(goal, "endless", False):
-        tail = extend_route(road_map, legs_from, ENDLESS_ROUTE_LENGTH)
-    elif getattr(goal, "position", None) is not None:
-        goal_kind = GOAL_POSITION
-        goal_xy = np.asarray(goal.position, dtype=np.float64)
-        goal_radius = float(goal.radius)
-        proj = project(road_map, goal_xy[None, :])
-        if proj.lane[0] < 0:
-            raise MapError(f"{where}.goal.position: {[round(float(v), 3) for v in goal_xy]} is not near any lane")
-        goal_lane_of_xy = int(proj.lane[0])
-        same_road = road_map.lane_road[goal_lane_of_xy] == road_map.lane_road[start_lane]
-        if not route_parts and same_road and proj.s[0] + goal_radius < start.offset:
-            # Behind the start on its road: the route must leave the road and come back to it.
-            tail = _route_back(road_map, start_lane, goal_lane_of_xy, f"{where}.goal.position")
-        else:
-            tail = _best_route(road_map, legs_from, np.array([goal_lane_of_xy]), f"{where}.goal")
-    else:
-        goal_kind = GOAL_ROAD
-        try:
-            goal_road = road_map.road(goal.road)
-        except KeyError:
-            raise MapError(f"{where}.goal.road: map has no road {goal.road!r}") from None
-        lanes = road_map.road_lanes(goal_road)
-        if goal.lane is not None:
-            goal_lane = _lane_of(road_map, goal.road, goal.lane, f"{where}.goal")
-            lanes = np.array([goal_lane])
-        goal_s = float(getattr(goal, "offset", None) or 0.0)
-        if int(road_map.lane_road[start_lane]) == int(goal_road) and goal_s <= start.offset:
-            # The goal test counts a vehicle on the goal road at or past goal_s as arrived: this
-            # one would be at its goal from the first step, whatever route it then drove.
-            raise MapError(
-                f"{where}.goal: offset {goal_s:g} on road {goal.road!r} is not ahead of the start (offset "
-                f"{start.offset:g} on the same road), so the route cannot reach it: the vehicle would count as "
-                "arrived at its first step; put the goal ahead of the start or on another road"
-            )
-        tail = _best_route(road_map, legs_from, lanes, f"{where}.goal")
-        goal_xy, _ = lane_pose_at(road_map, int(tail[-1]), goal_s)
-        goal_radius = float(road_map.lane_width[int(tail[-1])])
-        goal_gate = goal_line(road_map, int(tail[-1]), lanes, goal_s)
-    route = np.concatenate(route_parts + [tail if not route_parts else tail[1:]]).astype(np.int32)
-    path = route_polyline(road_map, route, start_s=float(start.offset))
-    end = len(path.s)
-    if goal_kind == GOAL_POSITION:  # the path ends abreast of the goal, not at its lane's end
-        end = int(np.argmin(np.hypot(*(path.xy - goal_xy).T))) + 1
-    path_xy, path_heading, path_s, path_lane = path.xy[:end], path.heading[:end], path.s[:end], path.lane[:end]
-    return ResolvedMission(
-        agent_id=agent_id,
-        start_lane=start_lane,
-        start_xy=start_xy,
-        start_heading=heading,
-        start_speed=float(start.speed),
-        route=route,
-        path_xy=path_xy,
-        path_heading=path_heading,
-        path_s=path_s,
-        path_lane=path_lane.astype(np.int32),
-        goal_kind=goal_kind,
-        goal_xy=goal_xy,
-        goal_radius=goal_radius,
-        goal_road=goal_road,
-        goal_lane=goal_lane,
-        goal_s=goal_s,
-        goal_gate=goal_gate,
-        on_end=getattr(mission, "on_end", "remove"),
-        follow=getattr(mission, "follow", None),
-    )
+
+def _position_goal(
+    road_map: RoadMap, goal, start, start_lane: int, route_parts: list, legs_from: int, where: str
+) -> tuple[np.ndarray, dict]:
+    """The last leg to a goal position, and the goal fields it sets; a goal behind the start loops back to it."""
+    goal_xy = np.asarray(goal.position, dtype=np.float64)
+    goal_radius = float(goal.radius)
+    fields = dict(goal_kind=GOAL_POSITION, goal_xy=goal_xy, goal_radius=goal_radius)
+    proj = project(road_map, goal_xy[None, :])
+    if proj.lane[0] < 0:
+        raise MapError(f"{where}.goal.position: {[round(float(v), 3) for v in goal_xy]} is not near any lane")
+    goal_lane_of_xy = int(proj.lane[0])
+    same_road = road_map.lane_road[goal_lane_of_xy] == road_map.lane_road[start_lane]
+    if not route_parts and same_road and proj.s[0] + goal_radius < start.offset:
+        # Behind the start on its road: the route must leave the road and come back to it.
+        return _route_back(road_map, start_lane, goal_lane_of_xy, f"{where}.goal.position"), fields
+    return _best_route(road_map, legs_from, np.array([goal_lane_of_xy]), f"{where}.goal"), fields
+
+
+def _road_goal(road_map: RoadMap, goal, start, start_lane: int, legs_from: int, where: str) -> tuple[np.ndarray, dict]:
+    """The last leg to a goal road (or one lane of it) at an offset, and the goal fields it sets (gate line too)."""
+    try:
+        goal_road = road_map.road(goal.road)
+    except KeyError:
+        raise MapError(f"{where}.goal.road: map has no road {goal.road!r}") from None
+    fields = dict(goal_kind=GOAL_ROAD, goal_road=goal_road)
+    lanes = road_map.road_lanes(goal_road)
+    if goal.lane is not None:
+        goal_lane = fields["goal_lane"] = _lane_of(road_map, goal.road, goal.lane, f"{where}.goal")
+        lanes = np.array([goal_lane])
+    goal_s = fields["goal_s"] = float(getattr(goal, "offset", None) or 0.0)
+    if int(road_map.lane_road[start_lane]) == int(goal_road) and goal_s <= start.offset:
+        # The goal test counts a vehicle on the goal road at or past goal_s as arrived: this
+        # one would be at its goal from the first step, whatever route it then drove.
+        raise MapError(
+            f"{where}.goal: offset {goal_s:g} on road {goal.road!r} is not ahead of the start (offset "
+            f"{start.offset:g} on the same road), so the route cannot reach it: the vehicle would count as "
+            "arrived at its first step; put the goal ahead of the start or on another road"
+        )
+    tail = _best_route(road_map, legs_from, lanes, f"{where}.goal")
+    fields["goal_xy"], _ = lane_pose_at(road_map, int(tail[-1]), goal_s)
+    fields["goal_radius"] = float(road_map.lane_width[int(tail[-1])])
+    fields["goal_gate"] = goal_line(road_map, int(tail[-1]), lanes, goal_s)
+    return tail, fields
 
 
 @dataclass

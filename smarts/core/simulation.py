@@ -313,6 +313,23 @@ class Simulation:
         self.episodes = n
         self.episode_capacity = int(capacity)
         self.table = VehicleTable(n * self.episode_capacity)
+        self._init_agents(episodes)
+        self._init_events(episodes)
+        self._init_episodes(episodes)
+        self._init_views(episodes)
+        self._init_providers(providers, episodes)
+        self.actions: dict | np.ndarray = {}
+        self.alive = np.zeros(0, dtype=np.int64)  # live rows after the last map update
+        self._all_episodes = np.arange(n, dtype=np.int64)
+        self._zero1 = np.zeros(1, dtype=np.int64)
+        self._scope_zero = np.zeros(0, np.int64)
+        self._scope_hi = np.zeros(0, np.int64)
+        self._active = np.zeros(0, dtype=np.int64)
+        self._active_rows = np.zeros(0, dtype=np.int64)
+
+    def _init_agents(self, episodes: Sequence[EpisodeSetup]) -> None:
+        """Every episode's missions as one agent list (ids prefixed by episode when B > 1), and per-agent state."""
+        n = len(episodes)
         missions, episode_of = [], []
         for b, setup in enumerate(episodes):
             if not setup.missions:
@@ -346,12 +363,20 @@ class Simulation:
         # movement since then (a short goal lane can lie wholly inside one step's travel)
         self.agent_prev_xy = np.zeros((na, 2))
         self.agent_prev_row = np.full(na, -1, dtype=np.int64)
+
+    def _init_events(self, episodes: Sequence[EpisodeSetup]) -> None:
+        """Per-episode event settings: which events end an agent, and the not-moving test."""
+        n = len(episodes)
         self.event_configs = [e.events or EventConfig(terminate_on=_default_terminations()) for e in episodes]
         self.terminate_on = np.array([c.terminate_on for c in self.event_configs], dtype=bool).reshape(n, NUM_EVENTS)
         self.not_moving_seconds = np.array([c.not_moving_seconds for c in self.event_configs], dtype=np.float64)
         self.not_moving_distance = np.array([c.not_moving_distance for c in self.event_configs], dtype=np.float64)
         first = self.event_configs[0]
         self.not_moving = NotMovingTracker(self.table.capacity, first.not_moving_seconds, first.not_moving_distance)
+
+    def _init_episodes(self, episodes: Sequence[EpisodeSetup]) -> None:
+        """Per-episode clocks and seeds; episodes with signals write their colours into one block."""
+        n = len(episodes)
         self.episode_limit = np.array([e.episode_steps for e in episodes], dtype=np.int64)
         self.episode_step = np.zeros(n, dtype=np.int64)
         self.episode_time = np.zeros(n)
@@ -361,6 +386,10 @@ class Simulation:
             if setup.signals is not None:  # the signals now write into the simulation's colour block
                 self.via_colour[b] = setup.signals.via_colour
                 setup.signals.via_colour = self.via_colour[b]
+
+    def _init_views(self, episodes: Sequence[EpisodeSetup]) -> None:
+        """One view per episode onto its block of table rows and its map window."""
+        n = len(episodes)
         if n > 1:
             self.table.row_of = _EpisodeRows(self)
             self.table.ids = _StackedIds(self)
@@ -376,6 +405,10 @@ class Simulation:
             for b, setup in enumerate(episodes)
         ]
         self.row_map = np.repeat(self.episode_map, cap)  # map of every row
+
+    def _init_providers(self, providers: list[Provider], episodes: Sequence[EpisodeSetup]) -> None:
+        """Batch providers step all episodes; each episode's own providers are numbered after them."""
+        n = len(episodes)
         self.batch_providers: list[Provider] = []
         self._checks: list = []  # batch providers' check_actions, called before every step
         for p in providers:
@@ -386,14 +419,6 @@ class Simulation:
             for p in setup.providers:
                 self._add_episode_provider(b, p)
         self._refresh_stages()
-        self.actions: dict | np.ndarray = {}
-        self.alive = np.zeros(0, dtype=np.int64)  # live rows after the last map update
-        self._all_episodes = np.arange(n, dtype=np.int64)
-        self._zero1 = np.zeros(1, dtype=np.int64)
-        self._scope_zero = np.zeros(0, np.int64)
-        self._scope_hi = np.zeros(0, np.int64)
-        self._active = np.zeros(0, dtype=np.int64)
-        self._active_rows = np.zeros(0, dtype=np.int64)
 
     # ------------------------------------------------------------------ providers
     def _add_batch_provider(self, provider: Provider) -> None:

@@ -63,6 +63,88 @@ class ChassisState(NamedTuple):
     steering: np.ndarray  # mean front wheel angle, rad (+ = left)
 
 
+def _chassis_mass(
+    x: float, y: float, heading: float, speed: float, length: float, width: float, height: float, mass: float
+) -> float:
+    """The chassis's share of ``mass`` (the car less its wheels and hinges), after checking every argument."""
+    for name, value in (("length", length), ("width", width), ("height", height)):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"add_vehicle: {name} must be a positive number, got {value!r}")
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(heading)):
+        raise ValueError(f"add_vehicle: pose must be finite, got ({x!r}, {y!r}, {heading!r})")
+    if not math.isfinite(speed):
+        raise ValueError(f"add_vehicle: speed must be finite, got {speed!r}")
+    if height <= CHASSIS_CLEARANCE + 0.1:
+        raise ValueError(f"add_vehicle: height must exceed {CHASSIS_CLEARANCE + 0.1} m, got {height!r}")
+    chassis_mass = mass - 4.0 * WHEEL_MASS - 2.0 * HINGE_MASS
+    if not (math.isfinite(mass) and chassis_mass > 0):
+        raise ValueError(f"add_vehicle: mass must exceed {4 * WHEEL_MASS + 2 * HINGE_MASS} kg, got {mass!r}")
+    return chassis_mass
+
+
+def _create_car(
+    cid: int, x: float, y: float, heading: float, length: float, width: float, height: float, chassis_mass: float
+) -> tuple[int, float, float, float]:
+    """One multibody: the chassis box, two steering hinges carrying the front wheels, two rear wheels.
+
+    Returns the body and the geometry the controls need: wheelbase, half track, box centre above the base.
+    """
+    base_z = WHEEL_RADIUS + CENTRE_OF_MASS_ABOVE_AXLE
+    box_centre_z = 0.5 * (CHASSIS_CLEARANCE + height)
+    box_above_base = box_centre_z - base_z
+    chassis = p.createCollisionShape(
+        p.GEOM_BOX,
+        halfExtents=[0.5 * length, 0.5 * width, 0.5 * (height - CHASSIS_CLEARANCE)],
+        collisionFramePosition=[0.0, 0.0, box_above_base],
+        physicsClientId=cid,
+    )
+    wheel = p.createCollisionShape(
+        p.GEOM_CYLINDER,
+        radius=WHEEL_RADIUS,
+        height=WHEEL_WIDTH,
+        collisionFrameOrientation=p.getQuaternionFromEuler([math.pi / 2, 0.0, 0.0]),
+        physicsClientId=cid,
+    )
+    hinge = p.createCollisionShape(p.GEOM_SPHERE, radius=0.05, physicsClientId=cid)
+
+    wheelbase = float(wheelbase_for_length(length))
+    half_track = 0.5 * max(width - WHEEL_WIDTH, 0.5 * width)
+    axle_z = WHEEL_RADIUS - base_z
+    front, rear = 0.5 * wheelbase, -0.5 * wheelbase
+    # Links: hinge FL, wheel FL (child of hinge), hinge FR, wheel FR, wheel RL, wheel RR.
+    positions = [
+        [front, half_track, axle_z],
+        [0.0, 0.0, 0.0],
+        [front, -half_track, axle_z],
+        [0.0, 0.0, 0.0],
+        [rear, half_track, axle_z],
+        [rear, -half_track, axle_z],
+    ]
+    parents = [0, 1, 0, 3, 0, 0]  # 0 = base, i + 1 = link i
+    axes = [[0, 0, 1], [0, 1, 0], [0, 0, 1], [0, 1, 0], [0, 1, 0], [0, 1, 0]]
+    shapes = [hinge, wheel, hinge, wheel, wheel, wheel]
+    masses = [HINGE_MASS, WHEEL_MASS, HINGE_MASS, WHEEL_MASS, WHEEL_MASS, WHEEL_MASS]
+    identity = [0.0, 0.0, 0.0, 1.0]
+    body = p.createMultiBody(
+        baseMass=chassis_mass,
+        baseCollisionShapeIndex=chassis,
+        basePosition=[x, y, base_z],
+        baseOrientation=p.getQuaternionFromEuler([0.0, 0.0, heading]),
+        linkMasses=masses,
+        linkCollisionShapeIndices=shapes,
+        linkVisualShapeIndices=[-1] * 6,
+        linkPositions=positions,
+        linkOrientations=[identity] * 6,
+        linkInertialFramePositions=[[0.0, 0.0, 0.0]] * 6,
+        linkInertialFrameOrientations=[identity] * 6,
+        linkParentIndices=parents,
+        linkJointTypes=[p.JOINT_REVOLUTE] * 6,
+        linkJointAxis=axes,
+        physicsClientId=cid,
+    )
+    return body, wheelbase, half_track, box_above_base
+
+
 class PhysicsWorld:
     """One pybullet world of cars on a flat ground plane, stepped ``dt`` seconds per ``step()``."""
 
@@ -181,78 +263,17 @@ class PhysicsWorld:
 
         ``mass`` is the whole car; the wheels and hinges take their share of it. Returns the handle.
         """
-        for name, value in (("length", length), ("width", width), ("height", height)):
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"add_vehicle: {name} must be a positive number, got {value!r}")
-        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(heading)):
-            raise ValueError(f"add_vehicle: pose must be finite, got ({x!r}, {y!r}, {heading!r})")
-        if not math.isfinite(speed):
-            raise ValueError(f"add_vehicle: speed must be finite, got {speed!r}")
-        if height <= CHASSIS_CLEARANCE + 0.1:
-            raise ValueError(f"add_vehicle: height must exceed {CHASSIS_CLEARANCE + 0.1} m, got {height!r}")
-        chassis_mass = mass - 4.0 * WHEEL_MASS - 2.0 * HINGE_MASS
-        if not (math.isfinite(mass) and chassis_mass > 0):
-            raise ValueError(f"add_vehicle: mass must exceed {4 * WHEEL_MASS + 2 * HINGE_MASS} kg, got {mass!r}")
+        chassis_mass = _chassis_mass(x, y, heading, speed, length, width, height, mass)
         cid = self._client
-        base_z = WHEEL_RADIUS + CENTRE_OF_MASS_ABOVE_AXLE
-        box_centre_z = 0.5 * (CHASSIS_CLEARANCE + height)
-        box_above_base = box_centre_z - base_z
-        chassis = p.createCollisionShape(
-            p.GEOM_BOX,
-            halfExtents=[0.5 * length, 0.5 * width, 0.5 * (height - CHASSIS_CLEARANCE)],
-            collisionFramePosition=[0.0, 0.0, box_above_base],
-            physicsClientId=cid,
-        )
-        wheel = p.createCollisionShape(
-            p.GEOM_CYLINDER,
-            radius=WHEEL_RADIUS,
-            height=WHEEL_WIDTH,
-            collisionFrameOrientation=p.getQuaternionFromEuler([math.pi / 2, 0.0, 0.0]),
-            physicsClientId=cid,
-        )
-        hinge = p.createCollisionShape(p.GEOM_SPHERE, radius=0.05, physicsClientId=cid)
-
-        wheelbase = float(wheelbase_for_length(length))
-        half_track = 0.5 * max(width - WHEEL_WIDTH, 0.5 * width)
-        axle_z = WHEEL_RADIUS - base_z
-        front, rear = 0.5 * wheelbase, -0.5 * wheelbase
-        # Links: hinge FL, wheel FL (child of hinge), hinge FR, wheel FR, wheel RL, wheel RR.
-        positions = [
-            [front, half_track, axle_z],
-            [0.0, 0.0, 0.0],
-            [front, -half_track, axle_z],
-            [0.0, 0.0, 0.0],
-            [rear, half_track, axle_z],
-            [rear, -half_track, axle_z],
-        ]
-        parents = [0, 1, 0, 3, 0, 0]  # 0 = base, i + 1 = link i
-        axes = [[0, 0, 1], [0, 1, 0], [0, 0, 1], [0, 1, 0], [0, 1, 0], [0, 1, 0]]
-        shapes = [hinge, wheel, hinge, wheel, wheel, wheel]
-        masses = [HINGE_MASS, WHEEL_MASS, HINGE_MASS, WHEEL_MASS, WHEEL_MASS, WHEEL_MASS]
-        identity = [0.0, 0.0, 0.0, 1.0]
-        c, s = math.cos(heading), math.sin(heading)
-        body = p.createMultiBody(
-            baseMass=chassis_mass,
-            baseCollisionShapeIndex=chassis,
-            basePosition=[x, y, base_z],
-            baseOrientation=p.getQuaternionFromEuler([0.0, 0.0, heading]),
-            linkMasses=masses,
-            linkCollisionShapeIndices=shapes,
-            linkVisualShapeIndices=[-1] * 6,
-            linkPositions=positions,
-            linkOrientations=[identity] * 6,
-            linkInertialFramePositions=[[0.0, 0.0, 0.0]] * 6,
-            linkInertialFrameOrientations=[identity] * 6,
-            linkParentIndices=parents,
-            linkJointTypes=[p.JOINT_REVOLUTE] * 6,
-            linkJointAxis=axes,
-            physicsClientId=cid,
+        body, wheelbase, half_track, box_above_base = _create_car(
+            cid, x, y, heading, length, width, height, chassis_mass
         )
         # Bullet's default damping acts like a strong air drag (60 v^2 N on a sedan): switch it off.
         p.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0, physicsClientId=cid)
         for link in _WHEELS:
             p.changeDynamics(body, link, lateralFriction=self.friction, restitution=0.0, physicsClientId=cid)
         if speed != 0.0:
+            c, s = math.cos(heading), math.sin(heading)
             p.resetBaseVelocity(body, [speed * c, speed * s, 0.0], physicsClientId=cid)
             for link in _WHEELS:
                 p.resetJointState(body, link, 0.0, targetVelocity=speed / WHEEL_RADIUS, physicsClientId=cid)

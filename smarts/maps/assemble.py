@@ -55,19 +55,85 @@ def assemble_road_map(
     if not lanes:
         raise MapError(f"{source}: the map has no drivable lanes")
     num_lanes = len(lanes)
+    roads = _lane_columns(lanes)
+    polylines, counts, lines = _centre_lines(lanes)
+    lane_width = roads["lane_width"]
 
+    lane_left, lane_right = _neighbours(roads["lane_road"], roads["lane_index"])
+    succ_offsets, succ = _csr(num_lanes, links, reverse=False)
+    pred_offsets, pred = _csr(num_lanes, links, reverse=True)
+    segments = _segments(lines["points"], lines["point_s"], lines["lane_point_offsets"], counts, num_lanes)
+
+    margin = float(lane_width.max()) + GRID_EXTRA_MARGIN
+    grid_origin, grid_shape, grid_offsets, grid_segs = build_segment_grid(
+        segments["seg_start"], segments["seg_vec"], GRID_CELL, margin
+    )
+
+    shapes = [np.asarray(s, dtype=np.float64).reshape(-1, 2) for s in junction_shapes]
+    raster_origin, resolution, drivable = build_drivable_raster(
+        polylines, lane_width, shapes, raster_resolution, max_raster_cells
+    )
+
+    lp_offsets, lp_xy, lp_s, lp_heading = _lanepoints(
+        lines["points"], lines["point_s"], lines["lane_point_offsets"], segments["seg_heading"], LANEPOINT_SPACING
+    )
+
+    return RoadMap(
+        source=source,
+        content_hash=content_hash,
+        **roads,
+        **lines,
+        lane_left=lane_left,
+        lane_right=lane_right,
+        succ_offsets=succ_offsets,
+        succ=succ,
+        pred_offsets=pred_offsets,
+        pred=pred,
+        **segments,
+        grid_origin=grid_origin,
+        grid_cell=GRID_CELL,
+        grid_shape=grid_shape,
+        grid_margin=margin,
+        grid_offsets=grid_offsets,
+        grid_segs=grid_segs,
+        raster_origin=raster_origin,
+        raster_resolution=resolution,
+        drivable=drivable,
+        lanepoint_offsets=lp_offsets,
+        lanepoints=lp_xy,
+        lanepoint_s=lp_s,
+        lanepoint_heading=lp_heading,
+        bounds=_bounds(lines["points"], shapes, lane_width),
+        junction_shapes=shapes,
+    )
+
+
+def _lane_columns(lanes: Sequence[LaneSpec]) -> dict:
+    """Per-lane scalar columns, and the road index each lane belongs to (roads numbered in first-seen order)."""
     road_ids: list[str] = []
     road_index_of: dict[str, int] = {}
     for lane in lanes:
         if lane.road_id not in road_index_of:
             road_index_of[lane.road_id] = len(road_ids)
             road_ids.append(lane.road_id)
-    lane_road = np.array([road_index_of[lane.road_id] for lane in lanes], dtype=np.int32)
-    lane_index = np.array([lane.index for lane in lanes], dtype=np.int16)
-    lane_width = np.array([lane.width for lane in lanes], dtype=np.float64)
-    lane_speed = np.array([lane.speed_limit for lane in lanes], dtype=np.float64)
-    lane_internal = np.array([lane.internal for lane in lanes], dtype=bool)
+    return dict(
+        lane_ids=[lane.lane_id for lane in lanes],
+        road_ids=road_ids,
+        road_index_of=road_index_of,
+        lane_road=np.array([road_index_of[lane.road_id] for lane in lanes], dtype=np.int32),
+        lane_index=np.array([lane.index for lane in lanes], dtype=np.int16),
+        lane_width=np.array([lane.width for lane in lanes], dtype=np.float64),
+        lane_speed_limit=np.array([lane.speed_limit for lane in lanes], dtype=np.float64),
+        lane_internal=np.array([lane.internal for lane in lanes], dtype=bool),
+    )
 
+
+def _centre_lines(lanes: Sequence[LaneSpec]) -> tuple[list[np.ndarray], np.ndarray, dict]:
+    """All lanes' cleaned centre lines in one point array, with arc length s restarting at 0 per lane.
+
+    Returns the per-lane polylines (the raster draws them), the point count per lane, and the
+    RoadMap columns: points, point_s, lane_point_offsets, lane_length, lane_sumo_length.
+    """
     polylines = [_clean_polyline(lane.shape) for lane in lanes]
     counts = np.array([len(p) for p in polylines], dtype=np.int64)
     point_offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
@@ -85,86 +151,46 @@ def assemble_road_map(
         ],
         dtype=np.float64,
     )
+    columns = dict(
+        lane_length=lane_length,
+        lane_sumo_length=lane_sumo_length,
+        lane_point_offsets=point_offsets,
+        points=points,
+        point_s=point_s,
+    )
+    return polylines, counts, columns
 
-    lane_left, lane_right = _neighbours(lane_road, lane_index)
-    succ_offsets, succ = _csr(num_lanes, links, reverse=False)
-    pred_offsets, pred = _csr(num_lanes, links, reverse=True)
 
-    # Segments: every consecutive pair of points within a lane.
+def _segments(
+    points: np.ndarray, point_s: np.ndarray, point_offsets: np.ndarray, counts: np.ndarray, num_lanes: int
+) -> dict:
+    """Segments: every consecutive pair of points within a lane (never across two lanes)."""
     is_seg_start = np.ones(len(points), dtype=bool)
     is_seg_start[point_offsets[1:] - 1] = False
     seg_idx = np.flatnonzero(is_seg_start)
     seg_start = points[seg_idx]
     seg_vec = points[seg_idx + 1] - seg_start
-    seg_len = np.hypot(seg_vec[:, 0], seg_vec[:, 1])
-    seg_heading = np.arctan2(seg_vec[:, 1], seg_vec[:, 0])
-    seg_lane = np.repeat(np.arange(num_lanes, dtype=np.int32), counts - 1)
-    seg_s0 = point_s[seg_idx]
-
-    margin = float(lane_width.max()) + GRID_EXTRA_MARGIN
-    grid_origin, grid_shape, grid_offsets, grid_segs = build_segment_grid(seg_start, seg_vec, GRID_CELL, margin)
-
-    shapes = [np.asarray(s, dtype=np.float64).reshape(-1, 2) for s in junction_shapes]
-    raster_origin, resolution, drivable = build_drivable_raster(
-        polylines, lane_width, shapes, raster_resolution, max_raster_cells
+    return dict(
+        seg_start=seg_start,
+        seg_vec=seg_vec,
+        seg_len=np.hypot(seg_vec[:, 0], seg_vec[:, 1]),
+        seg_heading=np.arctan2(seg_vec[:, 1], seg_vec[:, 0]),
+        seg_lane=np.repeat(np.arange(num_lanes, dtype=np.int32), counts - 1),
+        seg_s0=point_s[seg_idx],
     )
 
-    lp_offsets, lp_xy, lp_s, lp_heading = _lanepoints(points, point_s, point_offsets, seg_heading, LANEPOINT_SPACING)
 
+def _bounds(points: np.ndarray, shapes: list[np.ndarray], lane_width: np.ndarray) -> np.ndarray:
+    """(x min, y min, x max, y max) of every centre line and junction shape, padded by half the widest lane."""
     all_xy = np.concatenate([points, *shapes]) if shapes else points
     pad = float(lane_width.max()) / 2
-    bounds = np.array(
+    return np.array(
         [
             all_xy[:, 0].min() - pad,
             all_xy[:, 1].min() - pad,
             all_xy[:, 0].max() + pad,
             all_xy[:, 1].max() + pad,
         ]
-    )
-
-    return RoadMap(
-        source=source,
-        content_hash=content_hash,
-        lane_ids=[lane.lane_id for lane in lanes],
-        road_ids=road_ids,
-        lane_road=lane_road,
-        lane_index=lane_index,
-        lane_width=lane_width,
-        lane_speed_limit=lane_speed,
-        lane_length=lane_length,
-        lane_sumo_length=lane_sumo_length,
-        lane_internal=lane_internal,
-        lane_left=lane_left,
-        lane_right=lane_right,
-        lane_point_offsets=point_offsets,
-        points=points,
-        point_s=point_s,
-        succ_offsets=succ_offsets,
-        succ=succ,
-        pred_offsets=pred_offsets,
-        pred=pred,
-        seg_start=seg_start,
-        seg_vec=seg_vec,
-        seg_len=seg_len,
-        seg_heading=seg_heading,
-        seg_lane=seg_lane,
-        seg_s0=seg_s0,
-        grid_origin=grid_origin,
-        grid_cell=GRID_CELL,
-        grid_shape=grid_shape,
-        grid_margin=margin,
-        grid_offsets=grid_offsets,
-        grid_segs=grid_segs,
-        raster_origin=raster_origin,
-        raster_resolution=resolution,
-        drivable=drivable,
-        lanepoint_offsets=lp_offsets,
-        lanepoints=lp_xy,
-        lanepoint_s=lp_s,
-        lanepoint_heading=lp_heading,
-        bounds=bounds,
-        junction_shapes=shapes,
-        road_index_of=road_index_of,
     )
 
 

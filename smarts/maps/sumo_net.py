@@ -40,6 +40,27 @@ def read_map_bytes(path: Path) -> bytes:
 def compile_sumo_net(path: Path) -> RoadMap:
     """Parse a SUMO network (internal lanes included) and build all map arrays."""
     path = Path(path)
+    content_hash, root = _read_net_root(path)
+    lanes, lane_of_slot = _drivable_lanes(path, root)
+    signals = _SignalReader(path, root)
+    links, connections = _links(path, root, lanes, lane_of_slot, signals)
+    junction_shapes = _junction_outlines(path, root)
+
+    road_map = assemble_road_map(str(path), content_hash, lanes, sorted(links), junction_shapes)
+    if connections:
+        cols = list(zip(*connections))
+        for name, values, dtype in zip(
+            ("conn_from", "conn_via", "conn_to", "conn_tls", "conn_link", "conn_major", "conn_dir"),
+            cols,
+            (np.int32, np.int32, np.int32, np.int32, np.int32, bool, "<U1"),
+        ):
+            setattr(road_map, name, np.array(values, dtype=dtype))
+    signals.store(road_map)
+    return road_map
+
+
+def _read_net_root(path: Path) -> tuple[str, ET.Element]:
+    """The file's content hash and its parsed <net> root element."""
     data = read_map_bytes(path)
     content_hash = hashlib.sha256(data).hexdigest()
     try:
@@ -48,7 +69,11 @@ def compile_sumo_net(path: Path) -> RoadMap:
         raise MapError(f"{path}: not a valid XML file ({err})") from None
     if root.tag != "net":
         raise MapError(f"{path}: expected a SUMO network with root <net>, found <{root.tag}>")
+    return content_hash, root
 
+
+def _drivable_lanes(path: Path, root: ET.Element) -> tuple[list[LaneSpec], dict[tuple[str, int], int]]:
+    """Every lane a passenger car may drive, and (edge id, SUMO lane index) -> our lane index."""
     lanes: list[LaneSpec] = []
     lane_of_slot: dict[tuple[str, int], int] = {}  # (edge id, SUMO lane index) -> our lane
     for edge in root.findall("edge"):
@@ -82,11 +107,23 @@ def compile_sumo_net(path: Path) -> RoadMap:
             )
     if not lanes:
         raise MapError(f"{path}: the network has no lanes that passenger cars may drive on")
+    return lanes, lane_of_slot
 
+
+def _links(
+    path: Path,
+    root: ET.Element,
+    lanes: list[LaneSpec],
+    lane_of_slot: dict[tuple[str, int], int],
+    signals: _SignalReader,
+) -> tuple[set[tuple[int, int]], list[tuple]]:
+    """The lane graph's (from, to) successor pairs, and the connections between normal lanes.
+
+    Each connection is (from, via, to, tls, link, major, dir); junctions and signals read them.
+    """
     lane_of_id = {lane.lane_id: i for i, lane in enumerate(lanes)}
     links: set[tuple[int, int]] = set()
     via_targets: list[tuple[int, int]] = []
-    signals = _SignalReader(path, root)
     connections: list[tuple] = []  # (from, via, to, tls, link, major, dir) of normal -> normal links
     for conn in root.findall("connection"):
         try:
@@ -125,7 +162,11 @@ def compile_sumo_net(path: Path) -> RoadMap:
     # target lane of the connection that named it.
     has_successor = {a for a, _ in links}
     links.update((v, d) for v, d in via_targets if v not in has_successor)
+    return links, connections
 
+
+def _junction_outlines(path: Path, root: ET.Element) -> list[np.ndarray]:
+    """Outlines of the junctions that have an area (the drivable raster fills them)."""
     junction_shapes: list[np.ndarray] = []
     for junction in root.findall("junction"):
         if junction.get("type") in _NO_OUTLINE_JUNCTIONS or not junction.get("shape"):
@@ -133,18 +174,7 @@ def compile_sumo_net(path: Path) -> RoadMap:
         outline = _parse_shape(path, f"junction {junction.get('id')}", junction.get("shape"))
         if len(outline) >= 3:
             junction_shapes.append(outline)
-
-    road_map = assemble_road_map(str(path), content_hash, lanes, sorted(links), junction_shapes)
-    if connections:
-        cols = list(zip(*connections))
-        for name, values, dtype in zip(
-            ("conn_from", "conn_via", "conn_to", "conn_tls", "conn_link", "conn_major", "conn_dir"),
-            cols,
-            (np.int32, np.int32, np.int32, np.int32, np.int32, bool, "<U1"),
-        ):
-            setattr(road_map, name, np.array(values, dtype=dtype))
-    signals.store(road_map)
-    return road_map
+    return junction_shapes
 
 
 _MAJOR_STATES = ("M", "O")

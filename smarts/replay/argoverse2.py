@@ -188,8 +188,58 @@ def read_map(
     segments = _items(data, "lane_segments", path)
     if not segments:
         raise ReplayError(f"{path}: lane_segments: expected a mapping of lane segment id -> segment")
+    reader = _MapReader(path, swap_xy, flip_y, offset)
+    reader.read_lanes(segments)
+    reader.read_areas(_items(data, "drivable_areas", path))
+    reader.read_crossings(_items(data, "pedestrian_crossings", path))
+    ids = reader.ids
+    points_of = {lane: len(line) for lane, line in zip(ids, reader.centres)}
 
-    def points(where: str, value) -> np.ndarray:
+    def spans(lane: str, other: str | None) -> list[tuple[str, int, int, int, int]]:
+        if other is None or other not in points_of:
+            return []
+        return [full_span(points_of[lane], other, points_of[other])]
+
+    return DatasetMap(
+        source=str(path),
+        lane_ids=ids,
+        polylines=reader.centres,
+        widths=np.array(reader.widths),
+        speed_limits=np.full(len(ids), DEFAULT_SPEED_LIMIT),
+        internal=np.array(reader.internal, dtype=bool),
+        successors=reader.succ,
+        left=[spans(lane, other) for lane, other in zip(ids, reader.left_id)],
+        right=[spans(lane, other) for lane, other in zip(ids, reader.right_id)],
+        outlines=reader.outlines,
+        marks=reader.marks,
+        mark_kinds=reader.mark_kinds,
+        lines=reader.drawn,
+        line_kinds=reader.drawn_kinds,
+    )
+
+
+class _MapReader:
+    """Collects one map file's lanes, areas and marks, every point aligned the same way and
+    every error naming the file and the entry."""
+
+    def __init__(self, path: Path, swap_xy: bool, flip_y: bool, offset: tuple[float, float]):
+        self.path, self.swap_xy, self.flip_y, self.offset = path, swap_xy, flip_y, offset
+        self.ids: list[str] = []
+        self.centres: list[np.ndarray] = []
+        self.widths: list[np.ndarray] = []
+        self.internal: list[bool] = []
+        self.succ: list[list[str]] = []
+        self.left_id: list[str | None] = []
+        self.right_id: list[str | None] = []
+        self.outlines: list[np.ndarray] = []
+        self.marks: list[np.ndarray] = []  # filled areas: bike lanes, crosswalks
+        self.mark_kinds: list[int] = []
+        self.drawn: list[np.ndarray] = []  # painted lines and area edges
+        self.drawn_kinds: list[str] = []
+
+    def points(self, where: str, value) -> np.ndarray:
+        """A list of {x, y, z} points as aligned (x, y) rows; every point finite and within range."""
+        path = self.path
         try:
             xy = np.array([[float(p["x"]), float(p["y"])] for p in value], dtype=np.float64).reshape(-1, 2)
         except (TypeError, KeyError, ValueError):
@@ -198,76 +248,62 @@ def read_map(
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
             raise ReplayError(f"{path}: {where}[{k}]: expected a finite position, got ({xy[k, 0]:g}, {xy[k, 1]:g})")
-        return np.stack(align(xy[:, 0], xy[:, 1], swap_xy=swap_xy, flip_y=flip_y, offset=offset), axis=1)
+        return np.stack(align(xy[:, 0], xy[:, 1], swap_xy=self.swap_xy, flip_y=self.flip_y, offset=self.offset), axis=1)
 
-    def boundary(seg_id: str, seg: dict, key: str) -> np.ndarray:
-        xy = points(f"lane_segments.{seg_id}.{key}", seg.get(key))
+    def boundary(self, seg_id: str, seg: dict, key: str) -> np.ndarray:
+        """A lane segment's left or right boundary: at least two points."""
+        xy = self.points(f"lane_segments.{seg_id}.{key}", seg.get(key))
         if len(xy) < 2:
-            raise ReplayError(f"{path}: lane_segments.{seg_id}.{key}: expected at least 2 points, got {len(xy)}")
+            raise ReplayError(f"{self.path}: lane_segments.{seg_id}.{key}: expected at least 2 points, got {len(xy)}")
         return xy
 
-    ids, lines, widths, internal, succ, left_id, right_id = [], [], [], [], [], [], []
-    marks, mark_kinds, drawn, drawn_kinds = [], [], [], []
-    for seg_id, seg in segments:
-        if not isinstance(seg, dict):
-            raise ReplayError(f"{path}: lane_segments.{seg_id}: expected a mapping")
-        left, right = boundary(seg_id, seg, "left_lane_boundary"), boundary(seg_id, seg, "right_lane_boundary")
-        for xy, key in ((left, "left_lane_mark_type"), (right, "right_lane_mark_type")):
-            kind = MARK_TYPES.get(str(seg.get(key, "")))
-            if kind is not None:
-                drawn.append(xy)
-                drawn_kinds.append(kind)
-        if seg.get("lane_type", "VEHICLE") == "BIKE":
-            marks.append(np.concatenate([left, right[::-1]]))
-            mark_kinds.append(BIKE_LANE)
-            continue
-        if seg.get("lane_type", "VEHICLE") not in ("VEHICLE", "BUS"):
-            continue
-        centre, width = centre_and_width(left, right)
-        ids.append(str(seg.get("id", seg_id)))
-        lines.append(centre)
-        widths.append(width)
-        internal.append(bool(seg.get("is_intersection", False)))
-        succ.append([str(s) for s in seg.get("successors") or []])
-        left_id.append(None if seg.get("left_neighbor_id") is None else str(seg["left_neighbor_id"]))
-        right_id.append(None if seg.get("right_neighbor_id") is None else str(seg["right_neighbor_id"]))
-    points_of = {lane: len(line) for lane, line in zip(ids, lines)}
+    def read_lanes(self, segments: list[tuple[str, object]]) -> None:
+        """Vehicle and bus lanes become lanes (centre line between the boundaries); bike lanes become marks."""
+        for seg_id, seg in segments:
+            if not isinstance(seg, dict):
+                raise ReplayError(f"{self.path}: lane_segments.{seg_id}: expected a mapping")
+            left = self.boundary(seg_id, seg, "left_lane_boundary")
+            right = self.boundary(seg_id, seg, "right_lane_boundary")
+            for xy, key in ((left, "left_lane_mark_type"), (right, "right_lane_mark_type")):
+                kind = MARK_TYPES.get(str(seg.get(key, "")))
+                if kind is not None:
+                    self.drawn.append(xy)
+                    self.drawn_kinds.append(kind)
+            if seg.get("lane_type", "VEHICLE") == "BIKE":
+                self.marks.append(np.concatenate([left, right[::-1]]))
+                self.mark_kinds.append(BIKE_LANE)
+                continue
+            if seg.get("lane_type", "VEHICLE") not in ("VEHICLE", "BUS"):
+                continue
+            centre, width = centre_and_width(left, right)
+            self.ids.append(str(seg.get("id", seg_id)))
+            self.centres.append(centre)
+            self.widths.append(width)
+            self.internal.append(bool(seg.get("is_intersection", False)))
+            self.succ.append([str(s) for s in seg.get("successors") or []])
+            self.left_id.append(None if seg.get("left_neighbor_id") is None else str(seg["left_neighbor_id"]))
+            self.right_id.append(None if seg.get("right_neighbor_id") is None else str(seg["right_neighbor_id"]))
 
-    def spans(lane: str, other: str | None) -> list[tuple[str, int, int, int, int]]:
-        if other is None or other not in points_of:
-            return []
-        return [full_span(points_of[lane], other, points_of[other])]
+    def read_areas(self, areas: list[tuple[str, object]]) -> None:
+        """Drivable area outlines (with at least 3 points), also drawn as closed edges."""
+        for area_id, area in areas:
+            if not isinstance(area, dict):
+                raise ReplayError(f"{self.path}: drivable_areas.{area_id}: expected a mapping with area_boundary")
+            xy = self.points(f"drivable_areas.{area_id}.area_boundary", area.get("area_boundary"))
+            if len(xy) >= 3:
+                self.outlines.append(xy)
+                self.drawn.append(np.concatenate([xy, xy[:1]]))
+                self.drawn_kinds.append("edge")
 
-    outlines = []
-    for area_id, area in _items(data, "drivable_areas", path):
-        if not isinstance(area, dict):
-            raise ReplayError(f"{path}: drivable_areas.{area_id}: expected a mapping with area_boundary")
-        xy = points(f"drivable_areas.{area_id}.area_boundary", area.get("area_boundary"))
-        if len(xy) >= 3:
-            outlines.append(xy)
-            drawn.append(np.concatenate([xy, xy[:1]]))
-            drawn_kinds.append("edge")
-    for cross_id, cross in _items(data, "pedestrian_crossings", path):
-        if not isinstance(cross, dict):
-            raise ReplayError(f"{path}: pedestrian_crossings.{cross_id}: expected a mapping with edge1 and edge2")
-        e1 = points(f"pedestrian_crossings.{cross_id}.edge1", cross.get("edge1"))
-        e2 = points(f"pedestrian_crossings.{cross_id}.edge2", cross.get("edge2"))
-        if len(e1) >= 2 and len(e2) >= 2:
-            marks.append(np.concatenate([e1, e2[::-1]]))
-            mark_kinds.append(CROSSWALK)
-    return DatasetMap(
-        source=str(path),
-        lane_ids=ids,
-        polylines=lines,
-        widths=np.array(widths),
-        speed_limits=np.full(len(ids), DEFAULT_SPEED_LIMIT),
-        internal=np.array(internal, dtype=bool),
-        successors=succ,
-        left=[spans(lane, other) for lane, other in zip(ids, left_id)],
-        right=[spans(lane, other) for lane, other in zip(ids, right_id)],
-        outlines=outlines,
-        marks=marks,
-        mark_kinds=mark_kinds,
-        lines=drawn,
-        line_kinds=drawn_kinds,
-    )
+    def read_crossings(self, crossings: list[tuple[str, object]]) -> None:
+        """Crosswalks: the area between their two edges."""
+        for cross_id, cross in crossings:
+            if not isinstance(cross, dict):
+                raise ReplayError(
+                    f"{self.path}: pedestrian_crossings.{cross_id}: expected a mapping with edge1 and edge2"
+                )
+            e1 = self.points(f"pedestrian_crossings.{cross_id}.edge1", cross.get("edge1"))
+            e2 = self.points(f"pedestrian_crossings.{cross_id}.edge2", cross.get("edge2"))
+            if len(e1) >= 2 and len(e2) >= 2:
+                self.marks.append(np.concatenate([e1, e2[::-1]]))
+                self.mark_kinds.append(CROSSWALK)

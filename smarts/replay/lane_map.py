@@ -106,27 +106,7 @@ def project_on(points: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, np.nda
 def compile_lane_map(dm: DatasetMap, content_hash: str | None = None) -> RoadMap:
     """The RoadMap of a dataset map (cached in memory by content)."""
     if content_hash is None:
-        h = hashlib.sha256()
-        for line in [*dm.polylines, *dm.marks]:
-            h.update(np.ascontiguousarray(line, dtype=np.float64).tobytes())
-        h.update("\0".join(dm.lane_ids).encode())
-        h.update(
-            repr(
-                (
-                    dm.successors,
-                    dm.left,
-                    dm.right,
-                    dm.stop_sign_lanes,
-                    dm.mark_kinds,
-                    dm.signal_lanes,
-                    list(np.asarray(dm.internal).tolist()),
-                    list(np.asarray(dm.widths).tolist()),
-                )
-            ).encode()
-        )
-        h.update(np.ascontiguousarray(dm.stop_signs, dtype=np.float64).tobytes())
-        h.update(np.ascontiguousarray(dm.signal_stops, dtype=np.float64).tobytes())
-        content_hash = h.hexdigest()
+        content_hash = _content_hash(dm)
     cached = _compiled.get(content_hash)
     if cached is not None:
         return cached
@@ -143,25 +123,7 @@ def compile_lane_map(dm: DatasetMap, content_hash: str | None = None) -> RoadMap
     left = _pair_pieces(pairs, pieces, piece_of, shapes, widths)
     right: dict[int, int] = {q: p for p, q in left.items()}
     n_pieces = len(pieces)
-    # roads: chains of neighbours, walked from the rightmost piece leftwards
-    road_of = [-1] * n_pieces
-    position = [0] * n_pieces
-    roads: list[list[int]] = []
-    for p in range(n_pieces):
-        if road_of[p] >= 0:
-            continue
-        start, seen = p, {p}
-        while right.get(start) is not None and right[start] not in seen and road_of[right[start]] < 0:
-            start = right[start]
-            seen.add(start)
-        chain, piece = [], start
-        while piece is not None and road_of[piece] < 0 and piece not in chain:
-            chain.append(piece)
-            road_of[piece] = len(roads)
-            piece = left.get(piece)
-        for i, piece in enumerate(chain):
-            position[piece] = i
-        roads.append(chain)
+    road_of, position, roads = _roads(n_pieces, left, right)
     ids = _piece_ids(dm, usable, pieces)
     lanes = []
     for p, (k, i0, i1) in enumerate(pieces):
@@ -181,6 +143,71 @@ def compile_lane_map(dm: DatasetMap, content_hash: str | None = None) -> RoadMap
     order = sorted(range(n_pieces), key=lambda p: (road_of[p], position[p]))
     new_index = {old: new for new, old in enumerate(order)}
     lanes = [lanes[p] for p in order]
+    links = _links(dm, usable, index_of, piece_of, new_index)
+    road_map = assemble_road_map(dm.source, content_hash, lanes, sorted(set(links)), junction_shapes=dm.outlines)
+    pieces_of = {dm.lane_ids[usable[k]]: [new_index[p] for p in piece_of[k]] for k in range(len(usable))}
+    road_map.stop_sign_xy, road_map.stop_sign_lane = _stop_signs(dm, road_map, pieces_of)
+    _signals(dm, road_map, pieces_of)
+    _marks(dm, road_map)
+    _compiled[content_hash] = road_map
+    return road_map
+
+
+def _content_hash(dm: DatasetMap) -> str:
+    """Hash of everything the compiled map is built from (the in-memory cache key)."""
+    h = hashlib.sha256()
+    for line in [*dm.polylines, *dm.marks]:
+        h.update(np.ascontiguousarray(line, dtype=np.float64).tobytes())
+    h.update("\0".join(dm.lane_ids).encode())
+    h.update(
+        repr(
+            (
+                dm.successors,
+                dm.left,
+                dm.right,
+                dm.stop_sign_lanes,
+                dm.mark_kinds,
+                dm.signal_lanes,
+                list(np.asarray(dm.internal).tolist()),
+                list(np.asarray(dm.widths).tolist()),
+            )
+        ).encode()
+    )
+    h.update(np.ascontiguousarray(dm.stop_signs, dtype=np.float64).tobytes())
+    h.update(np.ascontiguousarray(dm.signal_stops, dtype=np.float64).tobytes())
+    return h.hexdigest()
+
+
+def _roads(n_pieces: int, left: dict[int, int], right: dict[int, int]) -> tuple[list[int], list[int], list[list[int]]]:
+    """Group lane pieces into roads: chains of neighbours, walked from the rightmost piece leftwards.
+
+    Returns each piece's road and its index in that road (0 = rightmost), and each road's pieces.
+    """
+    road_of = [-1] * n_pieces
+    position = [0] * n_pieces
+    roads: list[list[int]] = []
+    for p in range(n_pieces):
+        if road_of[p] >= 0:
+            continue
+        start, seen = p, {p}
+        while right.get(start) is not None and right[start] not in seen and road_of[right[start]] < 0:
+            start = right[start]
+            seen.add(start)
+        chain, piece = [], start
+        while piece is not None and road_of[piece] < 0 and piece not in chain:
+            chain.append(piece)
+            road_of[piece] = len(roads)
+            piece = left.get(piece)
+        for i, piece in enumerate(chain):
+            position[piece] = i
+        roads.append(chain)
+    return road_of, position, roads
+
+
+def _links(
+    dm: DatasetMap, usable: list[int], index_of: dict[str, int], piece_of: list[list[int]], new_index: dict[int, int]
+) -> list[tuple[int, int]]:
+    """Lane graph links: each lane's pieces in a row, then its last piece to each named successor's first."""
     links = []
     for k, i in enumerate(usable):
         own = piece_of[k]
@@ -189,13 +216,7 @@ def compile_lane_map(dm: DatasetMap, content_hash: str | None = None) -> RoadMap
             j = index_of.get(succ)
             if j is not None and j != k:
                 links.append((new_index[own[-1]], new_index[piece_of[j][0]]))
-    road_map = assemble_road_map(dm.source, content_hash, lanes, sorted(set(links)), junction_shapes=dm.outlines)
-    pieces_of = {dm.lane_ids[usable[k]]: [new_index[p] for p in piece_of[k]] for k in range(len(usable))}
-    road_map.stop_sign_xy, road_map.stop_sign_lane = _stop_signs(dm, road_map, pieces_of)
-    _signals(dm, road_map, pieces_of)
-    _marks(dm, road_map)
-    _compiled[content_hash] = road_map
-    return road_map
+    return links
 
 
 def _neighbour_pairs(dm: DatasetMap, usable: list[int], index_of: dict[str, int], shapes: list[np.ndarray],

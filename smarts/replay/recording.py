@@ -14,6 +14,7 @@ interval, so the first and last frames are always hit.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
 
@@ -393,18 +394,7 @@ def from_samples(
     are kept as recorded. Per-road-user ``length``/``width``/``vtype``/``kind`` are taken from its
     first sample.
     """
-    vehicle_ids = np.asarray(vehicle_ids).astype(str)
-    frames = np.asarray(frames, dtype=np.int64)
-    if len(vehicle_ids) == 0:
-        raise ReplayError(f"{source}: no vehicle samples")
-    order = np.lexsort((frames, vehicle_ids))
-    vids, frames = vehicle_ids[order], frames[order]
-    dup = (vids[1:] == vids[:-1]) & (frames[1:] == frames[:-1])
-    if dup.any():
-        i = int(np.flatnonzero(dup)[0])
-        raise ReplayError(f"{source}: vehicle {str(vids[i])!r} has two samples at frame {int(frames[i])}")
-    starts = np.flatnonzero(np.r_[True, vids[1:] != vids[:-1]])
-    ends = np.r_[starts[1:], len(vids)]
+    order, vids, frames, starts, ends = _sorted_tracks(source, vehicle_ids, frames)
     _check_extent(source, vids, frames, starts, ends, dt)
     x, y = np.asarray(x, np.float64)[order], np.asarray(y, np.float64)[order]
     heading = None if heading is None else np.asarray(heading, np.float64)[order]
@@ -415,23 +405,7 @@ def from_samples(
     ids = vids[starts].tolist()
     first = frames[starts]
     count = frames[ends - 1] - first + 1
-    total = int(count.sum())
-    # every road user's frames on its own full run: position of each sample in the output
-    out_off = np.concatenate([[0], np.cumsum(count)])
-    dest = out_off[np.repeat(np.arange(len(ids)), ends - starts)] + (frames - np.repeat(first, ends - starts))
-    full = np.zeros(total, dtype=bool)
-    full[dest] = True
-    grid = np.arange(total, dtype=np.float64)
-
-    def fill(values: np.ndarray, angle: bool = False) -> np.ndarray:
-        out = np.empty(total)
-        if full.all():
-            out[dest] = values
-            return out
-        v = np.unwrap(values) if angle else values  # gaps only inside a track, so one unwrap is fine
-        out[:] = np.interp(grid, dest.astype(np.float64), v)
-        return wrap_angle(out) if angle else out
-
+    fill = _gap_filler(frames, starts, ends, first, count)
     fx, fy = fill(x), fill(y)
     if heading is None or speed is None:
         dh, ds = kinematics_from_positions(fx, fy, count, dt, smooth_frames)
@@ -459,6 +433,49 @@ def from_samples(
         signal_states=signal_states,
         skipped=dict(skipped or {}),
     )
+
+
+def _sorted_tracks(source: str, vehicle_ids: np.ndarray, frames: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Samples sorted by (road user, frame): the sort order, sorted ids and frames, and each track's
+    [start, end) in them; two samples of one road user at one frame are an error."""
+    vehicle_ids = np.asarray(vehicle_ids).astype(str)
+    frames = np.asarray(frames, dtype=np.int64)
+    if len(vehicle_ids) == 0:
+        raise ReplayError(f"{source}: no vehicle samples")
+    order = np.lexsort((frames, vehicle_ids))
+    vids, frames = vehicle_ids[order], frames[order]
+    dup = (vids[1:] == vids[:-1]) & (frames[1:] == frames[:-1])
+    if dup.any():
+        i = int(np.flatnonzero(dup)[0])
+        raise ReplayError(f"{source}: vehicle {str(vids[i])!r} has two samples at frame {int(frames[i])}")
+    starts = np.flatnonzero(np.r_[True, vids[1:] != vids[:-1]])
+    ends = np.r_[starts[1:], len(vids)]
+    return order, vids, frames, starts, ends
+
+
+def _gap_filler(
+    frames: np.ndarray, starts: np.ndarray, ends: np.ndarray, first: np.ndarray, count: np.ndarray
+) -> Callable[..., np.ndarray]:
+    """A function that lays one sorted sample column onto every track's full run of frames,
+    interpolating the frames a road user skips (angles unwrapped first, wrapped after)."""
+    total = int(count.sum())
+    # every road user's frames on its own full run: position of each sample in the output
+    out_off = np.concatenate([[0], np.cumsum(count)])
+    dest = out_off[np.repeat(np.arange(len(starts)), ends - starts)] + (frames - np.repeat(first, ends - starts))
+    full = np.zeros(total, dtype=bool)
+    full[dest] = True
+    grid = np.arange(total, dtype=np.float64)
+
+    def fill(values: np.ndarray, angle: bool = False) -> np.ndarray:
+        out = np.empty(total)
+        if full.all():
+            out[dest] = values
+            return out
+        v = np.unwrap(values) if angle else values  # gaps only inside a track, so one unwrap is fine
+        out[:] = np.interp(grid, dest.astype(np.float64), v)
+        return wrap_angle(out) if angle else out
+
+    return fill
 
 
 def _check_extent(source: str, vids: np.ndarray, frames: np.ndarray, starts: np.ndarray, ends: np.ndarray,

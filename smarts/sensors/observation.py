@@ -336,7 +336,6 @@ def _observe(
     ego, neighbours, neighbour_mask, waypoints = out.ego, out.neighbours, out.neighbour_mask, out.waypoints
     waypoint_mask, goal, signal, events_out = out.waypoint_mask, out.goal, out.signal, out.events
     k_max = neighbours.shape[1]
-    vis_col = neighbours.shape[2] - 1
     near_d2 = np.empty(k_max)
     near_row = np.empty(k_max, dtype=np.int64)
     for i in range(agents.shape[0]):
@@ -349,19 +348,8 @@ def _observe(
         c, s = math.cos(h), math.sin(h)
         speed = data[_SPEED, r]
 
-        ego[i, 0] = speed
-        ego[i, 1] = data[_ACCEL, r]
-        ego[i, 2] = data[_JERK, r]
-        ego[i, 3] = data[_LAT_ACCEL, r]
-        ego[i, 4] = data[_YAW_RATE, r]
-        ego[i, 5] = data[_STEERING, r]
-        ego[i, 6] = wrap_scalar(h - data[_LANE_HEADING, r])
-        ego[i, 7] = data[_T, r]
         ln = lane[r]
-        ego[i, 8] = lane_width[ln] if ln >= 0 else 0.0
-        ego[i, 9] = lane_speed_limit[ln] if ln >= 0 else 0.0
-        ego[i, 10] = data[_LENGTH, r]
-        ego[i, 11] = data[_WIDTH, r]
+        _ego_features(data, r, ln, lane_width, lane_speed_limit, h, speed, ego, i)
         if ego_extended:
             # yaw[0]: yaw rate seen at step yaw[1]; yaw[2]: angular acceleration at that step.
             if yaw[1, a] != step:
@@ -369,67 +357,14 @@ def _observe(
                 yaw[0, a], yaw[1, a] = data[_YAW_RATE, r], step
             ego[i, 12] = yaw[2, a]
 
-        # K nearest by insertion into a sorted list (K is small); equal distances keep row order.
-        m = 0
-        for j in alive[alive_lo[i] : alive_hi[i]]:
-            if j == r:
-                continue
-            d2 = (data[_X, j] - x) ** 2 + (data[_Y, j] - y) ** 2
-            if d2 > radius2 or (m == k_max and d2 >= near_d2[m - 1]):
-                continue
-            if vis_mode == _VIS_HIDE and visible[i, j - base] <= 0.0:
-                continue
-            pos = m if m < k_max else k_max - 1
-            while pos > 0 and near_d2[pos - 1] > d2:
-                if pos < k_max:
-                    near_d2[pos], near_row[pos] = near_d2[pos - 1], near_row[pos - 1]
-                pos -= 1
-            near_d2[pos], near_row[pos] = d2, j
-            m = min(m + 1, k_max)
-        neighbours[i] = 0.0
-        neighbour_mask[i] = 0.0
-        for q in range(m):
-            j = near_row[q]
-            dx, dy = data[_X, j] - x, data[_Y, j] - y
-            rel = data[_H, j] - h
-            cr, sr = math.cos(rel), math.sin(rel)
-            nv = data[_SPEED, j]
-            neighbours[i, q, 0] = c * dx + s * dy
-            neighbours[i, q, 1] = c * dy - s * dx
-            neighbours[i, q, 2] = cr
-            neighbours[i, q, 3] = sr
-            # Relative velocity in the ego frame.
-            neighbours[i, q, 4] = nv * cr - speed
-            neighbours[i, q, 5] = nv * sr
-            neighbours[i, q, 6] = data[_LENGTH, j]
-            neighbours[i, q, 7] = data[_WIDTH, j]
-            neighbours[i, q, 8] = 1.0 if role[j] == _PEDESTRIAN else 0.0
-            if extended:
-                neighbours[i, q, 9] = nv
-                neighbours[i, q, 10] = data[_ACCEL, j]
-                neighbours[i, q, 11] = data[_YAW_RATE, j]
-                lj = lane[j]
-                neighbours[i, q, 12] = float(lane_index[lj]) if lj >= 0 else -1.0
-                neighbours[i, q, 13] = 1.0 if lj >= 0 and ln >= 0 and lane_road[lj] == lane_road[ln] else 0.0
-                if 0 <= vtype[j] < _NUM_TYPES:
-                    neighbours[i, q, 14 + vtype[j]] = 1.0
-            if vis_mode != _VIS_OFF:
-                neighbours[i, q, vis_col] = visible[i, j - base]
-            neighbour_mask[i, q] = 1.0
+        m = _nearest_rows(data, alive[alive_lo[i] : alive_hi[i]], r, x, y, radius2, vis_mode == _VIS_HIDE, visible, i,
+                          base, near_d2, near_row)  # fmt: skip
+        _neighbour_features(data, lane, role, vtype, lane_index, lane_road, ln, near_row, m, x, y, h, c, s, speed,
+                            extended, vis_mode, visible, i, base, neighbours, neighbour_mask)  # fmt: skip
 
-        # Indices past a path's end clip onto the padding rows, which are marked invalid.
-        for q in range(offsets.shape[0]):
-            flat = a * stride + min(route_index[a] + offsets[q], stride - 1)
-            for p in range(waypoints.shape[1]):
-                if flat_valid[flat, p]:
-                    dx, dy = flat_paths[flat, p, 0] - x, flat_paths[flat, p, 1] - y
-                    waypoints[i, p, q, 0] = c * dx + s * dy
-                    waypoints[i, p, q, 1] = c * dy - s * dx
-                    waypoints[i, p, q, 2] = wrap_scalar(flat_paths[flat, p, 2] - h)
-                    waypoint_mask[i, p, q] = 1.0
-                else:
-                    waypoints[i, p, q] = 0.0
-                    waypoint_mask[i, p, q] = 0.0
+        _waypoint_features(
+            flat_paths, flat_valid, stride, route_index[a], offsets, a, x, y, h, c, s, waypoints, waypoint_mask, i
+        )
 
         if goal_kind[a] != 0:
             dx, dy = goal_xy[a, 0] - x, goal_xy[a, 1] - y
@@ -448,6 +383,134 @@ def _observe(
             signal[i, 3] = max(signal_s[here] - route_progress[a], 0.0)
         for e in range(events.shape[1]):
             events_out[i, e] = events[a, e]
+
+
+# The blocks of ``_observe`` per agent, inlined into it by numba; they take plain arrays, not the
+# frozen records (``smarts.core.records``: a field read per agent would cost a load and a reference).
+@numba.njit(cache=True, nogil=True, inline="always")
+def _ego_features(data, r, ln, lane_width, lane_speed_limit, h, speed, ego, i):  # pragma: no cover - compiled
+    """The ego block's first 12 columns of row ``r`` (lane ``ln``, -1: off every lane) into ``ego[i]``."""
+    ego[i, 0] = speed
+    ego[i, 1] = data[_ACCEL, r]
+    ego[i, 2] = data[_JERK, r]
+    ego[i, 3] = data[_LAT_ACCEL, r]
+    ego[i, 4] = data[_YAW_RATE, r]
+    ego[i, 5] = data[_STEERING, r]
+    ego[i, 6] = wrap_scalar(h - data[_LANE_HEADING, r])
+    ego[i, 7] = data[_T, r]
+    ego[i, 8] = lane_width[ln] if ln >= 0 else 0.0
+    ego[i, 9] = lane_speed_limit[ln] if ln >= 0 else 0.0
+    ego[i, 10] = data[_LENGTH, r]
+    ego[i, 11] = data[_WIDTH, r]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _nearest_rows(
+    data, alive, r, x, y, radius2, hide, visible, i, base, near_d2, near_row
+):  # pragma: no cover - compiled
+    """The up to K (``near_row.shape[0]``) nearest ``alive`` rows to (x, y) within the radius,
+    nearest first, into ``near_d2``/``near_row``; returns how many. ``hide``: leave out rows
+    agent ``i`` cannot see at all."""
+    k_max = near_row.shape[0]
+    # K nearest by insertion into a sorted list (K is small); equal distances keep row order.
+    m = 0
+    for j in alive:
+        if j == r:
+            continue
+        d2 = (data[_X, j] - x) ** 2 + (data[_Y, j] - y) ** 2
+        if d2 > radius2 or (m == k_max and d2 >= near_d2[m - 1]):
+            continue
+        if hide and visible[i, j - base] <= 0.0:
+            continue
+        pos = m if m < k_max else k_max - 1
+        while pos > 0 and near_d2[pos - 1] > d2:
+            if pos < k_max:
+                near_d2[pos], near_row[pos] = near_d2[pos - 1], near_row[pos - 1]
+            pos -= 1
+        near_d2[pos], near_row[pos] = d2, j
+        m = min(m + 1, k_max)
+    return m
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _neighbour_features(
+    data,
+    lane,
+    role,
+    vtype,
+    lane_index,
+    lane_road,
+    ln,
+    near_row,
+    m,
+    x,
+    y,
+    h,
+    c,
+    s,
+    speed,
+    extended,
+    vis_mode,
+    visible,
+    i,
+    base,
+    neighbours,
+    neighbour_mask,
+):  # pragma: no cover - compiled
+    """The neighbours block of agent ``i`` (pose ``x, y, h``, c, s = cos h, sin h; lane ``ln``): one
+    row per nearest road user in the ego frame, the rest zero."""
+    vis_col = neighbours.shape[2] - 1
+    neighbours[i] = 0.0
+    neighbour_mask[i] = 0.0
+    for q in range(m):
+        j = near_row[q]
+        dx, dy = data[_X, j] - x, data[_Y, j] - y
+        rel = data[_H, j] - h
+        cr, sr = math.cos(rel), math.sin(rel)
+        nv = data[_SPEED, j]
+        neighbours[i, q, 0] = c * dx + s * dy
+        neighbours[i, q, 1] = c * dy - s * dx
+        neighbours[i, q, 2] = cr
+        neighbours[i, q, 3] = sr
+        # Relative velocity in the ego frame.
+        neighbours[i, q, 4] = nv * cr - speed
+        neighbours[i, q, 5] = nv * sr
+        neighbours[i, q, 6] = data[_LENGTH, j]
+        neighbours[i, q, 7] = data[_WIDTH, j]
+        neighbours[i, q, 8] = 1.0 if role[j] == _PEDESTRIAN else 0.0
+        if extended:
+            neighbours[i, q, 9] = nv
+            neighbours[i, q, 10] = data[_ACCEL, j]
+            neighbours[i, q, 11] = data[_YAW_RATE, j]
+            lj = lane[j]
+            neighbours[i, q, 12] = float(lane_index[lj]) if lj >= 0 else -1.0
+            neighbours[i, q, 13] = 1.0 if lj >= 0 and ln >= 0 and lane_road[lj] == lane_road[ln] else 0.0
+            if 0 <= vtype[j] < _NUM_TYPES:
+                neighbours[i, q, 14 + vtype[j]] = 1.0
+        if vis_mode != _VIS_OFF:
+            neighbours[i, q, vis_col] = visible[i, j - base]
+        neighbour_mask[i, q] = 1.0
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _waypoint_features(
+    flat_paths, flat_valid, stride, index, offsets, a, x, y, h, c, s, waypoints, waypoint_mask, i
+):  # pragma: no cover - compiled
+    """The waypoints of agent ``a`` (route point ``index``) at each offset along each of its paths, in
+    the frame of the ego pose (x, y, h; c, s = cos h, sin h)."""
+    # Indices past a path's end clip onto the padding rows, which are marked invalid.
+    for q in range(offsets.shape[0]):
+        flat = a * stride + min(index + offsets[q], stride - 1)
+        for p in range(waypoints.shape[1]):
+            if flat_valid[flat, p]:
+                dx, dy = flat_paths[flat, p, 0] - x, flat_paths[flat, p, 1] - y
+                waypoints[i, p, q, 0] = c * dx + s * dy
+                waypoints[i, p, q, 1] = c * dy - s * dx
+                waypoints[i, p, q, 2] = wrap_scalar(flat_paths[flat, p, 2] - h)
+                waypoint_mask[i, p, q] = 1.0
+            else:
+                waypoints[i, p, q] = 0.0
+                waypoint_mask[i, p, q] = 0.0
 
 
 _X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]

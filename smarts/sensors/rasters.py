@@ -264,24 +264,26 @@ def _draw_one(
     shaded,
 ):  # pragma: no cover - compiled
     """One agent's rasters (its own scratch buffers and output planes)."""
-    px_ex, px_ey, px_bin, px_dist, size, res = pix.ex, pix.ey, pix.bin, pix.dist, pix.size, pix.res
-    origin, inv_res, cell_max, width = grid.origin, grid.inv_res, grid.cell_max, grid.width
-    drivable, lane_distance, lane_cells = grid.drivable, grid.lane_distance, grid.lane_cells
-    flat_paths, flat_valid, stride, path_len, route_index = (
-        paths.flat_paths,
-        paths.flat_valid,
-        paths.stride,
-        paths.path_len,
-        paths.route_index,
-    )
+    size, res = pix.size, pix.res
     half = 0.5 * size * res
     view = half * math.sqrt(2.0)  # farthest pixel corner from the ego
-    slot = pix.slot
-    s_drv, s_lane, s_route, s_occ, s_occl = slot[0], slot[1], slot[2], slot[3], slot[4]
     x, y, h = data[_X, r], data[_Y, r], data[_H, r]
     c, s = math.cos(h), math.sin(h)
+    _draw_boxes(data, alive, row_base, r, x, y, h, c, s, half, pix, sh, visible, occupant)
+    _draw_route(paths, a, x, y, c, s, view, pix, route)
+    _read_map(grid, pix, sh, depth, x, y, c, s, cell, on_road, on_lane, shade)
+    _fill_layers(pix, layers, on_road, on_lane, route, occupant, shade)
+    if want_rgb:
+        _compose_rgb(size * size, role, occupant, route, on_lane, on_road, shade, shaded, rgb)
 
-    # Boxes: ego = -1, other road users = row + 1, into the pixels whose centre they cover.
+
+# The layers of ``_draw_one``, one loop nest each, inlined into it by numba.
+@numba.njit(cache=True, nogil=True, inline="always")
+def _draw_boxes(
+    data, alive, row_base, r, x, y, h, c, s, half, pix, sh, visible, occupant
+):  # pragma: no cover - compiled
+    """Boxes: ego = -1, other road users = row + 1, into the pixels whose centre they cover."""
+    px_ex, px_ey, size, res = pix.ex, pix.ey, pix.size, pix.res
     occupant[:] = 0
     for j in alive:
         if j != r and sh.hide_hidden and visible[j - row_base] <= 0.0:
@@ -307,7 +309,18 @@ def _draw_one(
                     if j == r or occupant[q] <= 0:
                         occupant[q] = mark
 
-    # Route: its path polyline sampled every half pixel, from where it enters the view.
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _draw_route(paths, a, x, y, c, s, view, pix, route):  # pragma: no cover - compiled
+    """Route: agent ``a``'s path polyline sampled every half pixel, from where it enters the view."""
+    size, res = pix.size, pix.res
+    flat_paths, flat_valid, stride, path_len, route_index = (
+        paths.flat_paths,
+        paths.flat_valid,
+        paths.stride,
+        paths.path_len,
+        paths.route_index,
+    )
     route[:] = 0
     base = a * stride
     k0 = route_index[a]
@@ -341,9 +354,15 @@ def _draw_one(
             break
         entered = entered or near
 
-    # Every pixel: map lookups, shadows, then the layers and the composed colour. Simple
-    # loops over the flat pixel index, so the compiler can vectorise them.
-    n_px = size * size
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _read_map(grid, pix, sh, depth, x, y, c, s, cell, on_road, on_lane, shade):  # pragma: no cover - compiled
+    """Every pixel: its map cell, on road / on a lane line, and its shadow level. Simple loops over
+    the flat pixel index, so the compiler can vectorise them."""
+    px_ex, px_ey, px_bin, px_dist = pix.ex, pix.ey, pix.bin, pix.dist
+    origin, inv_res, cell_max, width = grid.origin, grid.inv_res, grid.cell_max, grid.width
+    drivable, lane_distance, lane_cells = grid.drivable, grid.lane_distance, grid.lane_cells
+    n_px = pix.size * pix.size
     for q in range(n_px):
         ex, ey = px_ex[q], px_ey[q]
         cx = min(max((x + c * ex - s * ey - origin[0]) * inv_res, 0.0), cell_max[0])
@@ -361,6 +380,14 @@ def _draw_one(
             )  # fmt: skip
     else:
         shade[:] = OCCLUSION_VISIBLE
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _fill_layers(pix, layers, on_road, on_lane, route, occupant, shade):  # pragma: no cover - compiled
+    """Copy each asked-for layer into its plane (``pix.slot``: the plane of each layer, -1: not drawn)."""
+    n_px = pix.size * pix.size
+    slot = pix.slot
+    s_drv, s_lane, s_route, s_occ, s_occl = slot[0], slot[1], slot[2], slot[3], slot[4]
     flat = layers.reshape(layers.shape[0], n_px)
     if s_drv >= 0:
         for q in range(n_px):
@@ -375,19 +402,23 @@ def _draw_one(
             flat[s_occ, q] = occupant[q] > 0
     if s_occl >= 0:
         flat[s_occl, :] = shade
-    if want_rgb:
-        image = rgb.reshape(n_px, 3)
-        for q in range(n_px):
-            occ = occupant[q]
-            if occ != 0:
-                colour = EGO if occ < 0 else ROLE_BASE + role[occ - 1]
-                level = OCCLUSION_VISIBLE
-            else:
-                colour = ROUTE if route[q] else LANE if on_lane[q] else ROAD if on_road[q] else BACKGROUND
-                level = shade[q]
-            image[q, 0] = shaded[level, colour, 0]
-            image[q, 1] = shaded[level, colour, 1]
-            image[q, 2] = shaded[level, colour, 2]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _compose_rgb(n_px, role, occupant, route, on_lane, on_road, shade, shaded, rgb):  # pragma: no cover - compiled
+    """The RGB view: road users over route over lane lines over road, each pixel shaded by its level."""
+    image = rgb.reshape(n_px, 3)
+    for q in range(n_px):
+        occ = occupant[q]
+        if occ != 0:
+            colour = EGO if occ < 0 else ROLE_BASE + role[occ - 1]
+            level = OCCLUSION_VISIBLE
+        else:
+            colour = ROUTE if route[q] else LANE if on_lane[q] else ROAD if on_road[q] else BACKGROUND
+            level = shade[q]
+        image[q, 0] = shaded[level, colour, 0]
+        image[q, 1] = shaded[level, colour, 1]
+        image[q, 2] = shaded[level, colour, 2]
 
 
 class EgoViewRenderer:

@@ -479,20 +479,7 @@ def _validate_trace(
 
     # A failed episode is scored as worst without reading its traces, so it needs no following columns.
     required = REQUIRED_COLUMNS + (FOLLOW_COLUMNS if task == "adaptive" and not failed else ())
-    for name in ALL_COLUMNS:
-        value = getattr(trace, name)
-        if value is None:
-            if name in required:
-                why = " (required for the adaptive task)" if name in FOLLOW_COLUMNS else ""
-                raise bad(name, f"missing column{why}")
-            continue
-        if value.ndim != 1:
-            raise bad(name, f"expected a 1-D array over steps, got shape {value.shape}")
-        if name in _BOOL_KINDS:
-            if value.dtype.kind != "b":
-                raise bad(name, f"expected booleans, got dtype {value.dtype}")
-        elif value.dtype.kind not in "fiu":
-            raise bad(name, f"expected numbers, got dtype {value.dtype}")
+    _check_column_kinds(trace, required, bad)
     n = trace.time.shape[0]
     for name, value in list(trace.columns().items()) + [(f"extra.{k}", v) for k, v in trace.extra.items()]:
         if value.ndim != 1 or value.shape[0] != n:
@@ -507,7 +494,31 @@ def _validate_trace(
                 "no steps logged (only a failed episode may have an empty trace)",
             )
         return
+    _check_finite(trace, bad)
+    _check_times(trace, time_limit, bad)
+    _check_values(trace, n, bad)
 
+
+def _check_column_kinds(trace: AgentTrace, required: tuple[str, ...], bad) -> None:
+    """Every required column is present, and every present column is 1-D with the expected dtype kind."""
+    for name in ALL_COLUMNS:
+        value = getattr(trace, name)
+        if value is None:
+            if name in required:
+                why = " (required for the adaptive task)" if name in FOLLOW_COLUMNS else ""
+                raise bad(name, f"missing column{why}")
+            continue
+        if value.ndim != 1:
+            raise bad(name, f"expected a 1-D array over steps, got shape {value.shape}")
+        if name in _BOOL_KINDS:
+            if value.dtype.kind != "b":
+                raise bad(name, f"expected booleans, got dtype {value.dtype}")
+        elif value.dtype.kind not in "fiu":
+            raise bad(name, f"expected numbers, got dtype {value.dtype}")
+
+
+def _check_finite(trace: AgentTrace, bad) -> None:
+    """Float columns are finite (lane-relative ones only on rows where the vehicle is on the road)."""
     off_road = trace.off_road
     for name in FLOAT_COLUMNS:
         value = getattr(trace, name)
@@ -521,7 +532,11 @@ def _validate_trace(
                 name,
                 f"non-finite value {value[step].item()!r} at step {step}{where} (must be finite)",
             )
-    if n > 1 and not (np.diff(trace.time) > 0).all():
+
+
+def _check_times(trace: AgentTrace, time_limit: float, bad) -> None:
+    """Row times increase strictly, start after the reset, and end by the time limit."""
+    if trace.time.shape[0] > 1 and not (np.diff(trace.time) > 0).all():
         step = int(np.argmin(np.diff(trace.time) > 0)) + 1
         raise bad(
             "time",
@@ -541,6 +556,11 @@ def _validate_trace(
             f"row {step} at {trace.time[step].item()!r} s is after the time limit "
             f"{time_limit!r} s (rows end at the time limit)",
         )
+
+
+def _check_values(trace: AgentTrace, n: int, bad) -> None:
+    """Limits, distances, widths and gaps lie in the ranges the metrics assume; left_map only on the last row."""
+    off_road = trace.off_road
     _check_range(trace.speed_limit > 0, trace.speed_limit, bad, "speed_limit", "> 0")
     _check_range(
         trace.route_distance_to_goal >= 0,
@@ -630,12 +650,56 @@ def write_episode(log: EpisodeLog, path: str | os.PathLike) -> Path:
 def read_episode(path: str | os.PathLike) -> EpisodeLog:
     """Read and validate one .npz episode log; :class:`LogError` names what is wrong and where."""
     src = str(path)
+    arrays = _load_arrays(path, src)
+    meta = _read_metadata(arrays, src)
+    agent_ids = meta["agent_ids"]
+    agents = _read_agents(arrays, agent_ids, src)
+    scene = _read_scene(arrays, meta.get("scene"), src)
+    known = (
+        tuple(f"agents/{i}/" for i in range(len(agent_ids)))
+        + tuple(f"extra/{i}/" for i in range(len(agent_ids)))
+        + ("scene/",)
+    )
+    stray = sorted(k for k in arrays if not k.startswith(known))
+    if stray:
+        raise LogError(
+            f"arrays {stray} belong to no agent listed in metadata.agent_ids",
+            source=src,
+        )
+
+    log = EpisodeLog(
+        scenario=meta["scenario"],
+        task=meta["task"],
+        episode=meta["episode"],
+        seed=meta["seed"],
+        dt=meta["dt"],
+        time_limit=meta["time_limit"],
+        goal_radius=meta["goal_radius"],
+        agents=agents,
+        initial_route_distance=meta["initial_route_distance"],
+        failure=meta.get("failure"),
+        end_time=meta.get("end_time"),
+        info=meta.get("info") or {},
+        signals=meta.get("signals", 0),
+        scene=scene,
+        source=src,
+    )
+    validate_episode(log)
+    return log
+
+
+def _load_arrays(path: str | os.PathLike, src: str) -> dict[str, np.ndarray]:
+    """Every array of the .npz (a missing file raises FileNotFoundError as is)."""
     try:
-        arrays = read_npz(path)
+        return read_npz(path)
     except FileNotFoundError:
         raise
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise LogError(f"not a readable .npz episode log ({exc})", source=src) from None
+
+
+def _read_metadata(arrays: dict[str, np.ndarray], src: str) -> dict:
+    """Pop and check the JSON metadata entry: format, version, required fields, distinct agent ids."""
     if "metadata" not in arrays:
         raise LogError("missing the 'metadata' entry", source=src, column="metadata")
     try:
@@ -677,7 +741,11 @@ def read_episode(path: str | os.PathLike) -> EpisodeLog:
             source=src,
             column="metadata.agent_ids",
         )
+    return meta
 
+
+def _read_agents(arrays: dict[str, np.ndarray], agent_ids: list, src: str) -> dict[str, AgentTrace]:
+    """One trace per listed agent from its ``agents/<i>/`` columns and ``extra/<i>/`` arrays."""
     agents: dict[str, AgentTrace] = {}
     for index, agent_id in enumerate(agent_ids):
         prefix = f"agents/{index}/"
@@ -695,38 +763,7 @@ def read_episode(path: str | os.PathLike) -> EpisodeLog:
         xprefix = f"extra/{index}/"
         extra = {k[len(xprefix) :]: v for k, v in arrays.items() if k.startswith(xprefix)}
         agents[agent_id] = AgentTrace(**cols, extra=extra)
-    scene = _read_scene(arrays, meta.get("scene"), src)
-    known = (
-        tuple(f"agents/{i}/" for i in range(len(agent_ids)))
-        + tuple(f"extra/{i}/" for i in range(len(agent_ids)))
-        + ("scene/",)
-    )
-    stray = sorted(k for k in arrays if not k.startswith(known))
-    if stray:
-        raise LogError(
-            f"arrays {stray} belong to no agent listed in metadata.agent_ids",
-            source=src,
-        )
-
-    log = EpisodeLog(
-        scenario=meta["scenario"],
-        task=meta["task"],
-        episode=meta["episode"],
-        seed=meta["seed"],
-        dt=meta["dt"],
-        time_limit=meta["time_limit"],
-        goal_radius=meta["goal_radius"],
-        agents=agents,
-        initial_route_distance=meta["initial_route_distance"],
-        failure=meta.get("failure"),
-        end_time=meta.get("end_time"),
-        info=meta.get("info") or {},
-        signals=meta.get("signals", 0),
-        scene=scene,
-        source=src,
-    )
-    validate_episode(log)
-    return log
+    return agents
 
 
 def _read_scene(arrays: dict[str, np.ndarray], meta: Any, src: str) -> SceneTrace | None:

@@ -513,6 +513,45 @@ def score_suite(
     episodes disagree on the task.
     """
     params = load_params() if params is None else params
+    task = _suite_task(logs)
+    names = metric_names(task)
+    per_scenario, failed, seeds, episode_scores = _score_episodes(logs, params, names)
+    if not per_scenario:
+        raise ValueError("score_suite: every episode failed and failed episodes are excluded; nothing to score")
+
+    scenarios: dict[str, dict[str, float]] = {}
+    for name in sorted(per_scenario):
+        rows = per_scenario[name]
+        keys = dict.fromkeys(k for r in rows for k in r)  # cost.red_light: not in a failed episode's worst row
+        scenarios[name] = {k: float(np.mean([r[k] for r in rows if k in r])) for k in keys}
+    overall = {m: float(np.mean([row[m] for row in scenarios.values()])) for m in names[:-1]}
+    overall["S_bench"] = s_bench(overall, task, params)
+    overall_ci, scenario_ci = bootstrap_ci(per_scenario, task, params, ci_level, resamples, ci_seed)
+    failed.sort(key=lambda f: (f["scenario"], f["episode"]))
+    return SuiteScores(
+        task=task,
+        overall=overall,
+        scenarios=scenarios,
+        episodes={name: len(per_scenario[name]) for name in scenarios},
+        failed=failed,
+        policy=params.failed_episodes,
+        overall_ci=overall_ci,
+        scenario_ci=scenario_ci,
+        seeds={name: dict(sorted(seeds[name].items())) for name in sorted(seeds)},
+        episode_scores={
+            name: sorted(rows, key=lambda r: r["episode"]) for name, rows in sorted(episode_scores.items())
+        },
+        ci={
+            "level": ci_level,
+            "resamples": resamples,
+            "seed": ci_seed,
+            "method": ci_method(ci_level, resamples, ci_seed),
+        },
+    )
+
+
+def _suite_task(logs: Sequence[EpisodeLog]) -> str:
+    """The one task all logs share (a log that fails validation is named before a mix of tasks is)."""
     if not logs:
         raise ValueError("score_suite: no episode logs given")
     tasks = sorted({log.task for log in logs})
@@ -520,15 +559,18 @@ def score_suite(
         for log in logs:
             validate_episode(log)
         raise ValueError(f"score_suite: logs mix tasks {tasks}; score each task's logs separately")
-    task = tasks[0]
+    return tasks[0]
 
+
+def _score_episodes(logs: Sequence[EpisodeLog], params: MetricParams, names: tuple[str, ...]) -> tuple:
+    """Score every episode once; returns the scores kept per scenario (failed ones dropped when the
+    policy excludes them), the failed episodes, the seeds and every episode's row for the report."""
     seen: dict[tuple[str, int], str | None] = {}
     per_scenario: dict[str, list[dict[str, float]]] = {}
     failed: list[dict[str, Any]] = []
     seeds: dict[str, dict[int, int | None]] = {}
     episode_scores: dict[str, list[dict[str, Any]]] = {}
     exclude = params.failed_episodes == "exclude"
-    names = metric_names(task)
     for log in logs:
         scores = score_episode(log, params)
         key = (log.scenario, int(log.episode))
@@ -563,35 +605,4 @@ def score_suite(
             if exclude:
                 continue
         per_scenario.setdefault(log.scenario, []).append(scores)
-    if not per_scenario:
-        raise ValueError("score_suite: every episode failed and failed episodes are excluded; nothing to score")
-
-    scenarios: dict[str, dict[str, float]] = {}
-    for name in sorted(per_scenario):
-        rows = per_scenario[name]
-        keys = dict.fromkeys(k for r in rows for k in r)  # cost.red_light: not in a failed episode's worst row
-        scenarios[name] = {k: float(np.mean([r[k] for r in rows if k in r])) for k in keys}
-    overall = {m: float(np.mean([row[m] for row in scenarios.values()])) for m in names[:-1]}
-    overall["S_bench"] = s_bench(overall, task, params)
-    overall_ci, scenario_ci = bootstrap_ci(per_scenario, task, params, ci_level, resamples, ci_seed)
-    failed.sort(key=lambda f: (f["scenario"], f["episode"]))
-    return SuiteScores(
-        task=task,
-        overall=overall,
-        scenarios=scenarios,
-        episodes={name: len(per_scenario[name]) for name in scenarios},
-        failed=failed,
-        policy=params.failed_episodes,
-        overall_ci=overall_ci,
-        scenario_ci=scenario_ci,
-        seeds={name: dict(sorted(seeds[name].items())) for name in sorted(seeds)},
-        episode_scores={
-            name: sorted(rows, key=lambda r: r["episode"]) for name, rows in sorted(episode_scores.items())
-        },
-        ci={
-            "level": ci_level,
-            "resamples": resamples,
-            "seed": ci_seed,
-            "method": ci_method(ci_level, resamples, ci_seed),
-        },
-    )
+    return per_scenario, failed, seeds, episode_scores

@@ -181,88 +181,25 @@ class BuiltinTrafficProvider(ProviderBase):
         dl, dw, dh, _ = VEHICLE_DIMENSIONS[base]
         lanes = self.routes.lanes_of_first_road(route)
         first_road = self.map.road_ids[self.routes.routes[route][0]]
-        lane_choice = item.depart_lane
-        if isinstance(lane_choice, bool) or not isinstance(lane_choice, (int, str)):
-            raise ScenarioError(
-                f"{where}.depart_lane: expected a lane index or one of {list(DEPART_LANES)}, got {lane_choice!r}"
-            )
-        if isinstance(lane_choice, int) and not 0 <= lane_choice < len(lanes):
-            raise ScenarioError(
-                f"{where}.depart_lane: road {first_road!r} has {len(lanes)} lane(s) "
-                f"(0..{len(lanes) - 1}), got {lane_choice}"
-            )
-        if isinstance(lane_choice, str) and lane_choice not in DEPART_LANES:
-            raise ScenarioError(
-                f"{where}.depart_lane: expected a lane index or one of {list(DEPART_LANES)}, got {lane_choice!r}"
-            )
-        speed = item.depart_speed
-        if isinstance(speed, str):
-            if speed not in DEPART_SPEEDS:
-                raise ScenarioError(
-                    f"{where}.depart_speed: expected m/s or one of {list(DEPART_SPEEDS)}, got {speed!r}"
-                )
-        elif isinstance(speed, bool) or not isinstance(speed, (int, float)) or not (0.0 <= speed <= vtype.max_speed):
-            raise ScenarioError(
-                f"{where}.depart_speed: expected 0..{vtype.max_speed} m/s (the vehicle type's "
-                f"max_speed) or one of {list(DEPART_SPEEDS)}, got {speed!r}"
-            )
-        shortest = float(self.map.lane_length[lanes].min())
-        if not 0.0 <= float(item.depart_pos) <= shortest:
-            raise ScenarioError(
-                f"{where}.depart_pos: road {first_road!r} is {shortest:.1f} m long, got {item.depart_pos}"
-            )
-        params = np.array(
-            [
-                vtype.accel,
-                vtype.decel,
-                max(vtype.emergency_decel, vtype.decel),
-                vtype.tau,
-                vtype.min_gap,
-                vtype.max_speed,
-                vtype.politeness,
-                vtype.lc_threshold,
-                vtype.lc_keep_right,
-            ],
-            dtype=np.float64,
-        )
+        _check_depart(item, where, vtype, first_road, self.map.lane_length[lanes])
         src = _Source(
             id=item.id,
             where=where,
             route=route,
             vtype=base,
-            params=params,
+            params=_behaviour_params(vtype),
             length=float(vtype.length if vtype.length is not None else dl),
             width=float(vtype.width if vtype.width is not None else dw),
             height=float(vtype.height if vtype.height is not None else dh),
             speed_factor=float(vtype.speed_factor),
             speed_dev=float(vtype.speed_dev),
-            depart_lane=lane_choice,
-            depart_speed=speed,
+            depart_lane=item.depart_lane,
+            depart_speed=item.depart_speed,
             depart_pos=float(item.depart_pos),
             begin=0.0,
             end=math.inf,
         )
-        if isinstance(item, TripSpec):
-            if not item.depart >= 0.0:
-                raise ScenarioError(f"{where}.depart: expected a time >= 0 s, got {item.depart}")
-            src.begin, src.end, src.is_trip = float(item.depart), float(item.depart), True
-            return src
-        has_rate, has_prob = item.rate is not None, item.probability is not None
-        if has_rate == has_prob:
-            raise ScenarioError(f"{where}: give exactly one of rate (veh/h) or probability (per s)")
-        if has_rate and not item.rate > 0:
-            raise ScenarioError(f"{where}.rate: expected vehicles per hour > 0, got {item.rate}")
-        if has_prob and not 0.0 < item.probability <= 1.0:
-            raise ScenarioError(
-                f"{where}.probability: expected a probability per second in (0, 1], got {item.probability}"
-            )
-        if not 0.0 <= item.begin < item.end:
-            raise ScenarioError(f"{where}.end: expected 0 <= begin < end, got begin {item.begin}, end {item.end}")
-        src.begin, src.end = float(item.begin), float(item.end)
-        if has_rate:
-            src.period = 3600.0 / float(item.rate)
-        else:
-            src.probability = float(item.probability)
+        _set_timing(src, item, where)
         return src
 
     def _spots(self, src: _Source, lanes: list[int]) -> None:
@@ -537,3 +474,76 @@ class BuiltinTrafficProvider(ProviderBase):
 
 _XY = [COLUMN["x"], COLUMN["y"]]
 _NOT_DRIVEN = np.array([int(VehicleType.PEDESTRIAN), int(VehicleType.BICYCLE)], dtype=np.int8)
+
+
+def _check_depart(
+    item: FlowSpec | TripSpec, where: str, vtype: VehicleTypeSpec, first_road: str, lane_lengths: np.ndarray
+) -> None:
+    """The depart lane, speed and position fit the first road's lanes and the vehicle type."""
+    lane_choice = item.depart_lane
+    if isinstance(lane_choice, bool) or not isinstance(lane_choice, (int, str)):
+        raise ScenarioError(
+            f"{where}.depart_lane: expected a lane index or one of {list(DEPART_LANES)}, got {lane_choice!r}"
+        )
+    if isinstance(lane_choice, int) and not 0 <= lane_choice < len(lane_lengths):
+        raise ScenarioError(
+            f"{where}.depart_lane: road {first_road!r} has {len(lane_lengths)} lane(s) "
+            f"(0..{len(lane_lengths) - 1}), got {lane_choice}"
+        )
+    if isinstance(lane_choice, str) and lane_choice not in DEPART_LANES:
+        raise ScenarioError(
+            f"{where}.depart_lane: expected a lane index or one of {list(DEPART_LANES)}, got {lane_choice!r}"
+        )
+    speed = item.depart_speed
+    if isinstance(speed, str):
+        if speed not in DEPART_SPEEDS:
+            raise ScenarioError(f"{where}.depart_speed: expected m/s or one of {list(DEPART_SPEEDS)}, got {speed!r}")
+    elif isinstance(speed, bool) or not isinstance(speed, (int, float)) or not (0.0 <= speed <= vtype.max_speed):
+        raise ScenarioError(
+            f"{where}.depart_speed: expected 0..{vtype.max_speed} m/s (the vehicle type's "
+            f"max_speed) or one of {list(DEPART_SPEEDS)}, got {speed!r}"
+        )
+    shortest = float(lane_lengths.min())
+    if not 0.0 <= float(item.depart_pos) <= shortest:
+        raise ScenarioError(f"{where}.depart_pos: road {first_road!r} is {shortest:.1f} m long, got {item.depart_pos}")
+
+
+def _behaviour_params(vtype: VehicleTypeSpec) -> np.ndarray:
+    """The car-following and lane-change parameters of a vehicle type, in the kernels' column order."""
+    return np.array(
+        [
+            vtype.accel,
+            vtype.decel,
+            max(vtype.emergency_decel, vtype.decel),
+            vtype.tau,
+            vtype.min_gap,
+            vtype.max_speed,
+            vtype.politeness,
+            vtype.lc_threshold,
+            vtype.lc_keep_right,
+        ],
+        dtype=np.float64,
+    )
+
+
+def _set_timing(src: _Source, item: FlowSpec | TripSpec, where: str) -> None:
+    """A trip departs once at its depart time; a flow emits at a rate or a probability from begin to end."""
+    if isinstance(item, TripSpec):
+        if not item.depart >= 0.0:
+            raise ScenarioError(f"{where}.depart: expected a time >= 0 s, got {item.depart}")
+        src.begin, src.end, src.is_trip = float(item.depart), float(item.depart), True
+        return
+    has_rate, has_prob = item.rate is not None, item.probability is not None
+    if has_rate == has_prob:
+        raise ScenarioError(f"{where}: give exactly one of rate (veh/h) or probability (per s)")
+    if has_rate and not item.rate > 0:
+        raise ScenarioError(f"{where}.rate: expected vehicles per hour > 0, got {item.rate}")
+    if has_prob and not 0.0 < item.probability <= 1.0:
+        raise ScenarioError(f"{where}.probability: expected a probability per second in (0, 1], got {item.probability}")
+    if not 0.0 <= item.begin < item.end:
+        raise ScenarioError(f"{where}.end: expected 0 <= begin < end, got begin {item.begin}, end {item.end}")
+    src.begin, src.end = float(item.begin), float(item.end)
+    if has_rate:
+        src.period = 3600.0 / float(item.rate)
+    else:
+        src.probability = float(item.probability)
