@@ -311,6 +311,28 @@ def test_the_ppo_settings_reach_torchrl_objects():
     assert sorted(seen.tolist()) == list(range(100))  # every step once
     linears = [m for m in parts.actor_net.net if isinstance(m, torch.nn.Linear)]
     assert [m.out_features for m in linears] == [32, 16, 2]  # torchrl's MLP with the config's layers
+    # GAE with the configured discount and lambda: one slot's 3 steps, no episode end, the last
+    # step's next observation its own
+    from train.ppo import Batch
+
+    steps, size = 3, parts.layout.size
+    x, own_x = torch.randn(steps, 1, size), torch.randn(1, size)
+    reward = torch.tensor([[1.0], [0.5], [-1.0]])
+    never = torch.zeros(steps, 1, dtype=torch.bool)
+    own = never.clone()
+    own[-1] = True
+    batch = Batch(obs=x, action=torch.zeros(steps, 1, len(parts.low)), log_prob=torch.zeros(steps, 1), reward=reward,
+                  done=never, terminated=never, valid=~never, own_next=own, own_next_obs=own_x,
+                  episode_returns=np.zeros(0), episode_lengths=np.zeros(0))  # fmt: skip
+    advantage = learner.advantages(batch, x, own_x)["advantage"][:, 0]
+    with torch.no_grad():
+        value = parts.critic_net(x[:, 0]).squeeze(-1)
+        following = torch.cat([value[1:], parts.critic_net(own_x).squeeze(-1)])
+    delta, expected, running = reward[:, 0] + 0.9 * following - value, torch.zeros(steps), 0.0
+    for t in reversed(range(steps)):
+        running = delta[t] + 0.9 * 0.8 * running
+        expected[t] = running
+    assert torch.allclose(advantage, expected, atol=1e-5)
 
 
 def test_the_ppo_settings_reach_the_sb3_model():

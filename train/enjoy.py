@@ -252,86 +252,132 @@ def video_scenario(suite, chosen: str | None = None) -> str:
 
 
 def enjoy(args: argparse.Namespace) -> int:
+    """Play ``--episodes`` episodes of the agent, watched, filmed or recorded as asked, and print
+    each one's returns (and benchmark metrics on a suite scenario)."""
     policy, env, spec, reward_name = policy_env(args.agent, args.scenario, args.seed, args.task)
-    server = None
-    if args.viz or args.record:
-        from smarts.viz.watch import WatchedEnv
-
-        live = None
-        if args.viz:
-            from smarts.viz.server import BackgroundServer
-
-            server = BackgroundServer(port=args.port)
-            live = server.url
-            print(f"viewer: {server.url}/?episode=live (open it in a browser; the episode starts when it connects)")
-        env = WatchedEnv(env, record=args.record, live=live)
-        if args.viz:
-            env.publisher.connected.wait(10)
-    video = VideoWriter(args.video, args.fps) if args.video else None
-    tb_frames: list[np.ndarray] = []
-    writer = None
-    if args.tensorboard:
-        from torch.utils.tensorboard import SummaryWriter
-
-        writer = SummaryWriter(log_dir=str(args.tensorboard))
-    drawing = bool(video or writer)
-    # A suite scenario is also scored as the benchmark scores it (its recorder and metrics), which
-    # also tells a vehicle that left the map at its route's end from one that left the road.
-    suite, entry = suite_entry(args.scenario)
-    recorder: dict = {}
-    if entry is not None:
-        env.add_step_listener(lambda sim: recorder["now"].record() if "now" in recorder else None)
+    env, server = _watched(env, args)
+    frames = _Frames(args)
+    scoring = _Scoring(env, args.scenario)
     try:
         if args.viz and args.wait > 0:
             _wait_for_viewer(env, args.wait)
         for episode in range(args.episodes):
-            obs, _ = env.reset(seed=args.seed + episode)
-            if entry is not None:
-                from smarts.benchmark.recorder import EpisodeRecorder
-
-                recorder["now"] = EpisodeRecorder(env.sim, env.possible_agents, scenario=entry.name, task=suite.task,
-                                                  episode=episode, seed=args.seed + episode,
-                                                  time_limit=entry.time_limit, follow=entry.follow)  # fmt: skip
-            film = EpisodeFilm(env, spec, reward_name, args.follow, draw=drawing)
-            while env.agents and (args.max_steps is None or film.steps < args.max_steps):
-                frame = film.frame() if drawing else None
-                if video:
-                    video.add(frame)
-                if writer:
-                    tb_frames.append(frame)
-                obs, rewards, terminations, truncations, infos = env.step(act(policy, env, obs))
-                film.after_step(rewards, terminations, truncations, infos)
-                if args.viz and args.realtime:
-                    import time
-
-                    time.sleep(spec.step_length)
-            scores = _benchmark_view(recorder.pop("now").finish(), film) if entry is not None else None
-            if drawing and not env.agents:  # the last picture: how the episode ended
-                frame = film.frame()
-                if video:
-                    video.add(frame)
-                if writer:
-                    tb_frames.append(frame)
-            if writer:
-                write_tensorboard_video(writer, f"enjoy/{spec.name}", tb_frames, episode, args.fps)
-                tb_frames = []
-            print(f"episode {episode}: seed {args.seed + episode}, {film.steps} steps; return in {reward_name} reward: "
-                  f"{film.summary()}")  # fmt: skip
-            if scores is not None:
-                print(f"  benchmark metrics of this episode: {scores}")
+            _play_episode(env, policy, spec, reward_name, args, episode, frames, scoring)
     finally:
-        if video:
-            video.close()
-        if writer:
-            writer.close()
+        frames.close()
         env.close()
         if server is not None:
             server.stop()
-    if video:
-        print(f"video: {video.path} ({video.frames} frames at {args.fps} fps)")
+    if frames.video:
+        print(f"video: {frames.video.path} ({frames.video.frames} frames at {args.fps} fps)")
     for path in getattr(env, "recordings", []):
         print(f"recording: {path}")
     return 0
+
+
+def _watched(env, args: argparse.Namespace):
+    """``env`` in the web viewer (``--viz``, live, waiting up to 10 s for the browser) and/or
+    recorded (``--record``); the env and the viewer's server (None without ``--viz``)."""
+    if not (args.viz or args.record):
+        return env, None
+    from smarts.viz.watch import WatchedEnv
+
+    server = live = None
+    if args.viz:
+        from smarts.viz.server import BackgroundServer
+
+        server = BackgroundServer(port=args.port)
+        live = server.url
+        print(f"viewer: {server.url}/?episode=live (open it in a browser; the episode starts when it connects)")
+    env = WatchedEnv(env, record=args.record, live=live)
+    if args.viz:
+        env.publisher.connected.wait(10)
+    return env, server
+
+
+class _Frames:
+    """Where the pictures of ``enjoy`` go: the ``--video`` file and one TensorBoard video per
+    episode (``--tensorboard``); nothing is drawn without either."""
+
+    def __init__(self, args: argparse.Namespace):
+        self.fps = args.fps
+        self.video = VideoWriter(args.video, args.fps) if args.video else None
+        self.episode: list[np.ndarray] = []
+        self.writer = None
+        if args.tensorboard:
+            from torch.utils.tensorboard import SummaryWriter
+
+            self.writer = SummaryWriter(log_dir=str(args.tensorboard))
+        self.drawing = bool(self.video or self.writer)
+
+    def add(self, frame: np.ndarray | None) -> None:
+        if self.video:
+            self.video.add(frame)
+        if self.writer:
+            self.episode.append(frame)
+
+    def end_episode(self, tag: str, episode: int) -> None:
+        if self.writer:
+            write_tensorboard_video(self.writer, tag, self.episode, episode, self.fps)
+            self.episode = []
+
+    def close(self) -> None:
+        if self.video:
+            self.video.close()
+        if self.writer:
+            self.writer.close()
+
+
+class _Scoring:
+    """A suite scenario is also scored as the benchmark scores it (its recorder and metrics), which
+    also tells a vehicle that left the map at its route's end from one that left the road."""
+
+    def __init__(self, env, scenario: str):
+        self.suite, self.entry = suite_entry(scenario)
+        self.now = None  # the recorder of the episode under way
+        if self.entry is not None:
+            env.add_step_listener(lambda sim: self.now.record() if self.now is not None else None)
+
+    def start(self, env, episode: int, seed: int) -> None:
+        if self.entry is None:
+            return
+        from smarts.benchmark.recorder import EpisodeRecorder
+
+        entry = self.entry
+        self.now = EpisodeRecorder(env.sim, env.possible_agents, scenario=entry.name, task=self.suite.task,
+                                   episode=episode, seed=seed, time_limit=entry.time_limit, follow=entry.follow)  # fmt: skip
+
+    def finish(self, film: EpisodeFilm) -> str | None:
+        """The episode's benchmark metrics as one line (None off the suites)."""
+        if self.entry is None:
+            return None
+        log, self.now = self.now.finish(), None
+        return _benchmark_view(log, film)
+
+
+def _play_episode(env, policy, spec, reward_name: str, args: argparse.Namespace, episode: int, frames: _Frames,
+                  scoring: _Scoring) -> None:  # fmt: skip
+    """One episode from seed ``args.seed + episode``, filmed into ``frames`` and, on a suite
+    scenario, scored as the benchmark does."""
+    seed = args.seed + episode
+    obs, _ = env.reset(seed=seed)
+    scoring.start(env, episode, seed)
+    film = EpisodeFilm(env, spec, reward_name, args.follow, draw=frames.drawing)
+    while env.agents and (args.max_steps is None or film.steps < args.max_steps):
+        frames.add(film.frame() if frames.drawing else None)
+        obs, rewards, terminations, truncations, infos = env.step(act(policy, env, obs))
+        film.after_step(rewards, terminations, truncations, infos)
+        if args.viz and args.realtime:
+            import time
+
+            time.sleep(spec.step_length)
+    scores = scoring.finish(film)
+    if frames.drawing and not env.agents:  # the last picture: how the episode ended
+        frames.add(film.frame())
+    frames.end_episode(f"enjoy/{spec.name}", episode)
+    print(f"episode {episode}: seed {seed}, {film.steps} steps; return in {reward_name} reward: {film.summary()}")
+    if scores is not None:
+        print(f"  benchmark metrics of this episode: {scores}")
 
 
 def _benchmark_view(log, film: EpisodeFilm) -> str:

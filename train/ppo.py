@@ -1,6 +1,7 @@
 """PPO on the simulator with TorchRL's loss and advantage (no hand-written PPO maths).
 
-The whole algorithm in one readable loop:
+The whole algorithm is one readable loop (``train``, at the end of this file, with the update in
+``Learner.update``):
 
 1. ``envs`` copies of the task's training scenarios (every learning agent of every copy is one
    slot, all driven by one shared policy) run as one ``BatchedDriving``, in ``workers``
@@ -536,6 +537,10 @@ def check_init_from(path: Path, cfg: TrainConfig) -> dict:
     return blob
 
 
+UPDATE_STATS = ("objective", "critic", "entropy_loss", "entropy", "kl", "clip", "explained", "grad")
+"""What ``Learner.update`` records per minibatch step (its metrics are their means)."""
+
+
 class Learner:
     """PPO updates of ``parts`` on ``device``: torchrl's GAE (``vec_generalized_advantage_estimate``)
     per slot trajectory, its ``ClipPPOLoss`` over random minibatches of the valid steps, Adam with
@@ -576,64 +581,89 @@ class Learner:
         return value, next_value
 
     def update(self, batch: Batch) -> dict[str, float]:
-        cfg, parts = self.cfg, self.parts
+        """One PPO update on ``batch``: ``epochs`` passes of GAE and clipped-loss minibatch steps
+        (until the KL stop), then the observation statistics; the batch's training metrics."""
         if self.scale_rewards is not None:
             self.scale_rewards(batch)
+        x, own_x, rows = self.normalised(batch)
+        stats: dict[str, list[float]] = {k: [] for k in UPDATE_STATS}
+        for _ in range(self.cfg.epochs):
+            columns = self.advantages(batch, x, own_x)
+            if not self.epoch(rows, columns, stats):
+                break  # the policy has moved far enough on this batch (as SB3 does)
+        clipped = self.refresh_statistics(batch, x, rows)
+        return self.summary(stats, clipped, len(rows), batch.frames)
+
+    @torch.no_grad()
+    def normalised(self, batch: Batch) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The batch's observations [T, S, D] and own next observations [K, D] normalised once for
+        the whole update (the statistics change only after it), and the flat rows of valid steps."""
         steps, slots, size = batch.obs.shape
-        with torch.no_grad():
-            # Normalised once for the whole update: the statistics change only after it.
-            x = parts.normalizer(batch.obs.reshape(-1, size)).reshape(steps, slots, size)
-            own_x = parts.normalizer(batch.own_next_obs)
-        valid = batch.valid.reshape(-1)
-        flat_valid = torch.nonzero(valid).squeeze(-1)
-        stats: dict[str, list[float]] = {k: [] for k in ("objective", "critic", "entropy_loss", "entropy", "kl",
-                                                         "clip", "explained", "grad")}  # fmt: skip
-        stop = False
-        for _ in range(cfg.epochs):
-            # GAE on each slot's trajectory [S, T, 1], with the critic as updated so far (once per
-            # batch learned markedly slower); the steps of waiting slots are then dropped.
-            value, next_value = self._values(x, own_x, batch.own_next)
-            advantage, target = vec_generalized_advantage_estimate(
-                cfg.gamma, cfg.gae_lambda, value.T[..., None], next_value.T[..., None], batch.reward.T[..., None],
-                batch.done.T[..., None], batch.terminated.T[..., None], time_dim=-2,
-            )  # fmt: skip
-            columns = {
-                FLAT_OBSERVATION: x.reshape(-1, size),
-                "action": batch.action.reshape(steps * slots, -1),
-                "action_log_prob": batch.log_prob.reshape(-1),
-                "advantage": advantage.transpose(0, 1).reshape(-1, 1),
-                "value_target": target.transpose(0, 1).reshape(-1, 1),
-            }
-            for minibatch in self.minibatches(flat_valid, columns):
-                losses = self.loss(minibatch)
-                mean, scale = parts.head.take_last()  # the actor's pass inside the loss
-                kl = float(
-                    kl_estimate(mean.detach(), scale.detach(), minibatch["action"], minibatch["action_log_prob"])
-                )
-                if cfg.target_kl and kl > cfg.target_kl:
-                    stop = True  # the policy has moved far enough on this batch (as SB3 does)
-                    break
-                total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
-                if cfg.action_bound_coeff > 0:
-                    total = total + cfg.action_bound_coeff * action_bound_loss(mean, self.low, self.high)
-                self.optimizer.zero_grad()
-                total.backward()
-                grad = nn.utils.clip_grad_norm_(self.loss.parameters(), cfg.max_grad_norm)
-                self.optimizer.step()
-                for key, value_ in (("objective", losses["loss_objective"]), ("critic", losses["loss_critic"]),
-                                    ("entropy_loss", losses["loss_entropy"]), ("entropy", losses.get("entropy")),
-                                    ("clip", losses.get("clip_fraction")), ("explained", losses.get("explained_variance")),
-                                    ("grad", grad)):  # fmt: skip
-                    stats[key].append(float(value_.detach()) if value_ is not None else float("nan"))
-                stats["kl"].append(kl)
-            if stop:
-                break
-        # Refresh the observation statistics only now: during the update the policy must see its
-        # inputs exactly as it did when it acted, or PPO's probability ratios are off.
-        inputs = batch.obs.reshape(-1, size)[flat_valid]
-        clipped = parts.normalizer.clipped_fraction(inputs, normalised=x.reshape(-1, size)[flat_valid])
-        if cfg.obs_norm:
-            parts.normalizer.update(inputs)
+        x = self.parts.normalizer(batch.obs.reshape(-1, size)).reshape(steps, slots, size)
+        own_x = self.parts.normalizer(batch.own_next_obs)
+        rows = torch.nonzero(batch.valid.reshape(-1)).squeeze(-1)
+        return x, own_x, rows
+
+    def advantages(self, batch: Batch, x: torch.Tensor, own_x: torch.Tensor) -> dict[str, torch.Tensor]:
+        """GAE on each slot's trajectory [S, T, 1] with the critic as updated so far (once per
+        batch learned markedly slower): the flat columns the loss reads, one row per slot-step."""
+        cfg = self.cfg
+        steps, slots, size = x.shape
+        value, next_value = self._values(x, own_x, batch.own_next)
+        advantage, target = vec_generalized_advantage_estimate(
+            cfg.gamma, cfg.gae_lambda, value.T[..., None], next_value.T[..., None], batch.reward.T[..., None],
+            batch.done.T[..., None], batch.terminated.T[..., None], time_dim=-2,
+        )  # fmt: skip
+        return {
+            FLAT_OBSERVATION: x.reshape(-1, size),
+            "action": batch.action.reshape(steps * slots, -1),
+            "action_log_prob": batch.log_prob.reshape(-1),
+            "advantage": advantage.transpose(0, 1).reshape(-1, 1),
+            "value_target": target.transpose(0, 1).reshape(-1, 1),
+        }
+
+    def epoch(self, rows: torch.Tensor, columns: dict[str, torch.Tensor], stats: dict[str, list[float]]) -> bool:
+        """One pass over the valid ``rows`` in random minibatches; False when the KL stop ended it
+        (the steps of waiting slots are not among ``rows``)."""
+        return all(self.gradient_step(minibatch, stats) for minibatch in self.minibatches(rows, columns))
+
+    def gradient_step(self, minibatch: TensorDict, stats: dict[str, list[float]]) -> bool:
+        """``ClipPPOLoss`` (with the action-bound penalty), Adam and gradient clipping on one
+        minibatch, its losses appended to ``stats``; False, and no step, past ``target_kl``."""
+        cfg, parts = self.cfg, self.parts
+        losses = self.loss(minibatch)
+        mean, scale = parts.head.take_last()  # the actor's pass inside the loss
+        kl = float(kl_estimate(mean.detach(), scale.detach(), minibatch["action"], minibatch["action_log_prob"]))
+        if cfg.target_kl and kl > cfg.target_kl:
+            return False
+        total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+        if cfg.action_bound_coeff > 0:
+            total = total + cfg.action_bound_coeff * action_bound_loss(mean, self.low, self.high)
+        self.optimizer.zero_grad()
+        total.backward()
+        grad = nn.utils.clip_grad_norm_(self.loss.parameters(), cfg.max_grad_norm)
+        self.optimizer.step()
+        for key, value in (("objective", losses["loss_objective"]), ("critic", losses["loss_critic"]),
+                           ("entropy_loss", losses["loss_entropy"]), ("entropy", losses.get("entropy")),
+                           ("clip", losses.get("clip_fraction")), ("explained", losses.get("explained_variance")),
+                           ("grad", grad)):  # fmt: skip
+            stats[key].append(float(value.detach()) if value is not None else float("nan"))
+        stats["kl"].append(kl)
+        return True
+
+    def refresh_statistics(self, batch: Batch, x: torch.Tensor, rows: torch.Tensor) -> float:
+        """The observation normaliser takes the batch's valid steps (only now: during the update the
+        policy must see its inputs exactly as it did when it acted, or PPO's probability ratios are
+        off); the fraction of inputs its clip cut."""
+        size = batch.obs.shape[-1]
+        inputs = batch.obs.reshape(-1, size)[rows]
+        clipped = self.parts.normalizer.clipped_fraction(inputs, normalised=x.reshape(-1, size)[rows])
+        if self.cfg.obs_norm:
+            self.parts.normalizer.update(inputs)
+        return clipped
+
+    def summary(self, stats: dict[str, list[float]], clipped: float, valid: int, frames: int) -> dict[str, float]:
+        """The update's TensorBoard scalars: means over its minibatch steps and the state after it."""
 
         def mean_of(key: str) -> float:
             return float(np.mean(stats[key])) if stats[key] else float("nan")
@@ -645,17 +675,42 @@ class Learner:
             "policy/entropy": mean_of("entropy"),
             "policy/kl_approx": mean_of("kl"),
             "policy/clip_fraction": mean_of("clip"),
-            "policy/action_std": float(parts.actor_net.log_std.detach().clamp(-3.0, 0.5).exp().mean()),
+            "policy/action_std": float(self.parts.actor_net.log_std.detach().clamp(-3.0, 0.5).exp().mean()),
             "train/explained_variance": mean_of("explained"),
             "train/grad_norm": mean_of("grad"),
             "obs/clipped_fraction": clipped,
             "train/lr": self.optimizer.param_groups[0]["lr"],
-            "train/valid_fraction": float(len(flat_valid) / max(batch.frames, 1)),
+            "train/valid_fraction": float(valid / max(frames, 1)),
         }
 
 
 # ------------------------------------------------------------------ where batches come from
-class LocalCollection:
+class Collection:
+    """Where batches come from: ``start`` begins a batch of ``steps`` per slot, ``take`` waits for
+    it, ``sync`` gives the acting policy the learner's weights (never while collecting)."""
+
+    overlap = False
+
+    def start(self, steps: int) -> None:
+        raise NotImplementedError
+
+    def take(self) -> Batch:
+        raise NotImplementedError
+
+    def sync(self, parts: PolicyParts) -> None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def start_next(self, parts: PolicyParts, steps: int | None) -> None:
+        """The acting copy takes the learner's weights, then begins the next batch (none after the last)."""
+        if steps is not None:
+            self.sync(parts)
+            self.start(steps)
+
+
+class LocalCollection(Collection):
     """Batches from the ``BatchedDriving`` of this run (copies in this process or in shared-memory
     workers); with ``overlap`` the next batch is collected in a thread while the learner updates
     (the torch ops and the workers' stepping release the interpreter lock)."""
@@ -700,7 +755,7 @@ class LocalCollection:
         self.driving.close()
 
 
-class RayCollection:
+class RayCollection(Collection):
     """Batches from torchrl's ``Collector`` with ``backend="ray"``: each of the ``workers`` Ray
     actors steps its share of the copies as a ``SmartsBatchedEnv``, acting with the policy's
     TorchRL modules; the learner sends the new weights after every update (no overlap)."""
@@ -739,96 +794,160 @@ class RayCollection:
             self.collector = None
 
 
+# ------------------------------------------------------------------ the run's setup
+@dataclass
+class Start:
+    """What a run's networks start from: the checkpoint it continues (``resume``: networks,
+    observation statistics, optimiser, step count), trained networks a new run fine-tunes
+    (``init_from``: networks and statistics, a fresh optimiser), or nothing."""
+
+    blob: dict | None = None
+    source: Path | str | None = None
+    resumed: bool = False
+
+    @classmethod
+    def check(cls, cfg: TrainConfig, resume: Path | None) -> Start:
+        """Read and check the checkpoint, before anything is built or written."""
+        blob = check_resume(resume, cfg) if resume is not None else None
+        start_from = check_init_from(Path(cfg.init_from), cfg) if cfg.init_from else None
+        if blob is not None and start_from is not None:
+            raise ValueError("resume continues a run and init_from starts a new one from trained networks: give one")
+        if blob is not None:
+            return cls(blob, resume, resumed=True)
+        return cls(start_from, cfg.init_from) if start_from is not None else cls()
+
+    def restore(self, parts: PolicyParts, learner: Learner) -> int:
+        """Load the checkpoint into ``parts`` (and the optimiser when resuming); the step to go on from."""
+        if self.blob is None:
+            return 0
+        try:
+            parts.actor_net.load_state_dict(self.blob["actor"])
+            parts.critic_net.load_state_dict(self.blob["critic"])
+            parts.normalizer.load_state_dict(self.blob["normalizer"])
+            if self.resumed and "optimizer" in self.blob:
+                learner.optimizer.load_state_dict(self.blob["optimizer"])
+        except (RuntimeError, ValueError) as err:
+            raise CheckpointError(f"{self.source}: does not match this training setup ({err})") from None
+        return int(self.blob["step"]) if self.resumed else 0
+
+
+@dataclass
+class TrainingEnvs:
+    """The run's scenario copies before collection begins, with the networks built for them: a
+    ``BatchedDriving`` here (``driving``) or, with ``ray_address``, the Ray collectors' env
+    factories and the action spec of their TorchRL envs."""
+
+    parts: PolicyParts
+    slots: int
+    driving: object = None
+    factories: list | None = None
+    action_spec: object = None
+
+    def collection(self, cfg: TrainConfig, plan: BatchPlan, device: torch.device) -> Collection:
+        """Where the batches come from, acting with the (possibly restored) networks."""
+        if self.factories is not None:
+            return RayCollection(cfg, self.factories, self.parts, self.action_spec, self.slots, plan, device)
+        return LocalCollection(cfg, self.driving, self.parts, device)
+
+
+def open_envs(cfg: TrainConfig, specs: list | None, scale_out: contextlib.ExitStack) -> TrainingEnvs:
+    """The ``envs`` copies and their networks: one ``BatchedDriving`` (over ``workers`` processes),
+    or with ``ray_address`` a Ray session held by ``scale_out`` and one env per Ray collector."""
+    if cfg.ray_address:
+        return open_ray_envs(cfg, scale_out)
+    driving = make_driving(cfg, specs)
+    return TrainingEnvs(driving_parts(driving, cfg), driving.num_slots, driving=driving)
+
+
+def open_ray_envs(cfg: TrainConfig, scale_out: contextlib.ExitStack) -> TrainingEnvs:
+    """The Ray collectors' env factories; one share is built here only for the specs the networks
+    are built from, then the Ray session starts."""
+    from smarts.ray_session import ray_session
+
+    factories = ray_env_factories(cfg)
+    env = factories[0]()
+    parts, action_spec = env_parts(env, cfg), env.action_spec
+    slots = int(np.prod(env.batch_size)) * cfg.workers
+    env.close()
+    scale_out.enter_context(ray_session(cfg.ray_address, num_cpus=max(2, cfg.workers)))
+    return TrainingEnvs(parts, slots, factories=factories, action_spec=action_spec)
+
+
+def save_run_checkpoint(path: Path, cfg: TrainConfig, parts: PolicyParts, learner: Learner, step: int,
+                        metrics: dict) -> Path:  # fmt: skip
+    """A checkpoint of the run at ``step``: networks, statistics, action and observation contract,
+    config, the latest metrics and the optimiser (for ``resume``)."""
+    return save_checkpoint(path, actor=parts.actor_net, critic=parts.critic_net, normalizer=parts.normalizer,
+                           layout=parts.layout, low=parts.low, high=parts.high,
+                           action_space=ACTION_SPACES[cfg.action_space], controller=cfg.controller,
+                           interface=interface_dict(cfg), lane_relative=lane_relative_dict(cfg),
+                           comms=comms_dict(cfg), config=cfg.model_dump(), step=step, metrics=metrics,
+                           optimizer_state=learner.optimizer.state_dict())  # fmt: skip
+
+
+def timed(fn, *args):
+    """``fn(*args)`` and the seconds it took."""
+    began = time.perf_counter()
+    result = fn(*args)
+    return result, time.perf_counter() - began
+
+
+def batch_metrics(batch: Batch, wait_s: float, update_s: float, steps_per_s: float) -> dict[str, float]:
+    """The batch's timings and the returns and lengths of the episodes that ended in it."""
+    metrics = {
+        "perf/update_s": update_s,
+        "perf/wait_s": wait_s,  # > 0 when collection, not the update, sets the pace
+        "perf/env_steps_per_s": steps_per_s,
+    }
+    if len(batch.episode_returns):
+        metrics["episode/return"] = float(batch.episode_returns.mean())
+        metrics["episode/length"] = float(batch.episode_lengths.mean())
+    return metrics
+
+
 # ------------------------------------------------------------------ the run
 def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | None = None) -> Path:
     """Train, log and checkpoint under ``out``; returns the final checkpoint path. ``resume``
     continues from a checkpoint (networks, observation statistics, optimiser, step count) up to
     ``total_steps``."""
     torch.set_num_threads(cfg.torch_threads)
-    blob = check_resume(resume, cfg) if resume is not None else None
-    start_from = check_init_from(Path(cfg.init_from), cfg) if cfg.init_from else None
-    if blob is not None and start_from is not None:
-        raise ValueError("resume continues a run and init_from starts a new one from trained networks: give one")
+    start = Start.check(cfg, resume)  # resume or init_from, refused before anything is built
     check_devices(cfg)
     device = learner_device(cfg)
     specs = None if cfg.ray_address else training_specs(cfg)
     torch.manual_seed(cfg.seed)
     np.random.seed(cfg.seed)
     run = Run(cfg, out, resume, progress=progress)  # the run folder (never another run's), config.json, TensorBoard
-    scale_out = contextlib.ExitStack()
-    if cfg.ray_address:
-        from smarts.ray_session import ray_session
+    scale_out = contextlib.ExitStack()  # the Ray session, with ray_address
 
-        factories = ray_env_factories(cfg)
-        env = factories[0]()  # only for the specs the networks are built from
-        parts, action_spec = env_parts(env, cfg), env.action_spec
-        slots = int(np.prod(env.batch_size)) * cfg.workers
-        env.close()
-        scale_out.enter_context(ray_session(cfg.ray_address, num_cpus=max(2, cfg.workers)))
-    else:
-        driving = make_driving(cfg, specs)
-        parts, slots = driving_parts(driving, cfg), driving.num_slots
-    parts.to(device)
+    # Setup: the env copies, the actor-critic, the PPO loss and its optimiser, the collector.
+    envs = open_envs(cfg, specs, scale_out)
+    parts = envs.parts.to(device)
     learner = Learner(cfg, parts, device)
-    step = 0
-    for source, what in ((blob, resume), (start_from, cfg.init_from)):
-        if source is None:
-            continue
-        try:
-            parts.actor_net.load_state_dict(source["actor"])
-            parts.critic_net.load_state_dict(source["critic"])
-            parts.normalizer.load_state_dict(source["normalizer"])
-            if source is blob and "optimizer" in blob:  # init_from: networks and statistics, a fresh optimiser
-                learner.optimizer.load_state_dict(blob["optimizer"])
-        except (RuntimeError, ValueError) as err:
-            raise CheckpointError(f"{what}: does not match this training setup ({err})") from None
-        if source is blob:
-            step = int(blob["step"])
+    step = start.restore(parts, learner)
     # Ray's collector takes whole batches; the local one ends the run within one step of every slot.
-    plan = BatchPlan.of(cfg.total_steps - step, cfg.frames_per_batch, slots, whole=bool(cfg.ray_address))
-    if cfg.ray_address:
-        source = RayCollection(cfg, factories, parts, action_spec, slots, plan, device)
-    else:
-        source = LocalCollection(cfg, driving, parts, device)
+    plan = BatchPlan.of(cfg.total_steps - step, cfg.frames_per_batch, envs.slots, whole=bool(cfg.ray_address))
+    source = envs.collection(cfg, plan, device)
     metrics: dict[str, float] = {}
 
     def save(path: Path) -> Path:
-        return save_checkpoint(path, actor=parts.actor_net, critic=parts.critic_net, normalizer=parts.normalizer,
-                               layout=parts.layout, low=parts.low, high=parts.high,
-                               action_space=ACTION_SPACES[cfg.action_space], controller=cfg.controller,
-                               interface=interface_dict(cfg), lane_relative=lane_relative_dict(cfg),
-                               comms=comms_dict(cfg), config=cfg.model_dump(), step=step, metrics=metrics,
-                               optimizer_state=learner.optimizer.state_dict())  # fmt: skip
+        return save_run_checkpoint(path, cfg, parts, learner, step, metrics)
 
     bar = Progress(f"PPO {cfg.task}", cfg.total_steps, step, enabled=progress)
-    start, first_step = time.perf_counter(), step
+    began, first_step = time.perf_counter(), step
     try:
         batches = list(plan.steps_per_batch())
-        source.sync(parts)
-        source.start(batches[0])
+        source.start_next(parts, batches[0])
         for following in [*batches[1:], None]:
-            wait_start = time.perf_counter()
-            batch = source.take()
-            wait_s = time.perf_counter() - wait_start
-            if following is not None and source.overlap:
-                # Collected while this batch trains, by the policy as it is now (one update behind
-                # when it is used): the collector is idle here, so the copy changes between batches.
-                source.sync(parts)
-                source.start(following)
-            update_start = time.perf_counter()
-            metrics = learner.update(batch)
+            batch, wait_s = timed(source.take)  # collection
+            if source.overlap:  # the next batch is collected while this one trains (one update behind)
+                source.start_next(parts, following)
+            metrics, update_s = timed(learner.update, batch)  # GAE, then epochs of minibatch steps
             step += batch.frames
-            metrics["perf/update_s"] = time.perf_counter() - update_start
-            metrics["perf/wait_s"] = wait_s  # for the batch: > 0 when collection, not the update, sets the pace
-            metrics["perf/env_steps_per_s"] = (step - first_step) / (time.perf_counter() - start)
-            if len(batch.episode_returns):
-                metrics["episode/return"] = float(batch.episode_returns.mean())
-                metrics["episode/length"] = float(batch.episode_lengths.mean())
-            if following is not None and not source.overlap:
-                source.sync(parts)
-                source.start(following)
-            # TensorBoard, last.pt and, every eval_every steps, a held-out evaluation (best.pt).
-            run.end_of_batch(step, batch.frames, metrics, save)
+            metrics.update(batch_metrics(batch, wait_s, update_s, (step - first_step) / (time.perf_counter() - began)))
+            if not source.overlap:
+                source.start_next(parts, following)
+            run.end_of_batch(step, batch.frames, metrics, save)  # TensorBoard, last.pt, every eval_every: best.pt
             bar.update(step, metrics)
     except KeyboardInterrupt:
         bar.close()
@@ -839,4 +958,4 @@ def train(cfg: TrainConfig, out: Path, progress: bool = True, resume: Path | Non
         bar.close()
         source.close()
         scale_out.close()
-    return run.finish(step, metrics, save, start)  # final.pt, its evaluation, the summary
+    return run.finish(step, metrics, save, began)  # final.pt, its evaluation, the summary

@@ -23,10 +23,14 @@ import dataclasses
 import json
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from train.heldout import add_run_options, apply_run_options, road_car, situation_env, split_held_out, suite_scenarios
+
+if TYPE_CHECKING:
+    import torch
 
 
 def demonstrations(scenarios, seeds: int, progress: bool = True) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -139,15 +143,36 @@ def hindsight(count: int, steps: int, horizon: int, progress: bool = True) -> di
 
 
 def train(args: argparse.Namespace) -> dict:
-    import torch
+    """Gather (or read) the samples, hold out whole scenarios, train the stop/move network and
+    write TensorBoard logs, ``final.pt`` and ``summary.json``; the summary."""
     from torch.utils.tensorboard import SummaryWriter
 
     from agents.planners.nets import StopMoveNet, save_net
-    from train.run import Bar
 
     apply_run_options(args)
     started = time.time()
-    scenarios = suite_scenarios(args.suite)
+    data, situations = samples(args, suite_scenarios(args.suite))
+    split = split_samples(data, situations, args.hindsight_weight)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    writer = SummaryWriter(out / "tensorboard")
+    net = StopMoveNet(hidden=args.hidden, layers=3)
+    fit(net, split, writer, args)
+    metrics = {**held_metrics(net, split), "train_samples": len(split.train_y), "train_stops": int((split.train_y == 0).sum()),
+               "train_hindsight_stops": split.train_hindsight, "situations": args.situations, "horizon": args.horizon,
+               "hindsight_weight": args.hindsight_weight,
+               "heldout_scenarios": split.held, "steps": args.steps, "batch": args.batch, "hidden": args.hidden,
+               "parameters": sum(p.numel() for p in net.parameters()), "threads": args.threads,
+               "minutes": round((time.time() - started) / 60, 1)}  # fmt: skip
+    save_net(out / "final.pt", "tf-stop-move", net, metrics)
+    (out / "summary.json").write_text(json.dumps(metrics, indent=2))
+    writer.close()
+    return metrics
+
+
+def samples(args: argparse.Namespace, scenarios) -> tuple[dict[str, tuple], dict[str, tuple]]:
+    """(suite demonstrations, hindsight situations) by scenario or group: read from ``--data``
+    when the file exists, else gathered (and written to ``--data`` when given)."""
     cache = Path(args.data) if args.data else None
     if cache is not None and cache.is_file():
         with np.load(cache) as saved:
@@ -157,15 +182,36 @@ def train(args: argparse.Namespace) -> dict:
                 loaded.setdefault(name, []).append(saved[key])
         data = {n: tuple(v) for n, v in loaded.items() if not n.startswith("situations_")}
         situations = {n: tuple(v) for n, v in loaded.items() if n.startswith("situations_")}
-    else:
-        data = demonstrations(scenarios, args.seeds, not args.quiet)
-        situations = (
-            hindsight(args.situations, args.situation_steps, args.horizon, not args.quiet) if args.situations else {}
-        )
-        if cache is not None:
-            cache.parent.mkdir(parents=True, exist_ok=True)
-            np.savez_compressed(cache, **{f"{n}/{i}": v for part in (data, situations) for n, d in part.items()
-                                          for i, v in enumerate(d)})  # fmt: skip
+        return data, situations
+    data = demonstrations(scenarios, args.seeds, not args.quiet)
+    situations = (
+        hindsight(args.situations, args.situation_steps, args.horizon, not args.quiet) if args.situations else {}
+    )
+    if cache is not None:
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(cache, **{f"{n}/{i}": v for part in (data, situations) for n, d in part.items()
+                                      for i, v in enumerate(d)})  # fmt: skip
+    return data, situations
+
+
+@dataclasses.dataclass
+class Split:
+    """The training samples (with how often each is drawn) and the held-out sets."""
+
+    train_x: torch.Tensor  # [n, 53]
+    train_y: torch.Tensor  # [n]: 0 stop, 1 move
+    draw: torch.Tensor  # [n]: how often each sample is drawn, relatively
+    held: list[str]  # the held-out scenarios and situation groups
+    held_sets: dict[str, tuple[torch.Tensor, torch.Tensor]]  # "suites" / "situations" -> (features, labels)
+    held_flags: torch.Tensor  # the held-out situations' hindsight flags
+    train_hindsight: int
+
+
+def split_samples(data: dict[str, tuple], situations: dict[str, tuple], hindsight_weight: float) -> Split:
+    """Every 5th suite scenario and every 5th group of situations held out whole (``data`` takes
+    the situations too)."""
+    import torch
+
     names, held = split_held_out(list(data))
     if situations:
         sit_names, sit_held = split_held_out(list(situations)) if len(situations) >= 2 else (list(situations), [])
@@ -174,7 +220,7 @@ def train(args: argparse.Namespace) -> dict:
     train_x = torch.from_numpy(np.concatenate([data[n][0] for n in names]))
     train_y = torch.from_numpy(np.concatenate([data[n][1] for n in names]))
     # hindsight stops are about 1 % of the samples: drawn --hindsight-weight times as often
-    draw = torch.from_numpy(np.concatenate([np.where(situations[n][2], args.hindsight_weight, 1.0) if n in situations
+    draw = torch.from_numpy(np.concatenate([np.where(situations[n][2], hindsight_weight, 1.0) if n in situations
                                             else np.ones(len(data[n][1])) for n in names]))  # fmt: skip
     held_sets = {"suites": [n for n in held if n not in situations], "situations": [n for n in held if n in situations]}
     held_sets = {k: (torch.from_numpy(np.concatenate([data[n][0] for n in v])), torch.from_numpy(np.concatenate([data[n][1] for n in v])))
@@ -185,36 +231,23 @@ def train(args: argparse.Namespace) -> dict:
     train_hindsight = int(sum(situations[n][2].sum() for n in names if n in situations))
     print(f"samples: {len(train_y)} train ({float((train_y == 0).float().mean()):.1%} stop), held out "
           f"{ {k: len(v[1]) for k, v in held_sets.items()} } from {held}")  # fmt: skip
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    writer = SummaryWriter(out / "tensorboard")
-    net = StopMoveNet(hidden=args.hidden, layers=3)
+    return Split(train_x, train_y, draw, held, held_sets, held_flags, train_hindsight)
+
+
+def fit(net, split: Split, writer, args: argparse.Namespace) -> None:
+    """``--steps`` Adam steps on weighted draws of the training samples (cross-entropy plus the
+    logit penalty), the loss and the held-out metrics logged."""
+    import torch
+
+    from train.run import Bar
+
     opt = torch.optim.Adam(net.parameters(), lr=args.lr)
     gen = torch.Generator().manual_seed(args.seed)
-
-    def held_metrics() -> dict[str, float]:
-        metrics = {}
-        for which, (held_x, held_y) in held_sets.items():
-            with torch.no_grad():
-                pred = net(held_x).argmax(-1)
-            stop_true, stop_pred = held_y == 0, pred == 0
-            tp = float((stop_true & stop_pred).sum())
-            metrics.update({f"{which}/accuracy": float((pred == held_y).float().mean()),
-                            f"{which}/stop_recall": tp / max(float(stop_true.sum()), 1.0),
-                            f"{which}/stop_precision": tp / max(float(stop_pred.sum()), 1.0),
-                            f"{which}/majority_accuracy": float(max((held_y == 0).float().mean(), (held_y == 1).float().mean())),
-                            f"{which}/stops": int(stop_true.sum()), f"{which}/samples": len(held_y)})  # fmt: skip
-            if which == "situations":  # the stops only hindsight shows: the rules drove on there
-                flag = held_flags
-                metrics[f"{which}/hindsight_stops"] = int(flag.sum())
-                metrics[f"{which}/hindsight_stop_recall"] = float(stop_pred[flag].float().mean()) if flag.any() else 0.0
-        return metrics
-
     bar = Bar(range(1, args.steps + 1), desc="tf-bc", disable=args.quiet)
     for step in bar:
-        idx = torch.multinomial(draw, args.batch, replacement=True, generator=gen)
-        logits = net(train_x[idx])
-        loss = torch.nn.functional.cross_entropy(logits, train_y[idx]) + args.beta * (logits**2).mean()
+        idx = torch.multinomial(split.draw, args.batch, replacement=True, generator=gen)
+        logits = net(split.train_x[idx])
+        loss = torch.nn.functional.cross_entropy(logits, split.train_y[idx]) + args.beta * (logits**2).mean()
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -222,17 +255,30 @@ def train(args: argparse.Namespace) -> dict:
             writer.add_scalar("train/loss", loss.item(), step)
             bar.set_postfix(loss=f"{loss.item():.3f}")
         if step % 500 == 0 or step == args.steps:
-            for k, v in held_metrics().items():
+            for k, v in held_metrics(net, split).items():
                 writer.add_scalar(f"heldout/{k}", v, step)
-    metrics = {**held_metrics(), "train_samples": len(train_y), "train_stops": int((train_y == 0).sum()),
-               "train_hindsight_stops": train_hindsight, "situations": args.situations, "horizon": args.horizon,
-               "hindsight_weight": args.hindsight_weight,
-               "heldout_scenarios": held, "steps": args.steps, "batch": args.batch, "hidden": args.hidden,
-               "parameters": sum(p.numel() for p in net.parameters()), "threads": args.threads,
-               "minutes": round((time.time() - started) / 60, 1)}  # fmt: skip
-    save_net(out / "final.pt", "tf-stop-move", net, metrics)
-    (out / "summary.json").write_text(json.dumps(metrics, indent=2))
-    writer.close()
+
+
+def held_metrics(net, split: Split) -> dict[str, float]:
+    """Per held-out set: accuracy, stop recall and precision against the majority class; for the
+    situations also the recall of the stops only hindsight shows (the rules drove on there)."""
+    import torch
+
+    metrics = {}
+    for which, (held_x, held_y) in split.held_sets.items():
+        with torch.no_grad():
+            pred = net(held_x).argmax(-1)
+        stop_true, stop_pred = held_y == 0, pred == 0
+        tp = float((stop_true & stop_pred).sum())
+        metrics.update({f"{which}/accuracy": float((pred == held_y).float().mean()),
+                        f"{which}/stop_recall": tp / max(float(stop_true.sum()), 1.0),
+                        f"{which}/stop_precision": tp / max(float(stop_pred.sum()), 1.0),
+                        f"{which}/majority_accuracy": float(max((held_y == 0).float().mean(), (held_y == 1).float().mean())),
+                        f"{which}/stops": int(stop_true.sum()), f"{which}/samples": len(held_y)})  # fmt: skip
+        if which == "situations":
+            flag = split.held_flags
+            metrics[f"{which}/hindsight_stops"] = int(flag.sum())
+            metrics[f"{which}/hindsight_stop_recall"] = float(stop_pred[flag].float().mean()) if flag.any() else 0.0
     return metrics
 
 

@@ -173,15 +173,38 @@ def generate_situations(count: int, steps: int, progress: bool = True) -> dict[s
 
 
 def train(args: argparse.Namespace) -> dict:
-    import torch
+    """Generate (or read) the samples, hold out whole scenarios, train the classifier and write
+    TensorBoard logs, ``final.pt`` and ``summary.json``; the summary."""
     from torch.utils.tensorboard import SummaryWriter
 
     from agents.planners.nets import VCRClassifier, save_net
-    from train.run import Bar
 
     apply_run_options(args)
     started = time.time()
-    scenarios = suite_scenarios(args.suite)
+    data = samples(args, suite_scenarios(args.suite))
+    tr, held_sets, held, counts = split_samples(data)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    writer = SummaryWriter(out / "tensorboard")
+    weights = class_weights(counts, args.balance, args.collision_weight)
+    net = VCRClassifier()
+    step = fit(net, tr, weights, held_sets, writer, args)
+    metrics = {**held_metrics(net, held_sets), "balanced": bool(args.balance), "collision_weight": args.collision_weight,
+               "train_samples": len(tr[2]), "train_classes": dict(zip(CLASSES, counts.tolist())),
+               "heldout_samples": {k: len(v[2]) for k, v in held_sets.items()},
+               "heldout_classes": {k: dict(zip(CLASSES, np.bincount(v[2].numpy(), minlength=6).tolist())) for k, v in held_sets.items()},
+               "heldout_scenarios": held, "epochs": args.epochs, "steps": step,
+               "parameters": sum(p.numel() for p in net.parameters()), "threads": args.threads,
+               "minutes": round((time.time() - started) / 60, 1)}  # fmt: skip
+    save_net(out / "final.pt", "vcr-classifier", net, metrics)
+    (out / "summary.json").write_text(json.dumps(metrics, indent=2))
+    writer.close()
+    return metrics
+
+
+def samples(args: argparse.Namespace, scenarios) -> dict[str, dict[str, np.ndarray]]:
+    """The samples of ``--data`` when the file exists, else generated from the suites' scenarios
+    and the following situations (and written to ``--data`` when given)."""
     cache = Path(args.data) if args.data else None
     if cache is not None and cache.is_file():
         with np.load(cache) as saved:
@@ -189,13 +212,21 @@ def train(args: argparse.Namespace) -> dict:
             for key in saved.files:
                 name, field = key.rsplit("/", 1)
                 data.setdefault(name, {})[field] = saved[key]
-    else:
-        data = generate(scenarios, args.seeds, not args.quiet)
-        data.update(generate_situations(args.situations, args.situation_steps, not args.quiet))
-        if cache is not None:
-            cache.parent.mkdir(parents=True, exist_ok=True)
-            np.savez_compressed(cache, **{f"{n}/{k}": v for n, d in data.items() for k, v in d.items()})
-    # held out: every 5th suite scenario and every 5th group of situations (whole scenarios or groups)
+        return data
+    data = generate(scenarios, args.seeds, not args.quiet)
+    data.update(generate_situations(args.situations, args.situation_steps, not args.quiet))
+    if cache is not None:
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(cache, **{f"{n}/{k}": v for n, d in data.items() for k, v in d.items()})
+    return data
+
+
+def split_samples(data: dict[str, dict[str, np.ndarray]]) -> tuple[list, dict[str, list], list[str], np.ndarray]:
+    """(training tensors [rasters, numbers, labels], held-out tensors per set, the held-out
+    names, training class counts): every 5th suite scenario and every 5th group of situations is
+    held out whole."""
+    import torch
+
     situations = sorted(n for n in data if n.startswith("situations_"))
     suite_names, suite_held = split_held_out([n for n in data if n not in situations])
     held_situations = split_held_out(situations)[1] if len(situations) >= 2 else []
@@ -210,40 +241,30 @@ def train(args: argparse.Namespace) -> dict:
     counts = np.bincount(tr[2].numpy(), minlength=6)
     print(f"samples: {len(tr[2])} train {dict(zip(CLASSES, counts.tolist()))}, held out "
           f"{ {k: len(v[2]) for k, v in held_sets.items()} } from {suite_held} and {len(held_situations)} situation groups")  # fmt: skip
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    writer = SummaryWriter(out / "tensorboard")
-    # Collisions are rare (a few % of the samples): classes weigh 1 / sqrt(frequency), collision
-    # once more by --collision-weight, so the one class the policy reads is not drowned by "safe"
-    # (the original had no weights).
+    return tr, held_sets, held, counts
+
+
+def class_weights(counts: np.ndarray, balance: bool, collision_weight: float):
+    """The loss's class weights. Collisions are rare (a few % of the samples): classes weigh
+    1 / sqrt(frequency), collision once more by ``collision_weight``, so the one class the policy
+    reads is not drowned by "safe" (the original had no weights)."""
+    import torch
+
     weights = torch.tensor(1.0 / np.sqrt(np.maximum(counts, 1) / counts.sum()), dtype=torch.float32)
-    weights = weights / weights[5] if args.balance else torch.ones(6)
-    weights[0] *= args.collision_weight
-    net = VCRClassifier()
+    weights = weights / weights[5] if balance else torch.ones(6)
+    weights[0] *= collision_weight
+    return weights
+
+
+def fit(net, tr: list, weights, held_sets: dict[str, list], writer, args: argparse.Namespace) -> int:
+    """``--epochs`` passes of cross-entropy minibatches with Adam, the loss and the held-out
+    metrics logged; the number of gradient steps."""
+    import torch
+
+    from train.run import Bar
+
     opt = torch.optim.Adam(net.parameters(), lr=args.lr, weight_decay=1e-3)
     gen = torch.Generator().manual_seed(args.seed)
-
-    def held_metrics() -> dict[str, float]:
-        """Per held-out set: accuracy, and collision recall and precision of the argmax and of
-        p(collision) >= 0.3 (where VCR's speed map halves the step)."""
-        net.eval()
-        metrics = {}
-        with torch.no_grad():
-            for which, (rasters, numbers, labels) in held_sets.items():
-                logits = torch.cat(
-                    [net(rasters[i : i + 512], numbers[i : i + 512]) for i in range(0, len(labels), 512)]
-                )
-                p = torch.softmax(logits, -1)[:, 0]
-                pred = logits.argmax(-1)
-                truth = labels == 0
-                metrics[f"{which}/accuracy"] = float((pred == labels).float().mean())
-                for tag, hit in (("", pred == 0), ("_p0.3", p >= 0.3)):
-                    tp = float((hit & truth).sum())
-                    metrics[f"{which}/collision_recall{tag}"] = tp / max(float(truth.sum()), 1.0)
-                    metrics[f"{which}/collision_precision{tag}"] = tp / max(float(hit.sum()), 1.0)
-        net.train()
-        return metrics
-
     step = 0
     for epoch in Bar(range(1, args.epochs + 1), desc="vcr-classifier", disable=args.quiet):
         perm = torch.randperm(len(tr[2]), generator=gen)
@@ -256,18 +277,30 @@ def train(args: argparse.Namespace) -> dict:
             step += 1
             if step % 20 == 0:
                 writer.add_scalar("train/loss", loss.item(), step)
-        for k, v in held_metrics().items():
+        for k, v in held_metrics(net, held_sets).items():
             writer.add_scalar(f"heldout/{k}", v, epoch)
-    metrics = {**held_metrics(), "balanced": bool(args.balance), "collision_weight": args.collision_weight,
-               "train_samples": len(tr[2]), "train_classes": dict(zip(CLASSES, counts.tolist())),
-               "heldout_samples": {k: len(v[2]) for k, v in held_sets.items()},
-               "heldout_classes": {k: dict(zip(CLASSES, np.bincount(v[2].numpy(), minlength=6).tolist())) for k, v in held_sets.items()},
-               "heldout_scenarios": held, "epochs": args.epochs, "steps": step,
-               "parameters": sum(p.numel() for p in net.parameters()), "threads": args.threads,
-               "minutes": round((time.time() - started) / 60, 1)}  # fmt: skip
-    save_net(out / "final.pt", "vcr-classifier", net, metrics)
-    (out / "summary.json").write_text(json.dumps(metrics, indent=2))
-    writer.close()
+    return step
+
+
+def held_metrics(net, held_sets: dict[str, list]) -> dict[str, float]:
+    """Per held-out set: accuracy, and collision recall and precision of the argmax and of
+    p(collision) >= 0.3 (where VCR's speed map halves the step)."""
+    import torch
+
+    net.eval()
+    metrics = {}
+    with torch.no_grad():
+        for which, (rasters, numbers, labels) in held_sets.items():
+            logits = torch.cat([net(rasters[i : i + 512], numbers[i : i + 512]) for i in range(0, len(labels), 512)])
+            p = torch.softmax(logits, -1)[:, 0]
+            pred = logits.argmax(-1)
+            truth = labels == 0
+            metrics[f"{which}/accuracy"] = float((pred == labels).float().mean())
+            for tag, hit in (("", pred == 0), ("_p0.3", p >= 0.3)):
+                tp = float((hit & truth).sum())
+                metrics[f"{which}/collision_recall{tag}"] = tp / max(float(truth.sum()), 1.0)
+                metrics[f"{which}/collision_precision{tag}"] = tp / max(float(hit.sum()), 1.0)
+    net.train()
     return metrics
 
 

@@ -18,6 +18,7 @@ is the first 5 target-path waypoints at training time too.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -95,6 +96,32 @@ def stop_move_features(row: dict[str, np.ndarray], target_points: np.ndarray) ->
     return out
 
 
+@dataclass
+class _Scene:
+    """What one TF step sees: ego, lanes and neighbours, the situation flags, the lane speeds
+    (``v``: cur, left, right, target; lowered by leaders) and the alert box (front length, widths)."""
+
+    ego: np.ndarray
+    speed: float
+    width: float
+    ids: np.ndarray  # tracked neighbour ids by row
+    lanes: LaneView
+    cur_pts: np.ndarray
+    turning: bool
+    present: np.ndarray
+    heading: np.ndarray
+    nb_speed: np.ndarray
+    nb: np.ndarray
+    atten: float  # speed factor for the density around
+    straight: bool
+    v_lim: float
+    v: dict[str, float]
+    changing: bool
+    w_left: float
+    w_right: float
+    l_front: float
+
+
 class TFPlanner(StatefulPlanner):
     """TF's rules; ``stop_move`` (53 features -> True to move) adds the learned veto."""
 
@@ -128,6 +155,34 @@ class TFPlanner(StatefulPlanner):
         return rows[hit]
 
     def decide(self, st: TFState, row: dict[str, np.ndarray]) -> np.ndarray:
+        """Situation, meta controller (learned vote, rule stop), scheduler (leader-limited lane
+        speeds, lane choice, target point), then the step towards the point."""
+        scene = self.scene(st, row)
+        if scene is None:
+            st.stopped_by = "no lane"
+            return np.zeros(3)
+        model_move = self.model_vote(st, row, scene)
+        if self.rule_stop(st, row, scene):
+            st.stopped_by = "rule"
+            return np.zeros(3)
+        lane_of = self.leader_speeds(st, scene)
+        if not scene.changing and not model_move:
+            st.stopped_by = "model"
+            return np.zeros(3)
+        st.stopped_by = ""
+        choice = 0
+        if not scene.changing:
+            choice = self.lane_utility(st, row, scene.lanes, scene.v, lane_of, scene.present, scene.v_lim,
+                                       scene.straight)  # fmt: skip
+        aim = self.aim(st, row, scene, choice)
+        if aim is None:
+            st.stopped_by = "rule"
+            return np.zeros(3)
+        return self.step_towards(st, scene, aim, choice)
+
+    def scene(self, st: TFState, row: dict[str, np.ndarray]) -> _Scene | None:
+        """The step's situation flags, lane speeds and alert box, with the odometry counters and
+        the target path updated; None off every lane."""
         ego = row["ego"].astype(np.float64)
         speed, width = float(ego[Ego.SPEED]), max(float(ego[Ego.LANE_WIDTH]), 2.0)
         ids = st.tracker.update(st.odometry.pose, speed, row["neighbours"], row["neighbour_mask"])
@@ -137,8 +192,7 @@ class TFPlanner(StatefulPlanner):
         st.distance += moved
         lanes = lane_view(row["waypoints"], row["waypoint_mask"], width)
         if lanes.current < 0:
-            st.stopped_by = "no lane"
-            return np.zeros(3)
+            return None
         if st.target is None or st.target not in lanes.paths:
             st.target = lanes.current
         cur_pts = lanes.paths[lanes.current]
@@ -147,21 +201,26 @@ class TFPlanner(StatefulPlanner):
         present, heading, nb_speed, _ = neighbour_kinematics(row)
         nb = row["neighbours"].astype(np.float64)
         near = int((np.hypot(nb[present, Neighbour.DX], nb[present, Neighbour.DY]) < 20.0).sum())
-        atten = max(0.5, 1.0 - 0.02 * near)
         straight = all((np.abs(wrap(np.diff(p[:11, 2]))) <= 1e-3).all() for p in lanes.paths.values())
         st.straight_cnt = st.straight_cnt + 1 if straight else 0
         v_lim = max(float(ego[Ego.SPEED_LIMIT]), 0.1)
         v = {"cur": v_lim, "left": v_lim if lanes.left >= 0 else 0.0, "right": v_lim if lanes.right >= 0 else 0.0}
         v["target"] = v_lim
-        gaps = {"left": 10.0, "right": 10.0}
         offset = float(ego[Ego.LANE_OFFSET])
         changing = st.target != lanes.current or abs(offset) >= width / 10
-        w_left = width / 2 if changing and offset < 0 and abs(offset) >= width / 10 else 1.25
-        w_right = width / 2 if changing and offset > 0 and abs(offset) >= width / 10 else 1.25
-        l_front = 2.5 if changing else 7.0 if turning else 5.0
-        target_pts = lanes.paths[st.target]
+        return _Scene(
+            ego=ego, speed=speed, width=width, ids=ids, lanes=lanes, cur_pts=cur_pts, turning=turning,
+            present=present, heading=heading, nb_speed=nb_speed, nb=nb, atten=max(0.5, 1.0 - 0.02 * near),
+            straight=straight, v_lim=v_lim, v=v, changing=changing,
+            w_left=width / 2 if changing and offset < 0 and abs(offset) >= width / 10 else 1.25,
+            w_right=width / 2 if changing and offset > 0 and abs(offset) >= width / 10 else 1.25,
+            l_front=2.5 if changing else 7.0 if turning else 5.0,
+        )  # fmt: skip
 
-        # ---- meta controller: the learned vote, then the rule state machine
+    def model_vote(self, st: TFState, row: dict[str, np.ndarray], scene: _Scene) -> bool:
+        """The learned stop/move vote (move when there is no network or it is ignored), with the
+        anti-deadlock window: ``DEADLOCK_STOPS`` stops while standing open ``IGNORE_STEPS`` of moving."""
+        target_pts = scene.lanes.paths[st.target]
         model_move = True
         if self.stop_move is not None and not (st.model_ignore > 0 or st.novice > 0 or st.distance < 5.0
                                                or len(target_pts) < 5):  # fmt: skip
@@ -170,85 +229,95 @@ class TFPlanner(StatefulPlanner):
         if not model_move:
             # counted while standing: the original's stops were instant, so its ten stops were a
             # second at rest; here a stop is a brake, and a window opened mid-brake would drive on
-            st.model_stops += int(speed < STANDING)
+            st.model_stops += int(scene.speed < STANDING)
             if st.model_stops >= DEADLOCK_STOPS:
                 st.model_stops, st.model_ignore = 0, IGNORE_STEPS
         else:
             st.model_stops = 0
+        return model_move
+
+    def rule_stop(self, st: TFState, row: dict[str, np.ndarray], scene: _Scene) -> bool:
+        """The rule state machine: ignore for a while, hold while the blockers stay in the alert
+        box (then ignore), or hold on a new forecast hit; True to stop this step."""
+        box = (scene.l_front, scene.w_left, scene.w_right)
         if st.ignore > 0:
             st.ignore -= 1
         elif st.hold > 0:
-            keep = [b for b in st.blockers if b in ids]
-            rows = np.array([int(np.flatnonzero(ids == b)[0]) for b in keep], dtype=np.int64)
-            still = self.hits(row, rows, l_front, w_left, w_right)
-            st.blockers = [int(ids[r]) for r in still]
+            keep = [b for b in st.blockers if b in scene.ids]
+            rows = np.array([int(np.flatnonzero(scene.ids == b)[0]) for b in keep], dtype=np.int64)
+            still = self.hits(row, rows, *box)
+            st.blockers = [int(scene.ids[r]) for r in still]
             if not st.blockers:
                 st.hold = 0
             else:
                 st.hold -= 1
                 if st.hold == 0:
                     st.ignore = IGNORE_STEPS
-                st.stopped_by = "rule"
-                return np.zeros(3)
+                return True
         else:
-            hit = self.hits(row, present, l_front, w_left, w_right)
+            hit = self.hits(row, scene.present, *box)
             if hit.size:
-                st.blockers, st.hold = [int(ids[r]) for r in hit], HOLD_STEPS
-                st.stopped_by = "rule"
-                return np.zeros(3)
+                st.blockers, st.hold = [int(scene.ids[r]) for r in hit], HOLD_STEPS
+                return True
+        return False
 
-        # ---- scheduler: leader-limited lane speeds
-        lane_of = lanes.lane_of(nb[present, NEIGHBOUR_XY], width) if present.size else np.zeros(0, dtype=np.int64)
+    def leader_speeds(self, st: TFState, scene: _Scene) -> np.ndarray:
+        """Each lane's speed limited by its leader within reach (in ``scene.v``); the lane of
+        every present neighbour (-1: none)."""
+        ego, nb, lanes, v = scene.ego, scene.nb, scene.lanes, scene.v
+        gaps = {"left": 10.0, "right": 10.0}
+        present = scene.present
+        lane_of = lanes.lane_of(nb[present, NEIGHBOUR_XY], scene.width) if present.size else np.zeros(0, dtype=np.int64)
         ego_diag = float(np.hypot(ego[Ego.LENGTH], ego[Ego.WIDTH]))
         for r, lane in zip(present, lane_of):
-            if lane < 0 or nb[r, Neighbour.DX] <= 0 or abs(wrap(heading[r])) > np.pi / 2:
+            if lane < 0 or nb[r, Neighbour.DX] <= 0 or abs(wrap(scene.heading[r])) > np.pi / 2:
                 continue
             size = float(np.hypot(nb[r, Neighbour.LENGTH], nb[r, Neighbour.WIDTH]))
             gap = max(float(np.hypot(nb[r, Neighbour.DX], nb[r, Neighbour.DY])) - ego_diag - size, 0.0)
             if lane == lanes.current and gap < 5.5:
-                v["cur"] = min(v["cur"], float(nb_speed[r]))
-            elif changing and lane == st.target and gap < 5.5:
-                v["target"] = min(v["target"], float(nb_speed[r]))
-            elif not changing:
+                v["cur"] = min(v["cur"], float(scene.nb_speed[r]))
+            elif scene.changing and lane == st.target and gap < 5.5:
+                v["target"] = min(v["target"], float(scene.nb_speed[r]))
+            elif not scene.changing:
                 for side, path in (("left", lanes.left), ("right", lanes.right)):
                     if lane == path and gap < gaps[side]:
                         gaps[side] = gap
-                        v[side] = min(v[side], float(nb_speed[r]))
-        if not changing and not model_move:
-            st.stopped_by = "model"
-            return np.zeros(3)
-        st.stopped_by = ""
+                        v[side] = min(v[side], float(scene.nb_speed[r]))
+        return lane_of
 
-        # ---- lane choice
-        choice = 0
-        if not changing:
-            choice = self.lane_utility(st, row, lanes, v, lane_of, present, v_lim, straight)
-        widened = (w_left, w_right)
+    def aim(self, st: TFState, row: dict[str, np.ndarray], scene: _Scene, choice: int) -> np.ndarray | None:
+        """The target point: on a lane change (``choice`` +1 left, -1 right) an early point of the
+        current path, refused (None, a rule hold) when the widened alert box forecasts a hit; else
+        a point of the target path, a nearer one in turns."""
+        lanes = scene.lanes
         if choice:
-            side_path = lanes.left if choice > 0 else lanes.right
-            st.target = side_path
-            v["target"] = v[("left" if choice > 0 else "right")]
+            st.target = lanes.left if choice > 0 else lanes.right
+            scene.v["target"] = scene.v[("left" if choice > 0 else "right")]
             st.final_straight_cnt = 0
-            aim = cur_pts[min(3, len(cur_pts) - 1)]  # the 4th point of the path before the change (as the original)
-            widened = (w_left + width, w_right) if choice > 0 else (w_left, w_right + width)
-            if self.hits(row, present, l_front, *widened).size:
-                hit = self.hits(row, present, l_front, *widened)
-                st.blockers, st.hold = [int(ids[r]) for r in hit], HOLD_STEPS
+            aim = scene.cur_pts[
+                min(3, len(scene.cur_pts) - 1)
+            ]  # the 4th point of the path before the change (as the original)
+            w_left, w_right = scene.w_left, scene.w_right
+            widened = (w_left + scene.width, w_right) if choice > 0 else (w_left, w_right + scene.width)
+            if self.hits(row, scene.present, scene.l_front, *widened).size:
+                hit = self.hits(row, scene.present, scene.l_front, *widened)
+                st.blockers, st.hold = [int(scene.ids[r]) for r in hit], HOLD_STEPS
                 st.target = lanes.current
-                st.stopped_by = "rule"
-                return np.zeros(3)
+                return None
         else:
             pts = lanes.paths[st.target]
             aim = pts[min(2, len(pts) - 1)]
-        if turning:
+        if scene.turning:
             pts = lanes.paths[st.target]
             aim = pts[min(1, len(pts) - 1)]
+        return aim
 
-        # ---- speed and position
+    def step_towards(self, st: TFState, scene: _Scene, aim: np.ndarray, choice: int) -> np.ndarray:
+        """The relative step towards ``aim`` at the scheduled speed, the heading change clipped."""
         # while changing lanes the target lane's leader sets the speed (the original keeps the lane
         # it left until the lane id changes; here the path is known at once)
-        v_out = atten * (v["target"] if changing or choice else v["cur"])
-        if turning:
+        v_out = scene.atten * (scene.v["target"] if scene.changing or choice else scene.v["cur"])
+        if scene.turning:
             v_out *= 0.5
         if st.final_straight_cnt > 0:
             v_out *= max(0.2, 0.1 * (10 - st.final_straight_cnt))

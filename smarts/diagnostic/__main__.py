@@ -247,12 +247,7 @@ def _compare_rows(baseline: str, cases: list[str], steps: int, warmup: int, cons
     return rows
 
 
-def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if "--batched" in argv:  # the batched backend's rows have their own options
-        from smarts.diagnostic.batched_step import main as batched_main
-
-        return batched_main([a for a in argv if a != "--batched"])
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m smarts.diagnostic", description=__doc__.splitlines()[0])
     parser.add_argument(
         "--batched",
@@ -291,55 +286,71 @@ def main(argv: list[str] | None = None) -> int:
         "alternating with this one in fresh interpreters, and print the ratios",
     )
     parser.add_argument("--out", type=Path, default=Path("reports/diagnostic.json"), help="JSON output file")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def _positive_counts(parser: argparse.ArgumentParser, option: str, text: str) -> list[int]:
+    """Comma-separated positive integers, or the parser's error naming ``option``."""
     try:
-        counts = [int(c) for c in args.agents.split(",") if c.strip()]
+        counts = [int(c) for c in text.split(",") if c.strip()]
     except ValueError:
-        parser.error(f"--agents: expected comma-separated integers, got {args.agents!r}")
+        parser.error(f"{option}: expected comma-separated integers, got {text!r}")
     if not counts or min(counts) < 1:
-        parser.error(f"--agents: expected positive integers, got {args.agents!r}")
-    try:
-        vehicle_counts = [int(c) for c in args.vehicles.split(",") if c.strip()]
-    except ValueError:
-        parser.error(f"--vehicles: expected comma-separated integers, got {args.vehicles!r}")
-    if not vehicle_counts or min(vehicle_counts) < 1:
-        parser.error(f"--vehicles: expected positive integers, got {args.vehicles!r}")
-    engines = [e for e in args.traffic.split(",") if e.strip() and e != "none"]
-    unknown = [e for e in engines if e not in TRAFFIC_BENCHMARKS]
-    if unknown:
-        parser.error(f"--traffic: unknown engine(s) {unknown}; expected sumo, builtin or none")
+        parser.error(f"{option}: expected positive integers, got {text!r}")
+    return counts
+
+
+def _check_agents(parser: argparse.ArgumentParser, args: argparse.Namespace, counts: list[int]) -> None:
+    """The agent counts must stay on the highway for the whole run; steps and warm-up must be sane."""
     travel = CRUISE_SPEED * (args.steps + args.warmup) * 0.1
     max_agents = LANES * (int((ROAD_LENGTH - END_MARGIN - 5.0 - travel) // SPACING) + 1)
     if max(counts) > max_agents:
         parser.error(f"--agents: at most {max_agents} agents stay on the 455 m highway for {args.steps} steps")
     if args.steps < 1 or args.warmup < 0:
         parser.error("--steps must be >= 1 and --warmup >= 0")
-    sensor_case = None
-    if args.sensors != "none":
-        try:
-            sensor_case = tuple(int(v) for v in args.sensors.split(":"))
-        except ValueError:
-            sensor_case = ()
-        if len(sensor_case) != 2 or min(sensor_case) < 1:
-            parser.error(f"--sensors: expected AGENTS:VEHICLES (positive integers) or none, got {args.sensors!r}")
-        rows_needed = -(-sensor_case[0] // LANES) + -(-sensor_case[1] // LANES)
-        if 5.0 + TRAFFIC_SPACING * rows_needed + travel > ROAD_LENGTH - END_MARGIN:
-            parser.error(f"--sensors: {args.sensors} does not fit on the 455 m highway for {args.steps} steps")
 
-    cpu_cases = [c.strip() for c in args.cpu.split(",") if c.strip() and args.cpu != "none"]
-    if any(c != "1" and not (c.startswith("sumo") and c[4:].isdigit() and int(c[4:]) > 0) for c in cpu_cases):
-        parser.error(f"--cpu: expected 1 and/or sumoN (N > 0), or none; got {args.cpu!r}")
 
-    from rich.console import Console
+def _sensor_case(parser: argparse.ArgumentParser, args: argparse.Namespace) -> tuple[int, int] | None:
+    """``--sensors AGENTS:VEHICLES`` (None for ``none``), checked to fit on the highway."""
+    if args.sensors == "none":
+        return None
+    try:
+        sensor_case = tuple(int(v) for v in args.sensors.split(":"))
+    except ValueError:
+        sensor_case = ()
+    if len(sensor_case) != 2 or min(sensor_case) < 1:
+        parser.error(f"--sensors: expected AGENTS:VEHICLES (positive integers) or none, got {args.sensors!r}")
+    travel = CRUISE_SPEED * (args.steps + args.warmup) * 0.1
+    rows_needed = -(-sensor_case[0] // LANES) + -(-sensor_case[1] // LANES)
+    if 5.0 + TRAFFIC_SPACING * rows_needed + travel > ROAD_LENGTH - END_MARGIN:
+        parser.error(f"--sensors: {args.sensors} does not fit on the 455 m highway for {args.steps} steps")
+    return sensor_case
+
+
+def _cpu_cases(parser: argparse.ArgumentParser, text: str) -> list[str]:
+    cases = [c.strip() for c in text.split(",") if c.strip() and text != "none"]
+    if any(c != "1" and not (c.startswith("sumo") and c[4:].isdigit() and int(c[4:]) > 0) for c in cases):
+        parser.error(f"--cpu: expected 1 and/or sumoN (N > 0), or none; got {text!r}")
+    return cases
+
+
+def _replay_cases(parser: argparse.ArgumentParser, text: str) -> list[tuple[int, bool]]:
+    """``--replay`` as (replayed vehicles, an agent takes one over) pairs."""
+    cases = []
+    for item in (c.strip() for c in text.split(",") if c.strip() and text != "none"):
+        if not item.rstrip("+").isdigit() or item == "0+":
+            parser.error(f"--replay: expected counts such as 1,10,50,50+ or none, got {text!r}")
+        cases.append((int(item.rstrip("+")), item.endswith("+")))
+    return cases
+
+
+def _step_rows(counts: list[int], steps: int, warmup: int, console) -> list[dict]:
+    """Time the full-load agent cases and print their table."""
     from rich.progress import track
     from rich.table import Table
 
-    console = Console(width=max(Console().width, 110))
-    cpu_rows = _cpu_rows(cpu_cases, args.steps, args.warmup, args.stages, console) if cpu_cases else []
-    compare_rows = _compare_rows(args.baseline, cpu_cases, args.steps, args.warmup, console) if args.baseline else []
-    rows = [time_case(n, args.steps, args.warmup) for n in track(counts, description="timing cases", console=console)]
-
-    table = Table(title=f"Step time at full load, {args.steps} timed steps per case (ms per step)")
+    rows = [time_case(n, steps, warmup) for n in track(counts, description="timing cases", console=console)]
+    table = Table(title=f"Step time at full load, {steps} timed steps per case (ms per step)")
     for col in ("agents", "env step mean", "env step median", "sim mean", "obs mean", "env steps/s", "agent-steps/s"):
         table.add_column(col, justify="right", no_wrap=True)
     for r in rows:
@@ -353,56 +364,89 @@ def main(argv: list[str] | None = None) -> int:
             f"{r['agent_steps_per_s']:.0f}",
         )
     console.print(table)
+    return rows
 
-    sensor_rows = []
-    if sensor_case is not None:
-        sensor_rows.append(time_case(sensor_case[0], args.steps, args.warmup, vehicles=sensor_case[1]))
-        stable = Table(
-            title=f"All sensors (occlusion, 64x64 rasters + RGB, 64-ray lidar) and V2V, {args.steps} timed "
-            "steps (ms per step)"
+
+def _sensor_rows(case: tuple[int, int], steps: int, warmup: int, console) -> list[dict]:
+    """Time the all-sensors case and print its table, the observation split by sensor."""
+    from rich.table import Table
+
+    rows = [time_case(case[0], steps, warmup, vehicles=case[1])]
+    table = Table(
+        title=f"All sensors (occlusion, 64x64 rasters + RGB, 64-ray lidar) and V2V, {steps} timed steps (ms per step)"
+    )
+    for col in ("agents", "vehicles", "env step mean", "env step median", "sim mean", "obs mean",
+                "shadows", "rasters", "lidar", "v2v"):  # fmt: skip
+        table.add_column(col, justify="right", no_wrap=True)
+    for r in rows:
+        table.add_row(
+            str(r["agents"]),
+            str(r["vehicles"]),
+            f"{r['env_ms_mean']:.3f}",
+            f"{r['env_ms_median']:.3f}",
+            f"{r['sim_ms_mean']:.3f}",
+            f"{r['obs_ms_mean']:.3f}",
+            f"{r['shadows_ms_mean']:.3f}",
+            f"{r['rasters_ms_mean']:.3f}",
+            f"{r['lidar_ms_mean']:.3f}",
+            f"{r['v2v_ms_mean']:.3f}",
         )
-        for col in ("agents", "vehicles", "env step mean", "env step median", "sim mean", "obs mean",
-                    "shadows", "rasters", "lidar", "v2v"):  # fmt: skip
-            stable.add_column(col, justify="right", no_wrap=True)
-        for r in sensor_rows:
-            stable.add_row(
-                str(r["agents"]),
-                str(r["vehicles"]),
-                f"{r['env_ms_mean']:.3f}",
-                f"{r['env_ms_median']:.3f}",
-                f"{r['sim_ms_mean']:.3f}",
-                f"{r['obs_ms_mean']:.3f}",
-                f"{r['shadows_ms_mean']:.3f}",
-                f"{r['rasters_ms_mean']:.3f}",
-                f"{r['lidar_ms_mean']:.3f}",
-                f"{r['v2v_ms_mean']:.3f}",
-            )
-        console.print(stable)
+    console.print(table)
+    return rows
 
-    replay_cases = []
-    for item in (c.strip() for c in args.replay.split(",") if c.strip() and args.replay != "none"):
-        if not item.rstrip("+").isdigit() or item == "0+":
-            parser.error(f"--replay: expected counts such as 1,10,50,50+ or none, got {args.replay!r}")
-        replay_cases.append((int(item.rstrip("+")), item.endswith("+")))
+
+def _traffic_rows(engines: list[str], vehicle_counts: list[int], steps: int, console) -> list[dict]:
+    """Time every traffic engine at every vehicle count and print their table."""
+    from rich.progress import track
+    from rich.table import Table
+
+    rows = []
+    cases = [(e, n) for e in engines for n in vehicle_counts]
+    for engine, n in track(cases, description="timing traffic", console=console):
+        rows.append(TRAFFIC_BENCHMARKS[engine](n, steps))
+    table = Table(title=f"Traffic at full load, {steps} timed steps per case (ms per step, median)")
+    for col in ("engine", "vehicles", "on the road", "whole step", "traffic provider"):
+        table.add_column(col, justify="right", no_wrap=True)
+    for r in rows:
+        table.add_row(
+            r["engine"],
+            str(r["vehicles"]),
+            f"{r['vehicles_on_road']:.0f}",
+            f"{r['step_ms']:.3f}",
+            f"{r['provider_ms']:.3f}",
+        )
+    console.print(table)
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if "--batched" in argv:  # the batched backend's rows have their own options
+        from smarts.diagnostic.batched_step import main as batched_main
+
+        return batched_main([a for a in argv if a != "--batched"])
+    parser = _parser()
+    args = parser.parse_args(argv)
+    counts = _positive_counts(parser, "--agents", args.agents)
+    vehicle_counts = _positive_counts(parser, "--vehicles", args.vehicles)
+    engines = [e for e in args.traffic.split(",") if e.strip() and e != "none"]
+    unknown = [e for e in engines if e not in TRAFFIC_BENCHMARKS]
+    if unknown:
+        parser.error(f"--traffic: unknown engine(s) {unknown}; expected sumo, builtin or none")
+    _check_agents(parser, args, counts)
+    sensor_case = _sensor_case(parser, args)
+    cpu_cases = _cpu_cases(parser, args.cpu)
+    replay_cases = _replay_cases(parser, args.replay)  # checked with the rest, before any timing
+
+    from rich.console import Console
+
+    console = Console(width=max(Console().width, 110))
+    cpu_rows = _cpu_rows(cpu_cases, args.steps, args.warmup, args.stages, console) if cpu_cases else []
+    compare_rows = _compare_rows(args.baseline, cpu_cases, args.steps, args.warmup, console) if args.baseline else []
+    rows = _step_rows(counts, args.steps, args.warmup, console)
+    sensor_rows = _sensor_rows(sensor_case, args.steps, args.warmup, console) if sensor_case is not None else []
     replay_rows = _replay_rows(replay_cases, args.steps, args.warmup, console) if replay_cases else []
-
-    traffic_rows = []
-    if engines:
-        cases = [(e, n) for e in engines for n in vehicle_counts]
-        for engine, n in track(cases, description="timing traffic", console=console):
-            traffic_rows.append(TRAFFIC_BENCHMARKS[engine](n, args.steps))
-        ttable = Table(title=f"Traffic at full load, {args.steps} timed steps per case (ms per step, median)")
-        for col in ("engine", "vehicles", "on the road", "whole step", "traffic provider"):
-            ttable.add_column(col, justify="right", no_wrap=True)
-        for r in traffic_rows:
-            ttable.add_row(
-                r["engine"],
-                str(r["vehicles"]),
-                f"{r['vehicles_on_road']:.0f}",
-                f"{r['step_ms']:.3f}",
-                f"{r['provider_ms']:.3f}",
-            )
-        console.print(ttable)
+    traffic_rows = _traffic_rows(engines, vehicle_counts, args.steps, console) if engines else []
     report = {
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "machine": {

@@ -273,7 +273,7 @@ def _ints(text: str, flag: str, parser: argparse.ArgumentParser) -> list[int]:
     return values
 
 
-def main(argv: list[str] | None = None) -> int:
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m smarts.diagnostic --batched",
         description="Batched backend against the per-env path: agent-steps/s, memory per episode, PPO env-steps/s.",
@@ -306,6 +306,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--ppo-dir", type=Path, default=Path("runs/diagnostic_ppo"), help="where the PPO runs write")
     parser.add_argument("--out", type=Path, default=Path("reports/diagnostic_batched.json"), help="JSON output file")
+    return parser
+
+
+def _checked(parser: argparse.ArgumentParser, argv: list[str] | None) -> tuple[argparse.Namespace, list, list, list]:
+    """The options, with the batch sizes, cases and PPO worker counts they name (or the parser's error)."""
     args = parser.parse_args(argv)
     batches = _ints(args.batches, "--batches", parser)
     cases = [c for c in args.cases.split(",") if c.strip()]
@@ -322,13 +327,12 @@ def main(argv: list[str] | None = None) -> int:
         ppo_workers = []
     if not ppo_workers or min(ppo_workers) < 0:
         parser.error(f"--ppo-workers: expected comma-separated numbers >= 0, got {args.ppo_workers!r}")
+    return args, batches, cases, ppo_workers
 
-    from rich.console import Console
+
+def _print_batched(rows: list[dict], console) -> None:
     from rich.table import Table
 
-    console = Console(width=max(Console().width, 120))
-    rows = batched_rows(batches, cases, args.steps, args.warmup, args.per_env_agent_steps,
-                        progress=lambda r: console.log(f"{r['case']} B={r['batch']}: {r['agent_steps_per_s']:.0f} agent-steps/s"))  # fmt: skip
     table = Table(title="Batched backend vs per-env path (agent-steps/s, mean ± 95% CI over 5 chunks)")
     for col in ("case", "B", "batched", "per-env", "speed-up", "memory/episode"):
         table.add_column(col, justify="right", no_wrap=True)
@@ -339,34 +343,58 @@ def main(argv: list[str] | None = None) -> int:
             f"{r['speedup']:.1f}x", f"{r['memory_per_episode_kb']:.0f} KiB",
         )  # fmt: skip
     console.print(table)
-    sensors = []
-    if args.sensor_batch:
-        sensors = sensor_rows(args.sensor_batch, max(args.steps // 5, CHUNKS), args.warmup)
-        stable = Table(title=f"All sensors and V2V, batched ({SENSOR_AGENTS} agents and {SENSOR_VEHICLES} vehicles per "
-                             f"episode, B={args.sensor_batch}, {sensors[0]['sensor_threads']} sensor thread(s))")  # fmt: skip
-        for col in ("case", "agent-steps/s", "ratio"):
-            stable.add_column(col, justify="right")
-        for r in sensors:
-            stable.add_row(r["case"], f"{r['agent_steps_per_s']:,.0f} ± {r['agent_steps_per_s_ci95']:,.0f}",
-                           f"{r['agent_steps_per_s'] / sensors[1]['agent_steps_per_s']:.2f}x")  # fmt: skip
-        console.print(stable)
-    ppo_rows = []
-    if args.ppo_steps:
-        extra = tuple(args.ppo_options.split())
-        for workers in ppo_workers:
-            console.log(f"PPO with {workers} worker process(es): {args.ppo_steps} env steps")
-            ppo_rows.append(ppo_rate(workers, args.ppo_envs, args.ppo_steps, args.ppo_dir, args.ppo_frames,
-                                     args.ppo_minibatch, args.ppo_epochs, extra))  # fmt: skip
-        ptable = Table(title=f"PPO platoon end to end ({args.ppo_envs} copies, {args.ppo_steps} steps, frames "
-                             f"{args.ppo_frames}, minibatch {args.ppo_minibatch}, {args.ppo_epochs} epochs"
-                             f"{', ' + args.ppo_options if args.ppo_options else ''})")  # fmt: skip
-        for col in ("workers", "env-steps/s end to end", "ratio", "update s/batch"):
-            ptable.add_column(col, justify="right")
-        base = ppo_rows[0]["env_steps_per_s"]
-        for r in ppo_rows:
-            ptable.add_row(str(r["workers"]), f"{r['env_steps_per_s']:,.0f}", f"{r['env_steps_per_s'] / base:.2f}x",
-                           f"{r['update_s']:.2f}")  # fmt: skip
-        console.print(ptable)
+
+
+def _sensors(args: argparse.Namespace, console) -> list[dict]:
+    """The all-sensors rows at ``--sensor-batch`` copies, printed."""
+    from rich.table import Table
+
+    sensors = sensor_rows(args.sensor_batch, max(args.steps // 5, CHUNKS), args.warmup)
+    table = Table(title=f"All sensors and V2V, batched ({SENSOR_AGENTS} agents and {SENSOR_VEHICLES} vehicles per "
+                        f"episode, B={args.sensor_batch}, {sensors[0]['sensor_threads']} sensor thread(s))")  # fmt: skip
+    for col in ("case", "agent-steps/s", "ratio"):
+        table.add_column(col, justify="right")
+    for r in sensors:
+        table.add_row(r["case"], f"{r['agent_steps_per_s']:,.0f} ± {r['agent_steps_per_s_ci95']:,.0f}",
+                      f"{r['agent_steps_per_s'] / sensors[1]['agent_steps_per_s']:.2f}x")  # fmt: skip
+    console.print(table)
+    return sensors
+
+
+def _ppo(args: argparse.Namespace, ppo_workers: list[int], console) -> list[dict]:
+    """One end-to-end PPO run per worker count, printed against the first."""
+    from rich.table import Table
+
+    rows = []
+    extra = tuple(args.ppo_options.split())
+    for workers in ppo_workers:
+        console.log(f"PPO with {workers} worker process(es): {args.ppo_steps} env steps")
+        rows.append(ppo_rate(workers, args.ppo_envs, args.ppo_steps, args.ppo_dir, args.ppo_frames,
+                             args.ppo_minibatch, args.ppo_epochs, extra))  # fmt: skip
+    table = Table(title=f"PPO platoon end to end ({args.ppo_envs} copies, {args.ppo_steps} steps, frames "
+                        f"{args.ppo_frames}, minibatch {args.ppo_minibatch}, {args.ppo_epochs} epochs"
+                        f"{', ' + args.ppo_options if args.ppo_options else ''})")  # fmt: skip
+    for col in ("workers", "env-steps/s end to end", "ratio", "update s/batch"):
+        table.add_column(col, justify="right")
+    base = rows[0]["env_steps_per_s"]
+    for r in rows:
+        table.add_row(str(r["workers"]), f"{r['env_steps_per_s']:,.0f}", f"{r['env_steps_per_s'] / base:.2f}x",
+                      f"{r['update_s']:.2f}")  # fmt: skip
+    console.print(table)
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    args, batches, cases, ppo_workers = _checked(_parser(), argv)
+
+    from rich.console import Console
+
+    console = Console(width=max(Console().width, 120))
+    rows = batched_rows(batches, cases, args.steps, args.warmup, args.per_env_agent_steps,
+                        progress=lambda r: console.log(f"{r['case']} B={r['batch']}: {r['agent_steps_per_s']:.0f} agent-steps/s"))  # fmt: skip
+    _print_batched(rows, console)
+    sensors = _sensors(args, console) if args.sensor_batch else []
+    ppo_rows = _ppo(args, ppo_workers, console) if args.ppo_steps else []
     args.out.parent.mkdir(parents=True, exist_ok=True)
     report = {
         "machine": {

@@ -33,8 +33,6 @@ def make_figure(
 ) -> np.ndarray:
     """The figure as uint8 [H, W, 3]. ``policy`` is a locator that ``policy_resolver`` (None: the
     installed default, ``smarts.core.policies``) turns into a RelativeTargetPose policy."""
-    from PIL import Image, ImageDraw
-
     from smarts.env import DrivingParallelEnv
     from smarts.sensors.interface import (
         RASTER_LAYERS,
@@ -43,7 +41,6 @@ def make_figure(
         OcclusionInterface,
         RasterInterface,
     )
-    from smarts.sensors.rasters import RasterSensor
 
     interface = AgentInterface(
         occlusion=OcclusionInterface(enabled=True, mode="flag", range=28.0),
@@ -51,6 +48,25 @@ def make_figure(
         lidar=LidarInterface(rays=96, range=28.0),
     )
     env = DrivingParallelEnv(SCENARIO, observation=interface)
+    driver = _driver(env, policy, policy_resolver, seed)
+    obs, _ = env.reset(seed=seed)
+    for _ in range(steps):
+        if not env.agents:
+            break
+        batch = {k: np.stack([obs[a][k] for a in env.agents]) for k in obs[env.agents[0]]}
+        actions = dict(zip(env.agents, driver.act(batch)))
+        obs, *_ = env.step(actions)
+    if not env.agents:
+        raise RuntimeError(f"{SCENARIO}: the agent left before step {steps}; pick fewer steps")
+    rgb = _ego_view(env)
+    mine = obs[env.agents[0]]
+    env.close()
+    return _with_layers(_with_lidar(rgb, mine), mine, interface.rasters.layers)
+
+
+def _driver(env, policy: str, policy_resolver: PolicyResolver | None, seed: int):
+    """The policy that drives, refused (closing ``env``) unless it gives direct actions in the
+    scenario's action space; stepped at the scenario's step length and seeded."""
     wanted = env.scenario.agents[0].action_space
     try:
         driver = resolve_policy(policy, policy_resolver)
@@ -66,24 +82,25 @@ def make_figure(
         driver.dt = env.scenario.step_length
     if hasattr(driver, "seed"):
         driver.seed(seed)
-    obs, _ = env.reset(seed=seed)
-    for _ in range(steps):
-        if not env.agents:
-            break
-        batch = {k: np.stack([obs[a][k] for a in env.agents]) for k in obs[env.agents[0]]}
-        actions = dict(zip(env.agents, driver.act(batch)))
-        obs, *_ = env.step(actions)
-    if not env.agents:
-        raise RuntimeError(f"{SCENARIO}: the agent left before step {steps}; pick fewer steps")
+    return driver
+
+
+def _ego_view(env) -> np.ndarray:
+    """The first agent's ego-centred RGB view [VIEW_SIZE, VIEW_SIZE, 3], occluded ground shaded."""
+    from smarts.sensors.interface import RasterInterface
+    from smarts.sensors.rasters import RasterSensor
+
     sim, agent = env.sim, env.sim.agent_index[env.agents[0]]
     agents = np.array([agent], dtype=np.int64)
     rows = sim.agent_row[agents]
     view = RasterSensor(RasterInterface(size=VIEW_SIZE, resolution=VIEW_RESOLUTION, layers=(), rgb=True), False)
-    rgb = view.observe(sim, agents, rows, env.builder.shadows.scan(sim, agents, rows))["rgb"][0]
-    mine = obs[env.agents[0]]
-    env.close()
+    return view.observe(sim, agents, rows, env.builder.shadows.scan(sim, agents, rows))["rgb"][0]
 
-    # Lidar rays (from just outside the ego's box) blended over the view, then the hit points.
+
+def _with_lidar(rgb: np.ndarray, mine: dict):
+    """Lidar rays (from just outside the ego's box) blended over the view, then the hit points."""
+    from PIL import Image, ImageDraw
+
     centre, scale = VIEW_SIZE / 2, 1.0 / VIEW_RESOLUTION
     angles = 2 * np.pi * np.arange(len(mine["lidar"])) / len(mine["lidar"])
     ends = np.stack(
@@ -101,8 +118,13 @@ def make_figure(
     for (x, y), hit in zip(ends, mine["lidar_hit"]):
         if hit:
             draw.ellipse([x - 3, y - 3, x + 3, y + 3], fill=LIDAR_COLOURS[int(hit)], outline=(0, 0, 0))
+    return image
 
-    names = interface.rasters.layers
+
+def _with_layers(image, mine: dict, names: tuple[str, ...]) -> np.ndarray:
+    """The view above a row of the observation's raster layers, each named."""
+    from PIL import Image, ImageDraw
+
     width = max(VIEW_SIZE, len(names) * (LAYER_TILE + GAP) - GAP)
     canvas = Image.new("RGB", (width, VIEW_SIZE + GAP + LAYER_TILE + 16), (24, 24, 28))
     canvas.paste(image, ((width - VIEW_SIZE) // 2, 0))
