@@ -82,6 +82,22 @@ def _seed_list(seeds: dict) -> str:
     return ", ".join(f"{e}={s}" for e, s in sorted(seeds.items()))
 
 
+@dataclass
+class _Scored:
+    """Every agent's scores and what the report says about its episodes."""
+
+    shown: list[str]  # the requested agents, then the references found in the results
+    references: list[str]
+    names: tuple[str, ...]  # the task's metrics
+    scores: dict[str, Any]  # agent -> SuiteScores, None when no episode was scored
+    crashed: dict[str, list[dict]]  # agent -> summaries of episodes without a log
+    setup: dict[str, dict[str, Any]]  # agent -> action space, controller, interface
+    seeds: dict[str, dict[int, int]]  # scenario -> episode -> seed, in the suite's order
+    failures: list[dict]
+    retried: list[dict]
+    method: str  # how the intervals were made
+
+
 def write_report(
     out: Path,
     suite: Suite,
@@ -104,14 +120,41 @@ def write_report(
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    scored = _score(suite, list(dict.fromkeys(agents)), results, ci_level, resamples, ci_seed)
+    atomic_write_text(
+        out / "results.json",
+        json.dumps(_results_doc(suite, scored, not_run, ci_level, resamples, ci_seed), indent=2, default=float),
+    )
+    atomic_write_text(out / "results.csv", _results_csv(suite, scored))
+
+    def label(agent: str) -> str:
+        return f"{agent_name(agent)} (reference)" if agent in REFERENCE_AGENTS else agent_name(agent)
+
+    plots = out / "plots"
+    plots.mkdir(parents=True, exist_ok=True)
+    drawing = _trajectory_plots(plots, suite, scored.shown, results, label)  # drawn beside what follows
+    metric_figures = _metric_plots(plots, suite, scored.scores, scored.names, label)
+    _tensorboard(out / "tensorboard", suite, scored.scores, scored.names, agent_label)
+    trajectory_figures = drawing.result()
+    lines = _summary_lines(suite, scored, not_run, label)
+    lines += _figure_lines(metric_figures)
+    lines += _scenario_lines(suite, scored, trajectory_figures, label)
+    lines += _episode_lines(suite, scored, out)
+    report = out / "report.md"
+    atomic_write_text(report, "\n".join(lines) + "\n")
+    return report
+
+
+def _score(
+    suite: Suite, agents: list[str], results: list[dict], ci_level: float, resamples: int, ci_seed: int
+) -> _Scored:
+    """Each agent's logs read and scored; seeds, failures and re-runs gathered from the results."""
+    from smarts.benchmark.runner import REFERENCE_AGENTS
+
     params = load_params()
-    names = metric_names(suite.task)
-    agents = list(dict.fromkeys(agents))
     references = [a for a in REFERENCE_AGENTS if a not in agents and any(r["agent"] == a for r in results)]
     shown = agents + references
-    scores = {}
-    crashed = {}
-    setup: dict[str, dict[str, Any]] = {}
+    scores, crashed, setup = {}, {}, {}
     seeds: dict[str, dict[int, Any]] = {}  # scenario -> episode -> seed, over every job
     for agent in shown:
         mine = [r for r in results if r["agent"] == agent]
@@ -137,7 +180,6 @@ def write_report(
             if log.seed is not None:
                 seeds.setdefault(log.scenario, {})[int(log.episode)] = int(log.seed)
     order = [s.name for s in suite.scenarios]
-    seeds = {name: dict(sorted(seeds[name].items())) for name in order if name in seeds}
     failures = [
         {"agent": a, "scenario": f.get("scenario"), "episode": f.get("episode"), "seed": f.get("seed"),
          "failure": f.get("failure")}
@@ -148,9 +190,18 @@ def write_report(
          "reasons": list(r["retried"])}
         for r in results if r.get("retried") and r["agent"] in shown
     ]  # fmt: skip
-    method = ci_method(ci_level, resamples, ci_seed)
+    return _Scored(
+        shown=shown, references=references, names=metric_names(suite.task), scores=scores, crashed=crashed,
+        setup=setup, seeds={name: dict(sorted(seeds[name].items())) for name in order if name in seeds},
+        failures=failures, retried=retried, method=ci_method(ci_level, resamples, ci_seed),
+    )  # fmt: skip
 
-    doc = {
+
+def _results_doc(suite: Suite, sc: _Scored, not_run: int, ci_level: float, resamples: int, ci_seed: int) -> dict:
+    """``results.json``'s content."""
+    from smarts.benchmark.runner import REFERENCE_AGENTS, agent_name
+
+    return {
         "suite": suite.name,
         "task": suite.task,
         "complete": not_run == 0,
@@ -159,69 +210,67 @@ def write_report(
         "scenarios": [
             {"name": s.name, "difficulty": s.difficulty, "time_limit": s.time_limit} for s in suite.scenarios
         ],
-        "seeds": {name: {str(e): sd for e, sd in eps.items()} for name, eps in seeds.items()},
-        "failures": failures,
-        "retried": retried,
+        "seeds": {name: {str(e): sd for e, sd in eps.items()} for name, eps in sc.seeds.items()},
+        "failures": sc.failures,
+        "retried": sc.retried,
         "ci": {
             "level": ci_level,
             "resamples": resamples,
             "seed": ci_seed,
-            "method": method,
+            "method": sc.method,
             "null": f"an interval is null where {NA_REASON}",
         },
-        "references": references,
+        "references": sc.references,
         "agents": {
             agent: {
                 "name": agent_name(agent),
                 "reference": agent in REFERENCE_AGENTS,
-                **setup[agent],
-                "scores": _honest(scores[agent].to_dict()) if scores[agent] is not None else None,
-                "crashed_episodes": crashed[agent],
+                **sc.setup[agent],
+                "scores": _honest(sc.scores[agent].to_dict()) if sc.scores[agent] is not None else None,
+                "crashed_episodes": sc.crashed[agent],
             }
-            for agent in shown
+            for agent in sc.shown
         },
     }
-    atomic_write_text(out / "results.json", json.dumps(doc, indent=2, default=float))
+
+
+def _results_csv(suite: Suite, sc: _Scored) -> str:
+    """``results.csv``: a row per agent and scenario, then its overall row."""
+    from smarts.benchmark.runner import REFERENCE_AGENTS
+
+    names, order = sc.names, [s.name for s in suite.scenarios]
     difficulty = {s.name: s.difficulty for s in suite.scenarios}
     with io.StringIO(newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["agent", "reference", "action_space", "controller", "scenario", "difficulty", "episodes",
                          "seeds", "failed", *(c for n in names for c in (n, f"{n}_ci_low", f"{n}_ci_high"))])  # fmt: skip
-        for agent in shown:
-            s = scores[agent]
+        for agent in sc.shown:
+            s = sc.scores[agent]
             if s is None:
                 continue
-            head = [agent, agent in REFERENCE_AGENTS, setup[agent]["action_space"], setup[agent]["controller"]]
+            head = [agent, agent in REFERENCE_AGENTS, sc.setup[agent]["action_space"], sc.setup[agent]["controller"]]
             n_failed = {}
-            for fail in failures:
+            for fail in sc.failures:
                 if fail["agent"] == agent:
                     n_failed[fail["scenario"]] = n_failed.get(fail["scenario"], 0) + 1
             for scenario in [n for n in order if n in s.scenarios]:
                 row, ci = s.scenarios[scenario], s.scenario_ci[scenario]
                 writer.writerow([*head, scenario, difficulty.get(scenario, ""), s.episodes[scenario],
-                                 _seed_list(seeds.get(scenario, {})).replace(", ", ";"), n_failed.get(scenario, 0),
+                                 _seed_list(sc.seeds.get(scenario, {})).replace(", ", ";"), n_failed.get(scenario, 0),
                                  *(c for n in names for c in _csv_cells(row[n], ci[n]))])  # fmt: skip
             writer.writerow([*head, "overall", "", sum(s.episodes.values()), "", sum(n_failed.values()),
                              *(c for n in names for c in _csv_cells(s.overall[n], s.overall_ci[n]))])  # fmt: skip
-        atomic_write_text(out / "results.csv", f.getvalue())
+        return f.getvalue()
 
-    def label(agent: str) -> str:
-        return f"{agent_name(agent)} (reference)" if agent in REFERENCE_AGENTS else agent_name(agent)
 
-    plots = out / "plots"
-    plots.mkdir(parents=True, exist_ok=True)
-    drawing = _trajectory_plots(plots, suite, shown, results, label)  # drawn beside what follows
-    metric_figures = _metric_plots(plots, suite, scores, names, label)
-    _tensorboard(out / "tensorboard", suite, scores, names, agent_label)
-    trajectory_figures = drawing.result()
-    no_spread = any(
-        not has_spread(ci)
-        for s in scores.values() if s is not None
-        for cis in [s.overall_ci, *s.scenario_ci.values()] for ci in cis.values()
-    )  # fmt: skip
+def _summary_lines(suite: Suite, sc: _Scored, not_run: int, label) -> list[str]:
+    """The report's head: what ran, how intervals were made, the references, the overall table."""
+    from smarts.benchmark.runner import REFERENCE_AGENTS
 
-    episodes = sorted({n for eps in seeds.values() for n in [len(eps)]})
-    first = sorted({min(eps.values()) for eps in seeds.values() if eps})
+    names, shown = sc.names, sc.shown
+    no_spread = _no_spread(sc)
+    episodes = sorted({n for eps in sc.seeds.values() for n in [len(eps)]})
+    first = sorted({min(eps.values()) for eps in sc.seeds.values() if eps})
     lines = [f"# Benchmark: {suite.name} ({suite.task})", ""]
     if not_run:
         lines += [f"**Incomplete:** {not_run} planned episode(s) did not run (the run was interrupted); the "
@@ -229,7 +278,7 @@ def write_report(
     lines += [
         f"{len(suite.scenarios)} scenarios x {'/'.join(map(str, episodes)) or '0'} episodes; episode e of every "
         f"scenario runs with seed {first[0] if len(first) == 1 else 'see below'} + e (list below). Means over a "
-        "scenario's episodes, then over scenarios (each scenario weighs the same). Brackets: " + method,
+        "scenario's episodes, then over scenarios (each scenario weighs the same). Brackets: " + sc.method,
         "",
         "Reference agents (always run with the same suite, seeds and episodes): "
         + ", ".join(f"`{a}`" for a in REFERENCE_AGENTS) + "." + ("" if all(a in shown for a in REFERENCE_AGENTS)
@@ -242,26 +291,47 @@ def write_report(
     lines += ["| method | action space | controller | " + " | ".join(names) + " |",
               "|---|---|---|" + "---:|" * len(names)]  # fmt: skip
     for agent in shown:
-        s = scores[agent]
+        s = sc.scores[agent]
         cells = " | ".join(_cell(s.overall[n], s.overall_ci.get(n)) if s else "no episode scored" for n in names)
-        lines.append(f"| {label(agent)} | {setup[agent]['action_space']} | {setup[agent]['controller']} | {cells} |")
+        lines.append(
+            f"| {label(agent)} | {sc.setup[agent]['action_space']} | {sc.setup[agent]['controller']} | {cells} |"
+        )
     if no_spread:
         lines += ["", f"n/a: {NA_REASON}."]
-    if metric_figures:
-        lines += ["", "## Metrics per scenario", "",
-                  "Bars: each agent's mean, overall (left) and per scenario, with its confidence interval (none "
-                  "where n/a). Dashed line: the stand-still agent's value, the floor a policy has to beat.", ""]  # fmt: skip
-        for name, path in metric_figures.items():
-            lines += [f"![{name} per scenario](plots/{path.name})", ""]
-    lines += ["", "## Per scenario", ""]
+    return lines
+
+
+def _no_spread(sc: _Scored) -> bool:
+    return any(
+        not has_spread(ci)
+        for s in sc.scores.values() if s is not None
+        for cis in [s.overall_ci, *s.scenario_ci.values()] for ci in cis.values()
+    )  # fmt: skip
+
+
+def _figure_lines(metric_figures: dict[str, Path]) -> list[str]:
+    if not metric_figures:
+        return []
+    lines = ["", "## Metrics per scenario", "",
+             "Bars: each agent's mean, overall (left) and per scenario, with its confidence interval (none "
+             "where n/a). Dashed line: the stand-still agent's value, the floor a policy has to beat.", ""]  # fmt: skip
+    for name, path in metric_figures.items():
+        lines += [f"![{name} per scenario](plots/{path.name})", ""]
+    return lines
+
+
+def _scenario_lines(suite: Suite, sc: _Scored, trajectory_figures: dict[str, Path], label) -> list[str]:
+    """A table per scenario, its trajectory figure under it."""
+    names = sc.names
+    lines = ["", "## Per scenario", ""]
     for entry in suite.scenarios:
         lines += [
-            f"### {entry.name} ({entry.difficulty}, {entry.time_limit:g} s; episodes {_seed_list(seeds.get(entry.name, {}))})",
+            f"### {entry.name} ({entry.difficulty}, {entry.time_limit:g} s; episodes {_seed_list(sc.seeds.get(entry.name, {}))})",
             "",
         ]
         lines += ["| method | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
-        for agent in shown:
-            s = scores[agent]
+        for agent in sc.shown:
+            s = sc.scores[agent]
             row = s.scenarios.get(entry.name) if s is not None else None
             ci = s.scenario_ci.get(entry.name, {}) if s is not None else {}
             cells = " | ".join(_cell(row[n], ci.get(n)) if row else "no episode scored" for n in names)
@@ -269,29 +339,32 @@ def write_report(
         if entry.name in trajectory_figures:
             lines += ["", f"![{entry.name}: paths of episode 0](plots/{trajectory_figures[entry.name].name})"]
         lines.append("")
-    lines += ["## Episodes and seeds", "", "| scenario | difficulty | time limit (s) | episode=seed | failed episodes |",
-              "|---|---|---:|---|---|"]  # fmt: skip
+    return lines
+
+
+def _episode_lines(suite: Suite, sc: _Scored, out: Path) -> list[str]:
+    """The seeds of every episode, the failed and re-run ones, where the logs are."""
+    lines = ["## Episodes and seeds", "", "| scenario | difficulty | time limit (s) | episode=seed | failed episodes |",
+             "|---|---|---:|---|---|"]  # fmt: skip
     for entry in suite.scenarios:
-        mine = [f for f in failures if f["scenario"] == entry.name]
+        mine = [f for f in sc.failures if f["scenario"] == entry.name]
         failed = "; ".join(f"{f['agent']} #{f['episode']}" for f in mine) or "none"
         lines.append(
-            f"| {entry.name} | {entry.difficulty} | {entry.time_limit:g} | {_seed_list(seeds.get(entry.name, {}))} | {failed} |"
+            f"| {entry.name} | {entry.difficulty} | {entry.time_limit:g} | {_seed_list(sc.seeds.get(entry.name, {}))} | {failed} |"
         )
-    if failures:
+    if sc.failures:
         lines += ["", "## Failed episodes", ""]
         lines += [
             f"- {f['agent']}: {f['scenario'] or '?'} #{f['episode']} (seed {f['seed']}): {f['failure']}"
-            for f in failures
+            for f in sc.failures
         ]
-    if retried:
+    if sc.retried:
         lines += ["", "## Episodes run again after their worker process died", ""]
         lines += [f"- {r['agent']}: {r['scenario'] or '?'} #{r['episode']} (seed {r['seed']}): {'; '.join(r['reasons'])}"
-                  for r in retried]  # fmt: skip
+                  for r in sc.retried]  # fmt: skip
     lines += ["", "Episode logs: `logs/` (`smarts viz " + str(out / "logs") + "` replays them with the lead and "
               "traffic); TensorBoard: `tensorboard --logdir " + str(out / "tensorboard") + "`."]  # fmt: skip
-    report = out / "report.md"
-    atomic_write_text(report, "\n".join(lines) + "\n")
-    return report
+    return lines
 
 
 def _csv_cells(value: float, ci) -> list[str]:
