@@ -66,6 +66,7 @@ def project_rows(t, rows):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_events_module, _drivable_module)
 def events_of_episodes(t, alive, agents, rows, episode_time):  # pragma: no cover - compiled
     """Clear the events of agents no longer active, then ``episode_events`` of each episode with
     only its own live rows and agents (``alive`` and ``agents`` ascending)."""
