@@ -262,9 +262,9 @@ def test_offsets_mean_the_same_place_to_sumo_when_its_lane_length_differs(long_l
     """Offsets are metres along the drawn lane for trips and agents alike; SUMO, which counts
     along its 120 m lane length, gets them scaled, so a trip at depart_pos 50 starts in the
     middle of the road and an agent's twin stands where the agent is."""
-    from smarts.scenario import ScenarioSpec
+    from smarts.scenario import read_scenario
 
-    spec = ScenarioSpec.from_dict(
+    spec = read_scenario(
         {
             "name": "long-lanes",
             "map": str(long_lanes_net),
