@@ -41,7 +41,7 @@ class Spec(Schema):
     """Base of every spec model (see the module docstring)."""
 
     def __init__(self, *args: Any, **data: Any) -> None:
-        if args:  # positional fields in declaration order, as the dataclasses they replace took them
+        if args:  # fields in declaration order, as in TripSpec("lead", route=[...])
             names = list(type(self).model_fields)
             if len(args) > len(names):
                 raise TypeError(f"{type(self).__name__} takes at most {len(names)} positional arguments")
