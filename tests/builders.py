@@ -8,13 +8,13 @@ from pathlib import Path
 
 import pytest
 
-from smarts.scenario import ScenarioSpec
+from smarts.scenario import ScenarioSpec, read_scenario
 
 
 def make_spec(agents: list[dict], *, map_name: str = "straight_2lane", **extra) -> ScenarioSpec:
     """A scenario spec from agent dicts (missions as in YAML), validated like a file."""
     data = {"name": "test", "map": f"builtin:{map_name}", "agents": agents, **extra}
-    return ScenarioSpec.from_dict(data, source="test-scenario")
+    return read_scenario(data, source="test-scenario")
 
 
 def agent(start_road="main", lane=0, offset=10.0, speed=10.0, goal=None, action_space="relative_target_pose", **kw):

@@ -62,8 +62,8 @@ def road_car(lane: int, offset: float, speed: float, policy: str | None = None, 
 def situation_env(name: str, scenario: dict, observation, source: str, seed: int):
     """A scripted situation (a scenario dict of ``road_car`` cars) as a started env: ``(env, obs)``."""
     from smarts.env import DrivingParallelEnv
-    from smarts.scenario import ScenarioSpec
+    from smarts.scenario import read_scenario
 
-    env = DrivingParallelEnv(ScenarioSpec.from_dict({"name": name, **scenario}, source=source), observation=observation)
+    env = DrivingParallelEnv(read_scenario({"name": name, **scenario}, source=source), observation=observation)
     obs, _ = env.reset(seed=seed)
     return env, obs

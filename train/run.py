@@ -40,6 +40,7 @@ import torch
 from agents.checkpoint import CheckpointError, checkpoint_format, read_checkpoint
 from agents.ppo import CHECKPOINT_FORMAT, check_checkpoint
 from agents.sb3_policy import SB3_FORMAT, check_export
+from smarts.core.spec import replace
 from smarts.files import atomic_write_text, next_numbered, point_latest
 from train.config import ACTION_SPACES, TASK_SUITE, TrainConfig
 
@@ -235,11 +236,11 @@ def training_spec(name, action_space: str, controller: str = "direct", comms=Non
     else:
         spec = load_scenario(name)
     agents = [
-        a if a.is_social else dataclasses.replace(a, action_space=ACTION_SPACES[action_space], controller=controller)
+        a if a.is_social else replace(a, action_space=ACTION_SPACES[action_space], controller=controller)
         for a in spec.agents
     ]
-    spec = dataclasses.replace(spec, agents=agents)
-    return spec if comms is None else dataclasses.replace(spec, comms=comms)
+    spec = replace(spec, agents=agents)
+    return spec if comms is None else replace(spec, comms=comms)
 
 
 def training_specs(cfg: TrainConfig) -> list:
@@ -274,7 +275,7 @@ def interface_dict(cfg: TrainConfig) -> dict:
 def comms_dict(cfg: TrainConfig) -> dict | None:
     """The V2V settings as checkpoints record them (None: the scenarios' own)."""
     config = cfg.comms_config()
-    return None if config is None else {**dataclasses.asdict(config), "agent_channels": dict(config.agent_channels)}
+    return None if config is None else {**config.model_dump(), "agent_channels": dict(config.agent_channels)}
 
 
 def lane_relative_dict(cfg: TrainConfig) -> dict | None:

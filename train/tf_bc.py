@@ -19,7 +19,6 @@ recall/precision are reported per held-out set. Writes TensorBoard logs, ``final
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import time
 from pathlib import Path
@@ -50,7 +49,7 @@ def demonstrations(scenarios, seeds: int, progress: bool = True) -> dict[str, tu
     for entry in scenarios:
         feats, labels, turning = [], [], []
         for seed in range(seeds):
-            env = DrivingParallelEnv(dataclasses.replace(entry.spec), observation=interface)
+            env = DrivingParallelEnv(entry.spec, observation=interface)
             obs, _ = env.reset(seed=seed)
             tracks: dict[str, list] = {}
             for _ in range(int(round(entry.time_limit / entry.spec.step_length))):

@@ -76,7 +76,6 @@ def log_episode(spec, seed: int, steps: int) -> np.ndarray:
 def log_suites(out: Path, suites: list[str], seeds: int, first_seed: int = 0, steps: int | None = None,
                progress: bool = True) -> list[Path]:  # fmt: skip
     """Log ``seeds`` episodes of every scenario of the named suites into ``out``; returns the files."""
-    import dataclasses
 
     from smarts.benchmark.suites import load_suite
     from train.run import Bar
@@ -95,7 +94,7 @@ def log_suites(out: Path, suites: list[str], seeds: int, first_seed: int = 0, st
         n = steps or int(round(entry.time_limit / spec.step_length))
         arrays = {}
         for k in range(seeds):
-            arrays[f"seed{first_seed + k}"] = log_episode(dataclasses.replace(spec), first_seed + k, n)
+            arrays[f"seed{first_seed + k}"] = log_episode(spec, first_seed + k, n)
             bar.update(1)
         path = out / f"{entry.name}.npz"
         np.savez_compressed(path, **arrays)

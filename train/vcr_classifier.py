@@ -22,7 +22,6 @@ logs and ``final.pt``.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import time
 from pathlib import Path
@@ -113,7 +112,7 @@ def generate(scenarios, seeds: int, progress: bool = True) -> dict[str, dict[str
     for entry in scenarios:
         parts = ([], [], [])
         for seed in range(seeds):
-            env = DrivingParallelEnv(dataclasses.replace(entry.spec), observation=interface)
+            env = DrivingParallelEnv(entry.spec, observation=interface)
             obs, _ = env.reset(seed=seed)
             for part, new in zip(parts, explore(env, obs, int(round(entry.time_limit / entry.spec.step_length)), rng)):
                 part.extend(new)

@@ -33,7 +33,7 @@ from smarts.benchmark.recorder import EpisodeRecorder, EpisodeRecorders
 from smarts.core.errors import ActionError
 from smarts.core.policies import Policy, resolve_policy
 from smarts.dynamics.lane_relative import LaneRelativeParams
-from smarts.scenario.spec import ScenarioSpec
+from smarts.scenario import ScenarioSpec
 from smarts.sensors.interface import AgentInterface
 
 BATCHING = {

@@ -64,8 +64,9 @@ from smarts.benchmark.suites import Suite, SuiteScenario, load_suite
 from smarts.comms.config import CommsConfig
 from smarts.core.errors import AgentSetupError, OutputError
 from smarts.core.policies import Policy, PolicyResolver, resolve_policy
+from smarts.core.spec import replace
 from smarts.dynamics.lane_relative import LaneRelativeParams
-from smarts.scenario.spec import ACTION_SPACES, CONTROLLERS, LANE_RELATIVE_SPACES, ScenarioSpec
+from smarts.scenario import ACTION_SPACES, CONTROLLERS, LANE_RELATIVE_SPACES, ScenarioSpec
 from smarts.sensors.interface import AgentInterface, interface_from_dict, interface_to_dict
 
 REFERENCE_AGENTS = ("zoo:keep-lane", "zoo:random", "zoo:stand-still")
@@ -151,7 +152,7 @@ class PolicySetup:
             "lane_relative": None if self.lane_relative is None else dataclasses.asdict(self.lane_relative),
             "comms": None
             if self.comms is None
-            else {**dataclasses.asdict(self.comms), "agent_channels": dict(self.comms.agent_channels)},
+            else {**self.comms.model_dump(), "agent_channels": dict(self.comms.agent_channels)},
         }
 
 
@@ -395,11 +396,11 @@ def scenario_for(spec: ScenarioSpec, setup: PolicySetup) -> ScenarioSpec:
     """``spec`` with every learning (non-social) agent in the policy's action space and controller,
     and the policy's V2V settings when it was trained with its own."""
     agents = [
-        a if a.is_social else dataclasses.replace(a, action_space=setup.action_space, controller=setup.controller)
+        a if a.is_social else replace(a, action_space=setup.action_space, controller=setup.controller)
         for a in spec.agents
     ]
-    spec = dataclasses.replace(spec, agents=agents)
-    return spec if setup.comms is None else dataclasses.replace(spec, comms=setup.comms)
+    spec = replace(spec, agents=agents)
+    return spec if setup.comms is None else replace(spec, comms=setup.comms)
 
 
 def build_env(entry: SuiteScenario, setup: PolicySetup):

@@ -13,7 +13,6 @@ policy whose space the suite does not host. Errors name the file and the field.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,8 +23,8 @@ from pydantic import Field, field_validator
 from smarts.core.errors import ScenarioError
 from smarts.core.resources import config_path
 from smarts.core.schema import Schema, load_yaml, validate
-from smarts.scenario import ScenarioSpec
-from smarts.scenario.spec import ACTION_SPACES
+from smarts.core.spec import replace
+from smarts.scenario import ACTION_SPACES, ScenarioSpec, read_scenario
 
 SUITES_DIR = config_path("benchmark")
 """The shipped suites (``configs/benchmark/``, installed as ``smarts.configs``)."""
@@ -122,7 +121,7 @@ def _read_suite(data, source: str) -> Suite:
         body.setdefault("name", name)
         body.setdefault("episode_steps", int(math.ceil(float(limit) / float(dt) - 1e-9)))
         body.setdefault("events", {"terminate_on": TERMINATE_ON[task]})
-        spec = ScenarioSpec.from_dict(body, source=f"{source}: {where}.scenario", base_dir=Path(source).parent)
+        spec = read_scenario(body, source=f"{source}: {where}.scenario", base_dir=Path(source).parent)
         follow = item.follow
         trips = {t.id for t in (spec.traffic.trips if spec.traffic else [])}
         for agent_id, lead in follow.items():
@@ -134,11 +133,11 @@ def _read_suite(data, source: str) -> Suite:
             raise fail(f"{where}.follow", "adaptive scenarios need a lead vehicle to follow")
         if follow:  # the followers' missions name their lead (observations, rewards, SFD)
             agents = [
-                dataclasses.replace(a, mission=dataclasses.replace(a.mission, follow=follow[a.id]))
+                replace(a, mission=replace(a.mission, follow=follow[a.id]))
                 if a.id in follow else a
                 for a in spec.agents
             ]  # fmt: skip
-            spec = dataclasses.replace(spec, agents=agents)
+            spec = replace(spec, agents=agents)
         scenarios.append(SuiteScenario(name, item.difficulty, float(limit), spec, dict(follow)))
     name = suite.name or Path(source).stem
     return Suite(name, task, suite.episodes, suite.seed, scenarios, source, tuple(suite.action_spaces))

@@ -32,14 +32,21 @@ class Schema(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True, frozen=True, validate_default=True)
 
 
-def validate(model: type[M], data: Any, source: str, error: type[Exception] = ValueError) -> M:
-    """``model`` validated from ``data``; problems raise ``error`` naming ``source`` and fields."""
+def validate(
+    model: type[M],
+    data: Any,
+    source: str,
+    error: type[Exception] = ValueError,
+    context: dict[str, Any] | None = None,
+) -> M:
+    """``model`` validated from ``data``; problems raise ``error`` naming ``source`` and fields.
+    ``context`` reaches the model's validators (what they cannot know themselves)."""
     if data is None:
         data = {}
     if not isinstance(data, Mapping):
         raise error(f"{source}: expected a mapping at the top level, got {type(data).__name__}")
     try:
-        return model.model_validate(dict(data))
+        return model.model_validate(dict(data), context=context)
     except ValidationError as exc:
         raise error("\n".join(describe(model, problem, source) for problem in exc.errors())) from None
 

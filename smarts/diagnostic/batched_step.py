@@ -31,7 +31,6 @@ batch and the rate against the first row.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import itertools
 import json
 import platform
@@ -41,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from smarts.core.spec import replace
 from smarts.sensors.interface import AgentInterface
 
 CASES = {
@@ -70,15 +70,15 @@ def case_specs(case: str, batch: int) -> list:
 
 def _on_relative_target_pose(spec, controller: str):
     """``spec`` with every agent on RelativeTargetPose driven by ``controller``."""
-    agents = [dataclasses.replace(a, action_space="relative_target_pose", controller=controller) for a in spec.agents]
-    return dataclasses.replace(spec, agents=agents)
+    agents = [replace(a, action_space="relative_target_pose", controller=controller) for a in spec.agents]
+    return replace(spec, agents=agents)
 
 
 def case_spec(case: str):
     """The single-agent scenario of ``case``, its agent on RelativeTargetPose (direct actions or
     lane-relative commands)."""
     from smarts.benchmark.suites import load_suite
-    from smarts.scenario import ScenarioSpec
+    from smarts.scenario import read_scenario
 
     if case not in CASES or CASES[case][0] == "mix":
         raise ValueError(
@@ -88,7 +88,7 @@ def case_spec(case: str):
     if scenario == "lead":
         spec = next(s.spec for s in load_suite("adaptive").scenarios if s.name == "a01_straight_free")
     else:
-        spec = ScenarioSpec.from_dict(
+        spec = read_scenario(
             {
                 "name": "batched_free",
                 "map": "builtin:straight_3lane",
@@ -214,7 +214,7 @@ def sensor_rows(batch: int, steps: int, warmup: int, seed: int = 0) -> list[dict
     from smarts.sensors.rays import sensor_threads
 
     spec = sensor_scenario(SENSOR_AGENTS, SENSOR_VEHICLES, steps + warmup + 10)
-    plain = dataclasses.replace(spec, comms=None, agents=[dataclasses.replace(a, interface=None) for a in spec.agents])
+    plain = replace(spec, comms=None, agents=[replace(a, interface=None) for a in spec.agents])
     rows = []
     for case, scenario in (("sensors_v2v", spec), ("sensors_off", plain)):
         env = BatchedDriving([scenario] * batch)

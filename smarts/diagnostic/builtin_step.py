@@ -32,10 +32,10 @@ def builtin_step_benchmark(n_vehicles: int, steps: int = 200, seed: int = 42) ->
     step, and the vehicle count while timing.
     """
     from smarts.env.assembly import build_simulation
-    from smarts.scenario import ScenarioSpec
+    from smarts.scenario import read_scenario
     from smarts.traffic.builtin.provider import BuiltinTrafficProvider
 
-    spec = ScenarioSpec.from_dict(
+    spec = read_scenario(
         {
             "name": f"builtin_traffic_{n_vehicles}",
             "map": f"builtin:{BENCH_MAP}",

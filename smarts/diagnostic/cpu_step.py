@@ -14,12 +14,13 @@ to more than a plain run's step.
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections import defaultdict
 from collections.abc import Callable
 
 import numpy as np
+
+from smarts.core.spec import replace
 
 SETTLE_METHODS = ("_settle", "_project", "_route_progress_of", "_events_of")
 """The simulation's map projection, route progress and events (fused into ``_settle`` or not)."""
@@ -121,7 +122,7 @@ def sumo(n_vehicles: int = 50, steps: int = 300, stages: bool = False, seed: int
     from smarts.traffic.sumo_provider import SumoTrafficProvider
 
     spec = benchmark_spec(n_vehicles, seed)
-    sim = build_simulation(dataclasses.replace(spec, traffic=benchmark_traffic(n_vehicles)))
+    sim = build_simulation(replace(spec, traffic=benchmark_traffic(n_vehicles)))
     (provider,) = [p for p in sim.providers if isinstance(p, SumoTrafficProvider)]
     timer = StageTimer()
     try:

@@ -57,7 +57,7 @@ def replay_step_benchmark(n_vehicles: int, steps: int = 300, warmup: int = 20, t
     the whole env step (simulation, the agent's observation, reward), of the simulation step alone
     and of the replay provider, and the replayed vehicle count while timing."""
     from smarts.env import DrivingParallelEnv
-    from smarts.scenario import ScenarioSpec
+    from smarts.scenario import read_scenario
 
     frames = steps + warmup + 5
     with tempfile.TemporaryDirectory(prefix="smarts-replay-bench-") as folder:
@@ -75,7 +75,7 @@ def replay_step_benchmark(n_vehicles: int, steps: int = 300, warmup: int = 20, t
                 data["replay"]["take_over"] = {"ego": str(n_vehicles)}  # the front vehicle of its lane
                 agent = {"id": "ego"}
         data["agents"] = [agent]
-        env = DrivingParallelEnv(ScenarioSpec.from_dict(data, source="replay_step_benchmark"))
+        env = DrivingParallelEnv(read_scenario(data, source="replay_step_benchmark"))
         env.reset(seed=0)
     sim = env.sim
     provider = next((p for p in sim.providers if p.name == "replay"), None)

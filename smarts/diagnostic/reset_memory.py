@@ -37,9 +37,9 @@ def resident_mb() -> float:
 def measure(resets: int = 1000, steps: int = 5, density: str = "medium") -> dict:
     """Reset ``resets`` times with ``steps`` steps each; returns RSS readings in MB."""
     from smarts.env.assembly import build_simulation
-    from smarts.scenario import ScenarioSpec
+    from smarts.scenario import read_scenario
 
-    spec = ScenarioSpec.from_dict(
+    spec = read_scenario(
         {
             "name": "reset_memory",
             "map": "builtin:intersection_4way_1lane_signal",

@@ -3,7 +3,7 @@ six-lane highway so that every one stays live for the measured steps."""
 
 from __future__ import annotations
 
-from smarts.scenario import ScenarioSpec
+from smarts.scenario import ScenarioSpec, read_scenario
 
 PERF_MAP = "builtin:highway_6lane_ramp"
 PERF_ROAD = "main_0"
@@ -63,7 +63,7 @@ def sensor_scenario(n_agents: int, n_vehicles: int, steps: int) -> ScenarioSpec:
         for k in range(n_vehicles)
     ]
     cruise = {"max_speed": CRUISE_SPEED, "speed_dev": 0.0, "tau": 0.5, "min_gap": 2.0}
-    return ScenarioSpec.from_dict(
+    return read_scenario(
         {
             "name": f"diagnostic_sensors_{n_agents}_agents_{n_vehicles}_vehicles",
             "map": PERF_MAP,
@@ -84,7 +84,7 @@ def perf_scenario(n_agents: int, steps: int) -> ScenarioSpec:
     for i in range(n_agents):
         start = {"road": PERF_ROAD, "lane": i % LANES, "offset": 5.0 + SPACING * (i // LANES), "speed": CRUISE_SPEED}
         agents.append({"id": f"agent_{i}", "mission": {"start": start, "goal": {"endless": True}}})
-    return ScenarioSpec.from_dict(
+    return read_scenario(
         {
             "name": f"diagnostic_{n_agents}_agents",
             "map": PERF_MAP,

@@ -11,14 +11,14 @@ agent waits on the on-ramp, because a simulation needs an agent; its SUMO twin c
 
 from __future__ import annotations
 
-import dataclasses
 import time
 
 import numpy as np
 
+from smarts.core.spec import replace
 from smarts.core.spec.traffic import FlowSpec, TrafficSpec
 from smarts.core.vehicle_table import Role
-from smarts.scenario import ScenarioSpec
+from smarts.scenario import ScenarioSpec, read_scenario
 from smarts.traffic.sumo_provider import SumoTrafficProvider
 
 BENCHMARK_MAP = "highway_6lane_ramp"
@@ -54,7 +54,7 @@ def benchmark_spec(n_vehicles: int, seed: int = 42) -> ScenarioSpec:
         "mission": {"start": {"road": "ramp", "lane": 0, "offset": 5.0, "speed": 0.0}, "goal": {"endless": True}},
     }
     road = LONG_BENCHMARK_MAP if n_vehicles > LONG_MAP_ABOVE else BENCHMARK_MAP
-    return ScenarioSpec.from_dict(
+    return read_scenario(
         {
             "name": f"sumo_benchmark_{n_vehicles}",
             "map": f"builtin:{road}",
@@ -75,7 +75,7 @@ def sumo_step_benchmark(n_vehicles: int, steps: int = 200, seed: int = 42) -> di
     from smarts.env.assembly import build_simulation
 
     spec = benchmark_spec(n_vehicles, seed)
-    sim = build_simulation(dataclasses.replace(spec, traffic=benchmark_traffic(n_vehicles)))
+    sim = build_simulation(replace(spec, traffic=benchmark_traffic(n_vehicles)))
     (provider,) = [p for p in sim.providers if isinstance(p, SumoTrafficProvider)]
     sumo_times: list[float] = []
     step = provider.step

@@ -6,7 +6,6 @@ provider protocol, so adding traffic or replay providers changes this file, not 
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -18,7 +17,6 @@ from smarts.core.missions import resolve_mission
 from smarts.core.provider import ProviderBase
 from smarts.core.simulation import EpisodeSetup, EventConfig, Simulation, check_seed
 from smarts.core.spec import REPLAY_MAP
-from smarts.core.spec import ScenarioSpec as PlainScenarioSpec
 from smarts.core.vehicle_table import Role, VehicleType
 from smarts.dynamics.action_spaces import ActionSpaceType
 from smarts.dynamics.agent_provider import AgentProvider, AgentVehicle
@@ -26,17 +24,14 @@ from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.dynamics.limits import ReachLimits
 from smarts.maps import RoadMap, load_map
 from smarts.maps.stack import stack_maps
-from smarts.scenario import ScenarioSpec, load_scenario
+from smarts.scenario import ScenarioSpec, check_map, load_scenario, map_path
 from smarts.traffic.signals import FixedTimeSignals, SignalState
 
 
-def as_spec(scenario: str | Path | PlainScenarioSpec) -> ScenarioSpec:
-    """A spec from a library name, a YAML path or a spec object (a plain ``smarts.core.spec``
-    dataclass gains the reader's ``map_path`` and ``check_map``; its fields are kept as they are)."""
+def as_spec(scenario: str | Path | ScenarioSpec) -> ScenarioSpec:
+    """A spec from a library name, a YAML path or a spec object (returned as it is)."""
     if isinstance(scenario, ScenarioSpec):
         return scenario
-    if isinstance(scenario, PlainScenarioSpec):
-        return ScenarioSpec(**{f.name: getattr(scenario, f.name) for f in dataclasses.fields(scenario)})
     return load_scenario(scenario)
 
 
@@ -45,10 +40,10 @@ def scenario_map(spec: ScenarioSpec) -> RoadMap:
         from smarts.replay import replay_road_map
 
         road_map = replay_road_map(spec.replay, spec.base_dir, spec.source)
-        spec.check_map(road_map)
+        check_map(spec, road_map)
         return road_map
-    road_map = load_map(spec.map_path())
-    spec.check_map(road_map)
+    road_map = load_map(map_path(spec))
+    check_map(spec, road_map)
     return road_map
 
 
@@ -115,8 +110,8 @@ def _map_key(spec: ScenarioSpec) -> tuple:
     """What makes two scenarios' maps the same map: the file (and, for a dataset's own lanes,
     the scenario of the recording)."""
     if spec.map == REPLAY_MAP and spec.replay is not None:
-        return (str(spec.map_path()), spec.replay.scenario)
-    return (str(spec.map_path()),)
+        return (str(map_path(spec)), spec.replay.scenario)
+    return (str(map_path(spec)),)
 
 
 def _episode(
@@ -227,7 +222,7 @@ def _traffic_providers(spec: ScenarioSpec, road_map: RoadMap, signals: SignalSta
         from smarts.maps import sumo_net_path
         from smarts.traffic.sumo_provider import SumoTrafficProvider
 
-        net_file = sumo_net_path(spec.map_path())
+        net_file = sumo_net_path(map_path(spec))
         return [SumoTrafficProvider(traffic, road_map, net_file, spec.step_length, signals)]
     providers = [FixedTimeSignals(signals)] if signals is not None else []
     if traffic is not None:

@@ -7,7 +7,6 @@ Registered as ``smarts/Driving-v0``; ``gymnasium.make("smarts/Driving-v0", scena
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +14,7 @@ import gymnasium as gym
 import numpy as np
 
 from smarts.core.simulation import check_seed
+from smarts.core.spec import replace
 from smarts.dynamics.limits import ReachLimits
 from smarts.env.assembly import as_spec
 from smarts.env.parallel_env import DrivingParallelEnv
@@ -46,8 +46,8 @@ class DrivingEnv(gym.Env):
         comms = spec.comms
         if comms is not None and comms.agent_channels:  # channels of the removed agents go too
             kept = {a: c for a, c in comms.agent_channels.items() if a == agent}
-            comms = dataclasses.replace(comms, agent_channels=kept)
-        spec = dataclasses.replace(spec, agents=[a for a in spec.agents if a.id == agent], comms=comms)
+            comms = replace(comms, agent_channels=kept)
+        spec = replace(spec, agents=[a for a in spec.agents if a.id == agent], comms=comms)
         self.agent = agent
         self.env = DrivingParallelEnv(
             spec, observation=observation, limits=limits, render_mode=render_mode, render_view=render_view

@@ -15,7 +15,6 @@ process (no SUMO traffic, or one env).
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -29,6 +28,7 @@ from torchrl.data import Bounded, Categorical, Composite, TensorSpec, Unbounded
 from torchrl.envs import EnvBase, ParallelEnv, SerialEnv
 
 from smarts.core.simulation import check_seed, derived_seed
+from smarts.core.spec import replace
 from smarts.env.assembly import as_spec
 from smarts.env.batched.driving import BatchedDriving
 from smarts.env.parallel_env import DrivingParallelEnv
@@ -148,7 +148,7 @@ class SmartsTorchRLEnv(EnvBase):
         if single_agent and learners:
             chosen = agent or learners[0]
             keep = [a for a in spec.agents if a.id == chosen or a.is_social]
-            spec = dataclasses.replace(spec, agents=keep)
+            spec = replace(spec, agents=keep)
         return DrivingParallelEnv(spec, **env_kwargs)
 
     def _shared_space(self, what: str, space_of: Callable[[str], gym.Space], bounds_may_differ: bool = False):

@@ -32,7 +32,7 @@ DIFFICULTY = ((10, "easy"), (30, "medium"))
 """Most recorded road users at once below which a scenario is easy or medium (else hard)."""
 MIN_DRIVE = 2.0
 """s: a vehicle recorded for less is not taken over (there is nothing to drive)."""
-DEFAULT_CAPACITY = ScenarioSpec.__dataclass_fields__["vehicle_capacity"].default
+DEFAULT_CAPACITY = ScenarioSpec.model_fields["vehicle_capacity"].default
 
 
 def scenario_sources(folder: Path, fmt: str) -> list[tuple[Path, str | None]]:

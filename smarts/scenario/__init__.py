@@ -1,15 +1,22 @@
-"""Scenarios: the YAML spec (reader and writer of the ``smarts.core.spec`` dataclasses), the built-in
-maps (generated, compiled by netconvert) and library."""
+"""Scenarios: reading and writing the YAML of the spec models (``smarts.core.spec``), checking a
+spec against its map, the built-in maps (generated, compiled by netconvert) and library."""
 
 from smarts.core.errors import NetconvertError, ScenarioError
 from smarts.core.spec import (
     ACTION_SPACES,
+    BUILTIN_PREFIX,
+    CONTROLLERS,
+    DEFAULT_TERMINATE_ON,
     DEFAULT_VEHICLE_TYPES,
     DENSITY_LEVELS,
+    LANE_RELATIVE_SPACES,
+    MAP_FILE_SUFFIXES,
     MISSION_END_ACTIONS,
     TERMINATION_EVENTS,
     TRAFFIC_ENGINES,
+    TRAFFIC_VEHICLE_BASES,
     VEHICLE_TYPES,
+    ZOO_PREFIX,
     AgentSpec,
     EventsSpec,
     FlowSpec,
@@ -17,12 +24,14 @@ from smarts.core.spec import (
     MissionSpec,
     PedestrianFlowSpec,
     RewardSpec,
+    ScenarioSpec,
     StartSpec,
     TrafficSpec,
     TripSpec,
     VehicleDimensions,
     VehicleSpec,
     VehicleTypeSpec,
+    replace,
 )
 from smarts.scenario.builtin_maps import (
     BUILTIN_MAPS,
@@ -31,17 +40,26 @@ from smarts.scenario.builtin_maps import (
     compile_map,
 )
 from smarts.scenario.library import list_scenarios, load_scenario, scenario_path
-from smarts.scenario.spec import ScenarioSpec
+from smarts.scenario.map_check import check_map
+from smarts.scenario.reader import map_path, read_scenario, read_scenario_file, resolve_map_file
+from smarts.scenario.writer import scenario_to_dict, scenario_to_yaml
 
 __all__ = [
     "ACTION_SPACES",
     "BUILTIN_MAPS",
+    "BUILTIN_PREFIX",
+    "CONTROLLERS",
+    "DEFAULT_TERMINATE_ON",
     "DEFAULT_VEHICLE_TYPES",
     "DENSITY_LEVELS",
+    "LANE_RELATIVE_SPACES",
+    "MAP_FILE_SUFFIXES",
     "MISSION_END_ACTIONS",
     "TERMINATION_EVENTS",
     "TRAFFIC_ENGINES",
+    "TRAFFIC_VEHICLE_BASES",
     "VEHICLE_TYPES",
+    "ZOO_PREFIX",
     "AgentSpec",
     "EventsSpec",
     "FlowSpec",
@@ -60,8 +78,16 @@ __all__ = [
     "VehicleSpec",
     "VehicleTypeSpec",
     "builtin_map_path",
+    "check_map",
     "compile_map",
     "list_scenarios",
     "load_scenario",
+    "map_path",
+    "read_scenario",
+    "read_scenario_file",
+    "replace",
+    "resolve_map_file",
     "scenario_path",
+    "scenario_to_dict",
+    "scenario_to_yaml",
 ]

@@ -11,6 +11,7 @@ from rich.table import Table
 from smarts import exit_codes
 from smarts.command_line import HelpFormatter
 from smarts.core.errors import NetconvertError, ScenarioError
+from smarts.scenario import scenario_to_yaml
 from smarts.scenario.builtin_maps import BUILTIN_MAPS, builtin_map_path
 from smarts.scenario.library import list_scenarios, load_scenario
 
@@ -83,7 +84,7 @@ def _scenario_show(args: argparse.Namespace) -> int:
         spec = load_scenario(args.name)
     except ScenarioError as exc:
         return _fail(str(exc))
-    sys.stdout.write(spec.to_yaml())
+    sys.stdout.write(scenario_to_yaml(spec))
     if not args.build:
         return 0
     result = _validate(args.name)

@@ -6,7 +6,8 @@ import os
 from pathlib import Path
 
 from smarts.core.errors import ScenarioError
-from smarts.scenario.spec import ScenarioSpec
+from smarts.core.spec.scenario import ScenarioSpec
+from smarts.scenario.reader import read_scenario_file
 
 LIBRARY_DIR = Path(__file__).resolve().parent / "library"
 
@@ -34,5 +35,5 @@ def load_scenario(name_or_path: str | os.PathLike) -> ScenarioSpec:
         isinstance(name_or_path, Path) or text.endswith((".yaml", ".yml")) or "/" in text or os.sep in text
     )
     if looks_like_path:
-        return ScenarioSpec.from_yaml(text)
-    return ScenarioSpec.from_yaml(scenario_path(text))
+        return read_scenario_file(text)
+    return read_scenario_file(scenario_path(text))

@@ -35,9 +35,14 @@ Problem = tuple[str, str]
 """(dotted field, message)."""
 
 
-def check_scenario_map(spec: ScenarioSpec, road_map: Any, limits: Any = None) -> None:
+def check_map(spec: ScenarioSpec, road_map: Any, limits: Any = None) -> None:
     """Raise a ``ScenarioError`` listing every problem of ``spec`` on ``road_map`` (see
-    :func:`map_problems`), one line each: ``source: field: message``."""
+    :func:`map_problems`), one line each: ``source: field: message``.
+
+    ``road_map`` needs ``road_index_of``, ``road_lanes(road)`` and ``lane_length`` (and uses the
+    speed limits, lane graph, ``lane_internal`` and ``bounds`` when present), as on
+    :class:`smarts.maps.road_map.RoadMap`. ``limits`` (``ReachLimits``) also bounds the start speeds
+    of agents whose action space obeys them."""
     problems = map_problems(spec, road_map, limits)
     if problems:
         raise ScenarioError("\n".join(f"{spec.source}: {where}: {message}" for where, message in problems))

@@ -15,9 +15,9 @@ from typing import Any
 
 from smarts.core.errors import MapError, NetconvertError, ReplayError, ScenarioError
 from smarts.core.spec.replay import REPLAY_MAP
+from smarts.scenario import ScenarioSpec, map_path
 from smarts.scenario.library import load_scenario
 from smarts.scenario.map_check import map_problems
-from smarts.scenario.spec import ScenarioSpec
 
 
 @dataclass
@@ -83,7 +83,7 @@ def validate_spec(
             result.problems.append(line if line.startswith(f"{source}: ") else f"{source}: {where}{line}")
 
     try:
-        result.map_file = spec.map_path(cache_dir)
+        result.map_file = map_path(spec, cache_dir)
         if spec.map == REPLAY_MAP and spec.replay is not None:  # the recording's own lanes
             from smarts.replay import replay_road_map
 

@@ -1,27 +1,23 @@
-"""Writing a scenario: the spec dataclasses as plain data and YAML that the reader turns back into
-an equal spec."""
+"""Writing a scenario: the spec models as plain data and YAML that the reader turns back into an
+equal spec (written the way people write them: defaults of optional parts left out)."""
 
 from __future__ import annotations
 
-from dataclasses import fields
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import yaml
 
+from smarts.core.spec.comms import CommsConfig
+from smarts.core.spec.interface import interface_to_dict
+from smarts.core.spec.replay import ReplaySpec
 from smarts.core.spec.scenario import AgentSpec, ScenarioSpec
 from smarts.core.spec.traffic import TrafficSpec
-from smarts.sensors.interface import interface_to_dict
-
-if TYPE_CHECKING:
-    from smarts.comms.config import CommsConfig
 
 
 def scenario_to_dict(spec: ScenarioSpec) -> dict[str, Any]:
     """Plain data (lists, dicts, scalars) that ``read_scenario`` turns back into an equal spec."""
     data = _scenario_dict(spec)
     if spec.replay is not None:
-        from smarts.scenario.replay import replay_to_dict
-
         data["replay"] = replay_to_dict(spec.replay)
         taken = spec.replay.take_over
         for agent in data["agents"]:
@@ -110,13 +106,13 @@ def _agent_dict(agent: AgentSpec) -> dict[str, Any]:
 
 
 def _without_none(item: Any, *, drop: tuple[str, ...] = ()) -> dict[str, Any]:
-    """A traffic dataclass as a mapping, leaving out unset (None) fields and those in ``drop``."""
+    """A traffic model as a mapping, leaving out unset (None) fields and those in ``drop``."""
     out = {}
-    for f in fields(item):
-        value = getattr(item, f.name)
-        if value is None or f.name in drop:
+    for name in type(item).model_fields:
+        value = getattr(item, name)
+        if value is None or name in drop:
             continue
-        out[f.name] = list(value) if isinstance(value, list) else value
+        out[name] = list(value) if isinstance(value, list) else value
     return out
 
 
@@ -133,8 +129,24 @@ def _traffic_dict(traffic: TrafficSpec) -> dict[str, Any]:
 
 def _comms_dict(comms: CommsConfig) -> dict[str, Any]:
     """Every comms field (a default written out reads back the same)."""
-    out = {f.name: getattr(comms, f.name) for f in fields(comms)}
+    out = {name: getattr(comms, name) for name in CommsConfig.model_fields}
     out["agent_channels"] = dict(comms.agent_channels)
+    return out
+
+
+def replay_to_dict(replay: ReplaySpec) -> dict[str, Any]:
+    """The replay section as plain data that reads back into an equal spec (defaults left out)."""
+    out: dict[str, Any] = {"format": replay.format, "path": replay.path}
+    defaults = ReplaySpec(format=replay.format, path=replay.path)
+    for key in ("start", "duration", "vehicles", "reactive", "reactive_distance", "coordinates", "swap_xy",
+                "flip_y", "scenario"):  # fmt: skip
+        value = getattr(replay, key)
+        if value != getattr(defaults, key):
+            out[key] = list(value) if isinstance(value, list) else value
+    if replay.take_over:
+        out["take_over"] = dict(replay.take_over)
+    if tuple(replay.offset) != (0.0, 0.0):
+        out["offset"] = list(replay.offset)
     return out
 
 

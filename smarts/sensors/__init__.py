@@ -1,8 +1,8 @@
 """Sensors: agent interfaces and the batched observation (ego, neighbours, waypoints, occlusion,
 rasters, lidar), plus the renderers.
 
-Only the plain interface dataclasses are imported here, so the scenario reader can use them
-without loading the compiled sensors.
+Only the interface models (``smarts.core.spec.interface``) are imported here, so importing the
+package does not load the compiled sensors.
 """
 
 from smarts.core.errors import InterfaceError

@@ -14,6 +14,7 @@ from smarts.env.parallel_env import DrivingParallelEnv
 from smarts.env.sb3_vec_env import SmartsVecEnv
 from smarts.env.task_rewards import RewardWeights, reward_factory
 from smarts.env.torchrl_env import SmartsBatchedEnv
+from smarts.scenario import map_path, replace
 from smarts.sensors.interface import AgentInterface
 from tests.builders import agent, make_spec
 
@@ -26,10 +27,8 @@ def _adaptive(*names: str, controller: str = "lane_relative") -> list:
     out = []
     for name in names:
         spec = suite[name]
-        agents = [
-            dataclasses.replace(a, action_space="relative_target_pose", controller=controller) for a in spec.agents
-        ]
-        out.append(dataclasses.replace(spec, agents=agents))
+        agents = [replace(a, action_space="relative_target_pose", controller=controller) for a in spec.agents]
+        out.append(replace(spec, agents=agents))
     return out
 
 
@@ -60,7 +59,7 @@ def test_every_map_of_the_platoon_task_in_one_simulation_gives_the_single_envs_e
     specs = _adaptive(*(s.name for s in suite))
     batch = BatchedDriving(specs, observation=PLATOON, reward_factory=_platoon_reward())
     assert len(batch.groups) == 1
-    assert batch.groups[0].sim.map_stack.num_maps == len({s.map_path() for s in specs}) >= 5
+    assert batch.groups[0].sim.map_stack.num_maps == len({map_path(s) for s in specs}) >= 5
     _, compared = _compare_with_single_envs(batch, specs, steps=150)
     assert compared >= 150 * len(specs)
 
@@ -159,9 +158,9 @@ def test_scenarios_that_cannot_be_batched_are_refused_naming_why():
     """What stays refused now that SUMO copies (in worker processes), social agents and mixed
     action spaces batch: a batch without a learning agent, and learners whose observations differ."""
     suite = {s.name: s.spec for s in load_suite("adaptive").scenarios}
-    social = dataclasses.replace(
+    social = replace(
         suite["a01_straight_free"],
-        agents=[dataclasses.replace(a, policy="zoo:keep-lane") for a in suite["a01_straight_free"].agents],
+        agents=[replace(a, policy="zoo:keep-lane") for a in suite["a01_straight_free"].agents],
     )
     with pytest.raises(BatchedSetupError, match=r"every agent has a policy; at least one must learn"):
         BatchedDriving([social])

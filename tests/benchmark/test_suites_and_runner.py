@@ -22,7 +22,7 @@ from smarts.benchmark.runner import (
     scenario_for,
 )
 from smarts.benchmark.suites import load_suite
-from smarts.scenario import ScenarioError
+from smarts.scenario import ScenarioError, replace
 from train.__main__ import main
 
 TINY = str(Path(__file__).with_name("tiny_suite.yaml"))
@@ -217,8 +217,8 @@ def test_reference_agents_are_added_and_can_be_cached(tmp_path):
 
 def test_only_learning_agents_take_the_policy_action_space_and_controller():
     spec = load_suite(TINY).scenarios[1].spec
-    social = dataclasses.replace(spec.agents[1], policy="zoo:keep-lane")
-    spec = dataclasses.replace(spec, agents=[spec.agents[0], social])
+    social = replace(spec.agents[1], policy="zoo:keep-lane")
+    spec = replace(spec, agents=[spec.agents[0], social])
     built = scenario_for(spec, PolicySetup("target_pose", "lane_relative"))
     assert (built.agents[0].action_space, built.agents[0].controller) == ("target_pose", "lane_relative")
     assert (built.agents[1].action_space, built.agents[1].controller) == ("relative_target_pose", "direct")

@@ -12,7 +12,7 @@ import pytest
 from smarts.core.events import Event, crosses_gate, segment_point_distance2
 from smarts.env.assembly import build_simulation
 from smarts.maps import load_map
-from smarts.scenario import ScenarioSpec
+from smarts.scenario import read_scenario
 from tests.maps.conftest import build_net
 
 NODES = """<nodes>
@@ -33,7 +33,7 @@ def short_net(tmp_path_factory) -> Path:
 
 
 def _drive(net, goal, offset=81.0, steps=20):
-    spec = ScenarioSpec.from_dict(
+    spec = read_scenario(
         {
             "name": "short-goal",
             "map": str(net),

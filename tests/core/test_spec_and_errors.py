@@ -1,28 +1,28 @@
-"""Spec datatypes and error types sit in core: one class each, reachable from the old import paths."""
+"""Spec models and error types sit in core: one class each, reachable from the packages that use them."""
 
 from __future__ import annotations
 
-import dataclasses
 import pickle
 import subprocess
 import sys
 
+import pydantic
 import pytest
 
 import smarts.core.errors as errors
 import smarts.core.spec as core_spec
-from smarts.scenario import ScenarioSpec, load_scenario
+from smarts.scenario import ScenarioSpec, load_scenario, map_path, read_scenario, replace, scenario_to_dict
 
 
 def test_old_import_paths_give_the_same_classes():
     import smarts.benchmark.metrics as metrics
+    import smarts.comms.config as comms_config
     import smarts.dynamics as dynamics
     import smarts.maps as maps
     import smarts.scenario as scenario
     import smarts.scenario.errors as scenario_errors
-    import smarts.scenario.spec as scenario_spec
-    import smarts.scenario.traffic as scenario_traffic
     import smarts.sensors as sensors
+    import smarts.sensors.interface as sensors_interface
     from smarts.benchmark.runner import AgentSetupError
     from smarts.core.policies import NoResolverError
     from smarts.dynamics.action_spaces import ActionError
@@ -39,13 +39,10 @@ def test_old_import_paths_give_the_same_classes():
     assert AgentSetupError is errors.AgentSetupError
     assert NoResolverError is errors.NoResolverError
     assert maps.MapError is errors.MapError and maps.NoRouteError is errors.NoRouteError
-    for name in scenario_traffic.__all__:
-        assert getattr(scenario_traffic, name) is getattr(core_spec, name)
-    for name in set(scenario.__all__) & set(core_spec.__all__) - {"ScenarioSpec"}:
-        assert getattr(scenario, name) is getattr(core_spec, name), name
-    for name in set(scenario_spec.__all__) & set(core_spec.__all__) - {"ScenarioSpec"}:
-        assert getattr(scenario_spec, name) is getattr(core_spec, name), name
-    assert issubclass(scenario.ScenarioSpec, core_spec.ScenarioSpec)
+    for module in (scenario, sensors_interface, comms_config):
+        for name in set(module.__all__) & set(core_spec.__all__):
+            assert getattr(module, name) is getattr(core_spec, name), (module.__name__, name)
+    assert scenario.ScenarioSpec is core_spec.ScenarioSpec
 
 
 def test_error_types_keep_their_bases():
@@ -62,25 +59,28 @@ def test_error_types_keep_their_bases():
         errors.NoSuchError  # noqa: B018
 
 
-def test_a_read_scenario_is_the_core_dataclass_with_yaml_methods():
+def test_a_read_scenario_is_the_one_frozen_spec_class():
     spec = load_scenario("straight_2lane_cruise")
-    assert isinstance(spec, core_spec.ScenarioSpec)
-    assert type(spec) is ScenarioSpec
-    assert dataclasses.fields(spec) == dataclasses.fields(core_spec.ScenarioSpec)
-    assert ScenarioSpec.from_dict(spec.to_dict(), base_dir=spec.base_dir) == spec
-    again = dataclasses.replace(spec, seed=spec.seed + 1)
-    assert type(again) is ScenarioSpec and again.map_path() == spec.map_path()
+    assert type(spec) is core_spec.ScenarioSpec is ScenarioSpec
+    with pytest.raises(pydantic.ValidationError, match="frozen"):
+        spec.seed = 3
+    assert read_scenario(scenario_to_dict(spec), base_dir=spec.base_dir) == spec
+    again = replace(spec, seed=spec.seed + 1)
+    assert type(again) is ScenarioSpec and again.seed == spec.seed + 1 and again != spec
+    assert (again.source, again.base_dir) == (spec.source, spec.base_dir) and map_path(again) == map_path(spec)
+    with pytest.raises(errors.ScenarioError, match=r"ScenarioSpec: seed: input should be greater than or equal to 0"):
+        replace(spec, seed=-1)  # a changed spec is validated again
+    with pytest.raises(TypeError, match="no field seeds"):
+        replace(spec, seeds=1)
 
 
-def test_the_env_takes_a_plain_core_spec():
+def test_a_spec_built_in_code_equals_the_read_one_and_the_env_takes_it_as_it_is():
     from smarts.env.assembly import as_spec
 
     spec = load_scenario("straight_2lane_cruise")
-    plain = core_spec.ScenarioSpec(**{f.name: getattr(spec, f.name) for f in dataclasses.fields(spec)})
-    assert type(plain) is core_spec.ScenarioSpec
-    built = as_spec(plain)
-    assert type(built) is ScenarioSpec and built == spec and built.base_dir == spec.base_dir
-    assert as_spec(spec) is spec
+    built = ScenarioSpec(**{name: getattr(spec, name) for name in ScenarioSpec.model_fields})
+    assert built == spec and built.source == "<dict>"  # where it was read from is not part of the scenario
+    assert as_spec(spec) is spec and as_spec("straight_2lane_cruise") == spec
 
 
 def test_core_spec_and_errors_load_without_the_layers_above():

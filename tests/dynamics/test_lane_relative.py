@@ -6,6 +6,7 @@ import pytest
 from smarts.dynamics.action_spaces import ActionError
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.env import DrivingParallelEnv
+from smarts.scenario import scenario_to_yaml
 from tests.builders import agent, make_spec
 
 PARAMS = LaneRelativeParams()
@@ -167,7 +168,7 @@ def test_a_scenario_can_ask_for_the_controller_and_is_checked():
 
     spec = make_spec([agent(controller="lane_relative")])
     assert spec.agents[0].controller == "lane_relative"
-    assert "controller: lane_relative" in spec.to_yaml()
+    assert "controller: lane_relative" in scenario_to_yaml(spec)
     with pytest.raises(ScenarioError, match=r"agents\[0\]\.controller: lane_relative drives"):
         make_spec([agent(action_space="lane", controller="lane_relative")])
     with pytest.raises(ScenarioError, match=r"agents\[0\]\.controller"):

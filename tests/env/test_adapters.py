@@ -2,8 +2,6 @@
 own) beside built-in ones, each slot playing what the copy's single env plays with the one seeding
 rule, and both adapters playing the same episodes."""
 
-import dataclasses
-
 import numpy as np
 import torch
 from torchrl.envs.utils import check_env_specs
@@ -14,6 +12,7 @@ from smarts.env.assembly import as_spec
 from smarts.env.batched.driving import COPY_SEED_STRIDE, is_sumo
 from smarts.env.sb3_vec_env import SmartsVecEnv
 from smarts.env.torchrl_env import SmartsBatchedEnv
+from smarts.scenario import replace
 
 SEED = 3
 STEPS = 24  # the SUMO copy's episode is 15 steps: one restart within the run
@@ -21,7 +20,7 @@ STEPS = 24  # the SUMO copy's episode is 15 steps: one restart within the run
 
 def _specs() -> list:
     """Two built-in copies around one SUMO copy whose episode is cut short (so it restarts)."""
-    sumo = dataclasses.replace(as_spec("highway_merge_traffic"), episode_steps=15)
+    sumo = replace(as_spec("highway_merge_traffic"), episode_steps=15)
     cruise = as_spec("straight_2lane_cruise")
     assert is_sumo(sumo) and not is_sumo(cruise)
     return [cruise, sumo, cruise]

@@ -6,6 +6,7 @@ import pytest
 from smarts.core.events import Event
 from smarts.env import DrivingParallelEnv
 from smarts.env.task_rewards import RewardWeights, TaskReward
+from smarts.scenario import replace
 from tests.builders import agent, make_spec
 
 ONLY = dict(follow=0.0, travel=0.0, progress=0.0, goal=0.0, time=0.0, comfort=0.0, lane_centre=0.0,
@@ -155,7 +156,6 @@ def test_red_light_term_charges_the_step_the_benchmark_records_as_running_a_red_
     """The crossing of the benchmark's red-light test: the signal-blind driver of the south arm
     enters the junction on red once; the term charges exactly that step (the recorder's rule),
     the west driver (green) nothing."""
-    import dataclasses
 
     from smarts.benchmark.recorder import EpisodeRecorder
     from smarts.benchmark.suites import load_suite
@@ -164,7 +164,7 @@ def test_red_light_term_charges_the_step_the_benchmark_records_as_running_a_red_
     path = tmp_path / "crossing.yaml"
     path.write_text(CROSSING)
     entry = load_suite(path).scenarios[0]
-    spec = dataclasses.replace(entry.spec, agents=[dataclasses.replace(a, action_space="relative_target_pose")
+    spec = replace(entry.spec, agents=[replace(a, action_space="relative_target_pose")
                                                    for a in entry.spec.agents])  # fmt: skip
     env = DrivingParallelEnv(spec, reward=TaskReward(_weights("drive", red_light=3.0)))
     obs, _ = env.reset(seed=0)

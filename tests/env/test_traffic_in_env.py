@@ -1,13 +1,12 @@
 """Traffic, signals and pedestrians as the envs see them (real libsumo and the built-in model)."""
 
-import dataclasses
-
 import numpy as np
 import pytest
 
 from smarts.core.vehicle_table import Role
 from smarts.env import DrivingParallelEnv
 from smarts.env.assembly import as_spec
+from smarts.scenario import replace
 from tests.builders import agent, make_spec
 from zoo import make_policy
 
@@ -60,7 +59,7 @@ def test_same_seed_same_traffic_through_the_env():
 @pytest.mark.parametrize("engine", ["builtin", "sumo"])
 def test_take_over_a_trip_and_hand_it_back_at_the_goal(engine):
     spec = as_spec("straight_takeover")
-    spec = dataclasses.replace(spec, traffic=dataclasses.replace(spec.traffic, engine=engine, flows=[]))
+    spec = replace(spec, traffic=replace(spec.traffic, engine=engine, flows=[]))
     env = DrivingParallelEnv(spec)
     obs, _ = env.reset(seed=0)
     sim = env.sim

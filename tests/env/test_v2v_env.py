@@ -1,6 +1,5 @@
 """V2V messaging through the envs: the message part of actions, received messages in observations."""
 
-import dataclasses
 import re
 from pathlib import Path
 
@@ -12,7 +11,7 @@ from pettingzoo.test import parallel_api_test
 
 from smarts.dynamics.action_spaces import ActionError
 from smarts.env import DrivingEnv, DrivingParallelEnv
-from smarts.scenario import ScenarioError, ScenarioSpec, load_scenario
+from smarts.scenario import ScenarioError, ScenarioSpec, load_scenario, read_scenario, replace, scenario_to_dict
 from tests.builders import agent, make_spec
 
 CRUISE = np.array([1.0, 0.0, 0.0])  # relative pose: 1 m straight ahead per step
@@ -163,7 +162,7 @@ def test_agents_with_different_driving_spaces_get_their_own_action_widths():
 
 def test_same_seed_same_deliveries():
     spec = load_scenario("intersection_v2v")
-    spec = dataclasses.replace(spec, comms=dataclasses.replace(spec.comms, loss=0.3))
+    spec = replace(spec, comms=replace(spec.comms, loss=0.3))
 
     def run(seed: int) -> list[np.ndarray]:
         env = DrivingParallelEnv(spec)
@@ -192,7 +191,7 @@ def test_pettingzoo_api_with_comms():
 
 def test_gymnasium_check_env_with_comms_on_one_agent():
     spec = load_scenario("intersection_v2v")
-    spec = dataclasses.replace(spec, comms=dataclasses.replace(spec.comms, agent_channels={"agent_2": 0}))
+    spec = replace(spec, comms=replace(spec.comms, agent_channels={"agent_2": 0}))
     env = DrivingEnv(spec, agent="agent_1")  # agent_2's channel goes with agent_2
     assert env.action_space.shape == (11,) and "messages" in env.observation_space.spaces
     check_env(env, skip_render_check=True)
@@ -209,9 +208,9 @@ def test_gymnasium_check_env_with_comms_on_one_agent():
 def test_scenario_comms_section_round_trips_and_bad_fields_name_the_file():
     spec = load_scenario("intersection_v2v")
     assert spec.comms.penetration == 0.5 and spec.comms.latency == 1
-    again = ScenarioSpec.from_dict(spec.to_dict())
-    assert again == spec and again.comms == spec.comms and again.to_dict() == spec.to_dict()
-    assert ScenarioSpec.from_dict({**spec.to_dict(), "comms": None}).comms is None
+    again = read_scenario(scenario_to_dict(spec))
+    assert again == spec and again.comms == spec.comms and scenario_to_dict(again) == scenario_to_dict(spec)
+    assert read_scenario({**scenario_to_dict(spec), "comms": None}).comms is None
     assert _spec({}).comms.channels == 1  # an empty section: comms on with the defaults
     with pytest.raises(ScenarioError, match=r"test-scenario: comms\.loss: input should be less than 1"):
         _spec({"loss": 1.5})

@@ -13,7 +13,7 @@ from smarts.core.errors import ReplayError, ScenarioError
 from smarts.core.vehicle_table import Role, VehicleType
 from smarts.env.assembly import build_simulation
 from smarts.replay import read_recording
-from smarts.scenario import load_scenario
+from smarts.scenario import load_scenario, read_scenario, scenario_to_dict
 from tests.replay.files import FEET, GLOBAL_SHIFT, LANE0_Y, NGSIM_HEADER, straight, three_vehicles, write_ngsim
 
 ALIGN = {"swap_xy": True, "flip_y": True}
@@ -244,7 +244,7 @@ def test_take_over_starts_in_the_vehicle_and_aims_at_its_last_position(tmp_path,
     assert t.x[row] < v["x"][5] - 0.5  # braking, where the recorded truck drove on at 12 m/s
     assert "replay-2" not in _positions(sim)
     # written back, the scenario reads the same
-    assert type(spec).from_dict(spec.to_dict(), base_dir=tmp_path) == spec
+    assert read_scenario(scenario_to_dict(spec), base_dir=tmp_path) == spec
 
 
 def test_take_over_errors_name_the_file_and_field(tmp_path, csv_file):

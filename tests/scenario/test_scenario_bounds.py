@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from smarts.scenario import ScenarioError, ScenarioSpec
+from smarts.scenario import ScenarioError, read_scenario
 from tests.builders import with_
 
 CROSS = {
@@ -52,9 +52,9 @@ def test_physical_fields_are_bounded_naming_the_field(dotted, value, expected):
         "trips": [{"id": "t", "route": ["east_in"]}],
         "pedestrians": [{"id": "p", "origin": "west_in", "destination": "east_out", "rate": 60}],
     })  # fmt: skip
-    ScenarioSpec.from_dict(data, source="inline")  # valid as it is
+    read_scenario(data, source="inline")  # valid as it is
     with pytest.raises(ScenarioError) as info:
-        ScenarioSpec.from_dict(with_(data, **{dotted: value}), source="inline")
+        read_scenario(with_(data, **{dotted: value}), source="inline")
     assert (
         str(info.value)
         == f"inline: {dotted.replace('__', '.').replace('.0.', '[0].').replace('.0', '[0]')}: {expected}"
@@ -63,12 +63,12 @@ def test_physical_fields_are_bounded_naming_the_field(dotted, value, expected):
 
 def test_the_bounds_are_at_their_documented_values():
     from smarts.core.simulation import SEED_MAX
-    from smarts.scenario import reader
+    from smarts.core.spec import scenario, traffic
 
-    assert (reader.MAX_SPEED, reader.MAX_FLOW_RATE, reader.MAX_EPISODE_STEPS) == (70.0, 10_000.0, 10_000_000)
-    assert reader.SEED_MAX == SEED_MAX == 2**64 - 1
+    assert (scenario.MAX_SPEED, traffic.MAX_FLOW_RATE, scenario.MAX_EPISODE_STEPS) == (70.0, 10_000.0, 10_000_000)
+    assert scenario.SEED_MAX == SEED_MAX == 2**64 - 1
     edge = with_(
         CROSS, seed=2**64 - 1, episode_steps=10_000_000, step_length=1.0, agents__0__mission__start__speed=70.0
     )
-    spec = ScenarioSpec.from_dict(edge)
+    spec = read_scenario(edge)
     assert (spec.seed, spec.episode_steps, spec.agents[0].mission.start.speed) == (2**64 - 1, 10_000_000, 70.0)

@@ -8,7 +8,7 @@ import sys
 import yaml
 
 from smarts.__main__ import main
-from smarts.scenario import BUILTIN_MAPS, list_scenarios, load_scenario
+from smarts.scenario import BUILTIN_MAPS, list_scenarios, load_scenario, scenario_to_dict
 
 
 def test_scenario_list_shows_every_scenario_with_map_agents_steps(capsys, library_maps_available):
@@ -24,7 +24,7 @@ def test_scenario_list_shows_every_scenario_with_map_agents_steps(capsys, librar
 def test_scenario_show_prints_the_validated_spec_as_yaml(capsys):
     assert main(["scenario", "show", "intersection_4way_left"]) == 0
     out = capsys.readouterr().out
-    assert yaml.safe_load(out) == load_scenario("intersection_4way_left").to_dict()
+    assert yaml.safe_load(out) == scenario_to_dict(load_scenario("intersection_4way_left"))
     assert "action_space: relative_target_pose" in out  # defaults are shown explicitly
 
 

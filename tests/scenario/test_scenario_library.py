@@ -9,6 +9,7 @@ import pytest
 from smarts.scenario import (
     ScenarioError,
     ScenarioSpec,
+    check_map,
     list_scenarios,
     load_scenario,
     scenario_path,
@@ -44,7 +45,7 @@ def test_library_scenario_loads_and_matches_its_map(name, lane_table_maps, libra
     assert spec.name == name
     assert spec.builtin_map is not None
     assert spec.agents and len(set(spec.agent_ids)) == len(spec.agents)
-    spec.check_map(lane_table_maps[spec.builtin_map])
+    check_map(spec, lane_table_maps[spec.builtin_map])
 
 
 @pytest.mark.filterwarnings("ignore:Module 'rtree' not available")

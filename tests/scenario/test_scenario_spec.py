@@ -11,9 +11,14 @@ import yaml
 from smarts.scenario import (
     GoalSpec,
     ScenarioError,
-    ScenarioSpec,
     VehicleSpec,
+    check_map,
     list_scenarios,
+    map_path,
+    read_scenario,
+    read_scenario_file,
+    scenario_to_dict,
+    scenario_to_yaml,
 )
 
 BASE = {
@@ -46,7 +51,7 @@ def write_yaml(folder: Path, data, name: str = "intersection.yaml") -> Path:
 
 
 def test_defaults_are_filled_in(tmp_path):
-    spec = ScenarioSpec.from_yaml(write_yaml(tmp_path, BASE))
+    spec = read_scenario_file(write_yaml(tmp_path, BASE))
     assert spec.name == "intersection"
     assert (spec.step_length, spec.episode_steps, spec.seed, spec.vehicle_capacity) == (
         0.1,
@@ -71,7 +76,7 @@ def test_defaults_are_filled_in(tmp_path):
 
 def test_name_defaults_to_the_file_name(tmp_path):
     data = {k: v for k, v in BASE.items() if k != "name"}
-    assert ScenarioSpec.from_yaml(write_yaml(tmp_path, data, "my_run.yaml")).name == "my_run"
+    assert read_scenario_file(write_yaml(tmp_path, data, "my_run.yaml")).name == "my_run"
 
 
 def test_dict_and_yaml_round_trip(tmp_path):
@@ -81,18 +86,18 @@ def test_dict_and_yaml_round_trip(tmp_path):
     data["agents"][0]["mission"]["start"]["heading"] = 0.25
     data["agents"][0]["mission"]["goal"] = {"road": "north_out", "lane": 1, "offset": 12.5}
     data["agents"].append({"id": "cruiser", "mission": {"start": {"road": "south_in"}, "goal": {"endless": True}}})
-    spec = ScenarioSpec.from_yaml(write_yaml(tmp_path, data))
-    assert ScenarioSpec.from_dict(spec.to_dict()) == spec
-    assert ScenarioSpec.from_dict(yaml.safe_load(spec.to_yaml())) == spec
-    again = ScenarioSpec.from_yaml(write_yaml(tmp_path, yaml.safe_load(spec.to_yaml()), "again.yaml"))
-    assert again == spec and again.to_dict() == spec.to_dict()
-    assert spec.to_dict()["agents"][2]["mission"]["goal"] == {"endless": True}
+    spec = read_scenario_file(write_yaml(tmp_path, data))
+    assert read_scenario(scenario_to_dict(spec)) == spec
+    assert read_scenario(yaml.safe_load(scenario_to_yaml(spec))) == spec
+    again = read_scenario_file(write_yaml(tmp_path, yaml.safe_load(scenario_to_yaml(spec)), "again.yaml"))
+    assert again == spec and scenario_to_dict(again) == scenario_to_dict(spec)
+    assert scenario_to_dict(spec)["agents"][2]["mission"]["goal"] == {"endless": True}
 
 
 @pytest.mark.parametrize("name", list_scenarios())
 def test_library_scenarios_round_trip(name, library_scenario):
     spec = library_scenario(name)
-    assert ScenarioSpec.from_dict(spec.to_dict()) == spec
+    assert read_scenario(scenario_to_dict(spec)) == spec
 
 
 def _set(data: dict, dotted: str, value) -> dict:
@@ -193,7 +198,7 @@ BAD_SPECS = [
 def test_bad_spec_names_file_and_field(tmp_path, dotted, value, path, fragment):
     file = write_yaml(tmp_path, _set(BASE, dotted, value))
     with pytest.raises(ScenarioError) as info:
-        ScenarioSpec.from_yaml(file)
+        read_scenario_file(file)
     message = str(info.value)
     assert message.startswith(f"{file}: {path}: "), message
     assert fragment in message, message
@@ -206,42 +211,42 @@ def test_error_message_matches_documented_form(tmp_path):
         match=r"intersection\.yaml: agents\[1\]\.mission\.goal\.radius: "
         r"input should be greater than 0, got -2$",
     ):
-        ScenarioSpec.from_yaml(file)
+        read_scenario_file(file)
 
 
 def test_unknown_field_suggests_the_close_name(tmp_path):
     file = write_yaml(tmp_path, _set(BASE, "episode_step", 10))
     with pytest.raises(ScenarioError, match="did you mean 'episode_steps'"):
-        ScenarioSpec.from_yaml(file)
+        read_scenario_file(file)
 
 
 def test_invalid_yaml_and_missing_file_name_the_file(tmp_path):
     bad = tmp_path / "broken.yaml"
     bad.write_text("name: x\nagents: [\n", encoding="utf-8")
     with pytest.raises(ScenarioError, match=r"broken\.yaml: invalid YAML at line \d+"):
-        ScenarioSpec.from_yaml(bad)
+        read_scenario_file(bad)
     with pytest.raises(ScenarioError, match=r"absent\.yaml: cannot read"):
-        ScenarioSpec.from_yaml(tmp_path / "absent.yaml")
+        read_scenario_file(tmp_path / "absent.yaml")
     scalar = tmp_path / "scalar.yaml"
     scalar.write_text("42\n", encoding="utf-8")
     with pytest.raises(ScenarioError, match=r"scalar\.yaml: expected a mapping at the top level, got int"):
-        ScenarioSpec.from_yaml(scalar)
+        read_scenario_file(scalar)
     binary = tmp_path / "binary.yaml"
     binary.write_bytes(b"name: \xff\n")
     with pytest.raises(
         ScenarioError, match=r"binary\.yaml: not a YAML text file \(not UTF-8: byte 0xff at offset 6\)$"
     ):
-        ScenarioSpec.from_yaml(binary)
+        read_scenario_file(binary)
     empty = tmp_path / "empty.yaml"
     empty.write_text("", encoding="utf-8")
     with pytest.raises(ScenarioError) as info:  # the name defaults to the file's, as always
-        ScenarioSpec.from_yaml(empty)
+        read_scenario_file(empty)
     assert str(info.value) == f"{empty}: map: required field missing\n{empty}: agents: required field missing"
 
 
 def test_from_dict_names_its_source():
     with pytest.raises(ScenarioError, match=r"^inline: seed: input should be greater than or equal to 0, got -1$"):
-        ScenarioSpec.from_dict(_set(BASE, "seed", -1), source="inline")
+        read_scenario(_set(BASE, "seed", -1), source="inline")
 
 
 def test_map_file_is_resolved_next_to_the_scenario(tmp_path, built_maps):
@@ -249,25 +254,25 @@ def test_map_file_is_resolved_next_to_the_scenario(tmp_path, built_maps):
     (folder / "maps").mkdir(parents=True)
     net = folder / "maps" / "cross.net.xml"
     net.write_bytes(built_maps["intersection_4way_2lane"].read_bytes())
-    spec = ScenarioSpec.from_yaml(write_yaml(folder, _set(BASE, "map", "maps/cross.net.xml")))
+    spec = read_scenario_file(write_yaml(folder, _set(BASE, "map", "maps/cross.net.xml")))
     assert spec.builtin_map is None
-    assert spec.map_path() == net
-    assert spec.to_dict()["map"] == "maps/cross.net.xml"
+    assert map_path(spec) == net
+    assert scenario_to_dict(spec)["map"] == "maps/cross.net.xml"
 
 
 def test_builtin_map_path_compiles_the_map(map_cache_dir, built_maps):
-    spec = ScenarioSpec.from_dict(BASE)
-    assert spec.map_path(map_cache_dir) == built_maps["intersection_4way_2lane"]
+    spec = read_scenario(BASE)
+    assert map_path(spec, map_cache_dir) == built_maps["intersection_4way_2lane"]
 
 
 # ---------------------------------------------------------------------------- check_map
 def test_check_map_accepts_valid_missions(lane_table_maps):
-    spec = ScenarioSpec.from_dict(BASE, source="intersection.yaml")
-    assert spec.check_map(lane_table_maps["intersection_4way_2lane"]) is None
+    spec = read_scenario(BASE, source="intersection.yaml")
+    assert check_map(spec, lane_table_maps["intersection_4way_2lane"]) is None
     # The same missions against another map: the check did read the map.
     other = next(m for name, m in lane_table_maps.items() if "west_in" not in name and name.startswith("straight"))
     with pytest.raises(ScenarioError, match="west_in"):
-        spec.check_map(other)
+        check_map(spec, other)
 
 
 MAP_ERRORS = [
@@ -317,9 +322,9 @@ MAP_ERRORS = [
 
 @pytest.mark.parametrize("dotted,value,expected", MAP_ERRORS, ids=[m[0] for m in MAP_ERRORS])
 def test_check_map_names_agent_and_field(lane_table_maps, dotted, value, expected):
-    spec = ScenarioSpec.from_dict(_set(BASE, dotted, value), source="intersection.yaml")
+    spec = read_scenario(_set(BASE, dotted, value), source="intersection.yaml")
     with pytest.raises(ScenarioError) as info:
-        spec.check_map(lane_table_maps["intersection_4way_2lane"])
+        check_map(spec, lane_table_maps["intersection_4way_2lane"])
     assert str(info.value).startswith(f"intersection.yaml: {expected}"), str(info.value)
 
 
@@ -328,10 +333,10 @@ def test_check_map_with_the_map_compiler(built_maps, map_cache_dir):
     from smarts import maps
 
     road_map = maps.load_map(built_maps["intersection_4way_2lane"], cache_dir=map_cache_dir / "maps")
-    spec = ScenarioSpec.from_dict(BASE, source="intersection.yaml")
-    spec.check_map(road_map)
+    spec = read_scenario(BASE, source="intersection.yaml")
+    check_map(spec, road_map)
     with pytest.raises(ScenarioError, match=r"agents\[0\]\.mission\.start\.lane: road 'west_in' has 2 lanes"):
-        ScenarioSpec.from_dict(_set(BASE, "agents[0].mission.start.lane", 3)).check_map(road_map)
+        check_map(read_scenario(_set(BASE, "agents[0].mission.start.lane", 3)), road_map)
 
 
 # ---------------------------------------------------------------------------- the schema
@@ -342,7 +347,7 @@ def test_every_problem_is_reported_at_once_each_with_file_and_field(tmp_path):
     data = _set(data, "events.terminate_on", ["collision", "exploded"])
     file = write_yaml(tmp_path, data)
     with pytest.raises(ScenarioError) as info:
-        ScenarioSpec.from_yaml(file)
+        read_scenario_file(file)
     lines = str(info.value).splitlines()
     assert [line.split(": ")[1] for line in lines] == [
         "seed",
@@ -374,7 +379,7 @@ def test_a_misspelt_key_at_a_nested_path_gets_a_did_you_mean(dotted, expected):
     data = _set(data, "agents[0].interface", {"lidar": {}})
     data = _set(data, "comms", {})
     with pytest.raises(ScenarioError) as info:
-        ScenarioSpec.from_dict(_set(data, dotted, 1), source="inline")
+        read_scenario(_set(data, dotted, 1), source="inline")
     assert str(info.value).startswith(f"inline: {expected} (known: "), str(info.value)
 
 
@@ -397,50 +402,30 @@ def test_a_misspelt_key_at_a_nested_path_gets_a_did_you_mean(dotted, expected):
 def test_types_are_strict(dotted, value, expected):
     """true is not a number and "1" is not an integer (an integer is a valid number)."""
     with pytest.raises(ScenarioError) as info:
-        ScenarioSpec.from_dict(_set(BASE, dotted, value), source="inline")
+        read_scenario(_set(BASE, dotted, value), source="inline")
     assert str(info.value) == f"inline: {expected}"
 
 
 def test_integers_are_read_as_floats_where_numbers_are_expected():
-    spec = ScenarioSpec.from_dict(_set(BASE, "agents[0].mission.start.offset", 20), source="inline")
+    spec = read_scenario(_set(BASE, "agents[0].mission.start.offset", 20), source="inline")
     assert type(spec.agents[0].mission.start.offset) is float and spec.agents[0].mission.start.offset == 20.0
     assert type(spec.agents[1].mission.goal.position[0]) is float
 
 
-def test_the_file_models_hold_the_dataclasses_fields_and_defaults():
-    """Each section's schema model has the fields of the dataclass it becomes, with its defaults."""
-    import dataclasses
+def test_each_section_is_one_frozen_strict_model_read_and_built_alike():
+    """A section's file layout and what the simulator reads are the same class: closed, strict and
+    frozen, checking values built in code by the rules a file is read with."""
+    import smarts.core.spec as core_spec
+    from smarts.core.spec import Spec
 
-    from smarts.comms.config import CommsConfig, CommsFile
-    from smarts.core.spec import EventsSpec, FlowSpec, PedestrianFlowSpec, RewardSpec, TripSpec, VehicleTypeSpec
-    from smarts.scenario import reader
-    from smarts.sensors import interface
-
-    pairs = [
-        (reader.VehicleTypeFile, VehicleTypeSpec, {"id"}),
-        (reader.FlowFile, FlowSpec, set()),
-        (reader.TripFile, TripSpec, set()),
-        (reader.PedestrianFile, PedestrianFlowSpec, set()),
-        (reader.RewardFile, RewardSpec, set()),
-        (reader.EventsFile, EventsSpec, set()),
-        (reader.VehicleFile, VehicleSpec, set()),
-        (CommsFile, CommsConfig, set()),
-        (interface.EgoFile, interface.EgoInterface, set()),
-        (interface.NeighboursFile, interface.NeighboursInterface, set()),
-        (interface.WaypointsFile, interface.WaypointsInterface, set()),
-        (interface.OcclusionFile, interface.OcclusionInterface, set()),
-        (interface.RastersFile, interface.RasterInterface, set()),
-        (interface.LidarFile, interface.LidarInterface, set()),
-    ]
-    for model, spec, only_in_spec in pairs:
-        spec_fields = {f.name: f for f in dataclasses.fields(spec)}
-        assert set(model.model_fields) == set(spec_fields) - only_in_spec, model.__name__
-        for name, info in model.model_fields.items():
-            f = spec_fields[name]
-            default = info.get_default(call_default_factory=True)
-            if f.default is not dataclasses.MISSING:
-                assert default == f.default or list(f.default) == default, (model.__name__, name)
-            elif f.default_factory is not dataclasses.MISSING:
-                assert default == f.default_factory(), (model.__name__, name)
-            else:
-                assert info.is_required(), (model.__name__, name)
+    models = [getattr(core_spec, name) for name in core_spec.__all__]
+    models = [m for m in models if isinstance(m, type) and issubclass(m, Spec) and m is not Spec]
+    assert len(models) == 22
+    for model in models:
+        config = model.model_config
+        assert (config["extra"], config["strict"], config["frozen"]) == ("forbid", True, True), model.__name__
+    with pytest.raises(ScenarioError, match=r"FlowSpec: <top>: expected exactly one of rate"):
+        core_spec.FlowSpec(id="f", route=["a"])
+    with pytest.raises(ScenarioError, match=r"GoalSpec: radius: only allowed with a position goal"):
+        core_spec.GoalSpec(road="r", radius=2.0)
+    assert core_spec.GoalSpec(position=[1, 2]).position == (1.0, 2.0)

@@ -16,13 +16,17 @@ from smarts.scenario import (
     MissionSpec,
     PedestrianFlowSpec,
     ScenarioError,
-    ScenarioSpec,
     StartSpec,
     TrafficSpec,
     TripSpec,
     VehicleTypeSpec,
+    check_map,
     list_scenarios,
     load_scenario,
+    read_scenario,
+    read_scenario_file,
+    scenario_to_dict,
+    scenario_to_yaml,
 )
 
 BASE = {
@@ -125,7 +129,7 @@ def write_yaml(folder: Path, data, name: str = "busy.yaml") -> Path:
 
 # ---------------------------------------------------------------------------- reading
 def test_traffic_section_becomes_the_traffic_dataclasses(tmp_path):
-    spec = ScenarioSpec.from_yaml(write_yaml(tmp_path, BASE))
+    spec = read_scenario_file(write_yaml(tmp_path, BASE))
     expected = TrafficSpec(
         engine="sumo",
         density="low",
@@ -163,7 +167,7 @@ def test_traffic_section_becomes_the_traffic_dataclasses(tmp_path):
 
 
 def test_social_agent_and_take_over_fields(tmp_path):
-    spec = ScenarioSpec.from_yaml(write_yaml(tmp_path, BASE))
+    spec = read_scenario_file(write_yaml(tmp_path, BASE))
     learner, taker, social = spec.agents
     assert learner.policy is None and not learner.is_social
     assert learner.mission.on_end == "remove" and learner.mission.start.take_over is None
@@ -174,16 +178,16 @@ def test_social_agent_and_take_over_fields(tmp_path):
 
 
 def test_empty_traffic_mapping_gives_the_defaults():
-    spec = ScenarioSpec.from_dict(_set(BASE, "traffic", {}) | {"agents": BASE["agents"][:1]})
+    spec = read_scenario(_set(BASE, "traffic", {}) | {"agents": BASE["agents"][:1]})
     assert spec.traffic == TrafficSpec()
     assert (spec.traffic.engine, spec.traffic.density) == ("builtin", "none")
-    plain = ScenarioSpec.from_dict({**BASE, "agents": BASE["agents"][:1], "traffic": None})
+    plain = read_scenario({**BASE, "agents": BASE["agents"][:1], "traffic": None})
     assert plain.traffic is None
 
 
 def test_a_declared_type_may_redefine_a_default_name():
     data = _set(BASE, "traffic.vehicle_types.car", {"max_speed": 20})
-    assert ScenarioSpec.from_dict(data).traffic.vehicle_type("car").max_speed == 20.0
+    assert read_scenario(data).traffic.vehicle_type("car").max_speed == 20.0
 
 
 def test_dataclass_defaults_keep_older_code_working():
@@ -196,12 +200,12 @@ def test_dataclass_defaults_keep_older_code_working():
 
 # ---------------------------------------------------------------------------- round trip
 def test_dict_and_yaml_round_trip(tmp_path):
-    spec = ScenarioSpec.from_yaml(write_yaml(tmp_path, BASE))
-    as_dict = spec.to_dict()
-    assert ScenarioSpec.from_dict(as_dict) == spec
-    assert ScenarioSpec.from_dict(yaml.safe_load(spec.to_yaml())) == spec
-    again = ScenarioSpec.from_yaml(write_yaml(tmp_path, yaml.safe_load(spec.to_yaml()), "b.yaml"))
-    assert again == spec and again.to_dict() == as_dict
+    spec = read_scenario_file(write_yaml(tmp_path, BASE))
+    as_dict = scenario_to_dict(spec)
+    assert read_scenario(as_dict) == spec
+    assert read_scenario(yaml.safe_load(scenario_to_yaml(spec))) == spec
+    again = read_scenario_file(write_yaml(tmp_path, yaml.safe_load(scenario_to_yaml(spec)), "b.yaml"))
+    assert again == spec and scenario_to_dict(again) == as_dict
     assert as_dict["agents"][1]["mission"]["start"] == {"take_over": "lead"}
     assert as_dict["agents"][1]["mission"]["on_end"] == "traffic"
     assert as_dict["agents"][2]["policy"] == "zoo:keep-lane"
@@ -214,7 +218,7 @@ def test_dict_and_yaml_round_trip(tmp_path):
 @pytest.mark.parametrize("name", list_scenarios())
 def test_library_traffic_round_trips_through_yaml(name, library_scenario):
     spec = library_scenario(name)
-    assert ScenarioSpec.from_dict(yaml.safe_load(spec.to_yaml())) == spec
+    assert read_scenario(yaml.safe_load(scenario_to_yaml(spec))) == spec
 
 
 # ---------------------------------------------------------------------------- invalid input
@@ -315,7 +319,7 @@ def test_bad_traffic_and_agent_fields_name_file_and_field(tmp_path, bad):
     path = bad[3] if len(bad) > 3 else dotted
     file = write_yaml(tmp_path, _set(BASE, dotted, value))
     with pytest.raises(ScenarioError) as info:
-        ScenarioSpec.from_yaml(file)
+        read_scenario_file(file)
     message = str(info.value)
     assert message.startswith(f"{file}: {path}: "), message
     assert fragment in message, message
@@ -329,7 +333,7 @@ def test_handing_back_to_traffic_needs_a_traffic_section():
         match=r"^inline: agents\[1\]\.mission\.on_end: 'traffic' hands the vehicle to traffic, "
         r"but the scenario has no traffic section$",
     ):
-        ScenarioSpec.from_dict(data, source="inline")
+        read_scenario(data, source="inline")
 
 
 def test_flow_needs_a_route_or_both_ends():
@@ -340,14 +344,14 @@ def test_flow_needs_a_route_or_both_ends():
         match=r"^inline: traffic\.flows\[1\]: expected a route \(a list of roads\) or origin and "
         r"destination, got neither$",
     ):
-        ScenarioSpec.from_dict(data, source="inline")
+        read_scenario(data, source="inline")
 
 
 # ---------------------------------------------------------------------------- check_map
 def test_check_map_accepts_valid_traffic(lane_table_maps):
-    spec = ScenarioSpec.from_dict(BASE, source="busy.yaml")
+    spec = read_scenario(BASE, source="busy.yaml")
     assert spec.agents[1].mission.start.road is None  # taken over: no start road to check
-    spec.check_map(lane_table_maps["intersection_4way_2lane"])
+    check_map(spec, lane_table_maps["intersection_4way_2lane"])
 
 
 MAP_ERRORS = [
@@ -394,9 +398,9 @@ MAP_ERRORS = [
 
 @pytest.mark.parametrize("dotted,value,expected", MAP_ERRORS, ids=[m[0] for m in MAP_ERRORS])
 def test_check_map_names_the_traffic_field(lane_table_maps, dotted, value, expected):
-    spec = ScenarioSpec.from_dict(_set(BASE, dotted, value), source="busy.yaml")
+    spec = read_scenario(_set(BASE, dotted, value), source="busy.yaml")
     with pytest.raises(ScenarioError) as info:
-        spec.check_map(lane_table_maps["intersection_4way_2lane"])
+        check_map(spec, lane_table_maps["intersection_4way_2lane"])
     assert str(info.value).startswith(f"busy.yaml: {expected}"), str(info.value)
 
 
@@ -405,13 +409,13 @@ def test_check_map_with_the_compiled_map(built_maps, map_cache_dir, library_scen
 
     spec = library_scenario("straight_takeover")
     road_map = load_map(built_maps["straight_3lane"], cache_dir=map_cache_dir / "maps")
-    spec.check_map(road_map)
-    data = _set(spec.to_dict(), "traffic.trips[0].depart_lane", 3)
+    check_map(spec, road_map)
+    data = _set(scenario_to_dict(spec), "traffic.trips[0].depart_lane", 3)
     with pytest.raises(
         ScenarioError,
         match=r"^t\.yaml: traffic\.trips\[0\]\.depart_lane: road 'main' has 3 lanes \(0\.\.2\)",
     ):
-        ScenarioSpec.from_dict(data, source="t.yaml").check_map(road_map)
+        check_map(read_scenario(data, source="t.yaml"), road_map)
 
 
 # ---------------------------------------------------------------------------- library

@@ -14,7 +14,7 @@ import yaml
 
 from smarts.__main__ import main
 from smarts.core.spec.scenario import ACTION_SPACES
-from smarts.scenario import ScenarioError, ScenarioSpec, list_scenarios
+from smarts.scenario import ScenarioError, list_scenarios, read_scenario
 from smarts.scenario.map_check import START_SPEED_MARGIN
 from smarts.scenario.validate import validate_scenario, validate_spec
 from tests.builders import with_
@@ -136,7 +136,7 @@ def test_the_reach_limits_bound_only_the_spaces_that_obey_them():
             for space in ACTION_SPACES
         ],
     )  # main_0 allows 25 m/s: 30 is within its limit times 1.5, above the pose spaces' 22.22
-    result = validate_spec(ScenarioSpec.from_dict(data, source="fast"))
+    result = validate_spec(read_scenario(data, source="fast"))
     assert [line.split(": ")[1] for line in result.problems] == [
         f"agents[{i}].mission.start.speed" for i, space in enumerate(ACTION_SPACES) if space != "continuous"
     ]

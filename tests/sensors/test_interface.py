@@ -6,7 +6,7 @@ import yaml
 
 from smarts.core.errors import InterfaceError
 from smarts.core.vehicle_table import VehicleType
-from smarts.scenario import ScenarioError, ScenarioSpec
+from smarts.scenario import ScenarioError, read_scenario, scenario_to_yaml
 from smarts.sensors.interface import (
     RASTER_LAYERS,
     AgentInterface,
@@ -136,7 +136,7 @@ def test_spec_round_trips_through_yaml_with_interfaces():
     }
     spec = _spec(interface)
     assert spec.agents[1].interface.lidar == LidarInterface()
-    again = ScenarioSpec.from_dict(yaml.safe_load(spec.to_yaml()), source="again")
+    again = read_scenario(yaml.safe_load(scenario_to_yaml(spec)), source="again")
     assert again == spec
     assert again.agents[0].interface is None
     assert interface_from_dict({"lidar": None, "rasters": False}) == AgentInterface()

@@ -7,7 +7,7 @@ import numpy as np
 import yaml
 
 from smarts.env import DrivingParallelEnv
-from smarts.scenario import ScenarioSpec
+from smarts.scenario import read_scenario
 
 README = (Path(__file__).resolve().parents[2] / "README.md").read_text()
 
@@ -15,7 +15,7 @@ README = (Path(__file__).resolve().parents[2] / "README.md").read_text()
 def test_readme_interface_example_runs():
     block = next(b for b in re.findall(r"```yaml\n(.*?)```", README, flags=re.S) if "interface:" in b)
     data = {"name": "readme_sensors", **yaml.safe_load(block)}
-    env = DrivingParallelEnv(ScenarioSpec.from_dict(data, source="README sensors"))
+    env = DrivingParallelEnv(read_scenario(data, source="README sensors"))
     obs, _ = env.reset(seed=0)
     o = obs["agent_0"]
     assert env.observation_space("agent_0").contains(o)

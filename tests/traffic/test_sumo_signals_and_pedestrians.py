@@ -52,7 +52,9 @@ def test_red_light_queues_traffic_before_the_stop_line_until_green():
 
 
 def test_pedestrians_walk_on_the_sidewalk_as_pedestrian_rows():
-    traffic = TrafficSpec(pedestrians=[PedestrianFlowSpec("walkers", "south_in", "north_out", rate=3600)])
+    traffic = TrafficSpec(
+        engine="sumo", pedestrians=[PedestrianFlowSpec("walkers", "south_in", "north_out", rate=3600)]
+    )
     sim, provider, _ = _sim(traffic, "intersection_4way_1lane_peds", "west_in", signals=False)
     try:
         sim.reset()

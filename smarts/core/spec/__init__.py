@@ -1,9 +1,25 @@
-"""Scenario spec datatypes: what a scenario file holds, as plain dataclasses every layer can read.
+"""The scenario spec: what a scenario, its agents' interfaces, traffic, comms and replay sections
+hold, as one set of frozen, validated models every layer reads.
 
-``smarts.core.spec.scenario`` holds the scenario, its agents and missions; ``smarts.core.spec.traffic``
-the traffic section. Reading and writing YAML lives in ``smarts.scenario``.
+``scenario`` holds the scenario, its agents and missions; ``traffic`` the traffic section;
+``interface`` an agent's sensors; ``comms`` the V2V settings; ``replay`` a recorded dataset.
+Reading and writing YAML lives in ``smarts.scenario``. A spec is immutable: :func:`replace` gives a
+changed, validated copy.
 """
 
+from smarts.core.spec.base import MAX_SPEED, MAX_TIME, Spec, replace
+from smarts.core.spec.comms import CommsConfig
+from smarts.core.spec.interface import (
+    OCCLUSION_MODES,
+    RASTER_LAYERS,
+    AgentInterface,
+    EgoInterface,
+    LidarInterface,
+    NeighboursInterface,
+    OcclusionInterface,
+    RasterInterface,
+    WaypointsInterface,
+)
 from smarts.core.spec.replay import COORDINATES, REACTIVE_MODES, REPLAY_FORMATS, REPLAY_MAP, ReplaySpec
 from smarts.core.spec.scenario import (
     ACTION_SPACES,
@@ -11,9 +27,11 @@ from smarts.core.spec.scenario import (
     CONTROLLERS,
     DEFAULT_TERMINATE_ON,
     LANE_RELATIVE_SPACES,
+    MAP_FILE_SUFFIXES,
     MISSION_END_ACTIONS,
     TERMINATION_EVENTS,
     VEHICLE_TYPES,
+    ZOO_PREFIX,
     AgentSpec,
     EventsSpec,
     GoalSpec,
@@ -41,13 +59,9 @@ from smarts.core.spec.traffic import (
 
 __all__ = [
     "ACTION_SPACES",
-    "COORDINATES",
-    "REACTIVE_MODES",
-    "REPLAY_FORMATS",
-    "REPLAY_MAP",
-    "ReplaySpec",
     "BUILTIN_PREFIX",
     "CONTROLLERS",
+    "COORDINATES",
     "DEFAULT_TERMINATE_ON",
     "DEFAULT_VEHICLE_TYPES",
     "DENSITY_LEVELS",
@@ -55,23 +69,43 @@ __all__ = [
     "DEPART_LANES",
     "DEPART_SPEEDS",
     "LANE_RELATIVE_SPACES",
+    "MAP_FILE_SUFFIXES",
+    "MAX_SPEED",
+    "MAX_TIME",
     "MISSION_END_ACTIONS",
+    "OCCLUSION_MODES",
+    "RASTER_LAYERS",
+    "REACTIVE_MODES",
+    "REPLAY_FORMATS",
+    "REPLAY_MAP",
     "TERMINATION_EVENTS",
     "TRAFFIC_ENGINES",
     "TRAFFIC_VEHICLE_BASES",
     "VEHICLE_TYPES",
+    "ZOO_PREFIX",
+    "AgentInterface",
     "AgentSpec",
+    "CommsConfig",
+    "EgoInterface",
     "EventsSpec",
     "FlowSpec",
     "GoalSpec",
+    "LidarInterface",
     "MissionSpec",
+    "NeighboursInterface",
+    "OcclusionInterface",
     "PedestrianFlowSpec",
+    "RasterInterface",
+    "ReplaySpec",
     "RewardSpec",
     "ScenarioSpec",
+    "Spec",
     "StartSpec",
     "TrafficSpec",
     "TripSpec",
     "VehicleDimensions",
     "VehicleSpec",
     "VehicleTypeSpec",
+    "WaypointsInterface",
+    "replace",
 ]
