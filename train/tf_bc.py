@@ -18,6 +18,7 @@ recall/precision are reported per held-out set. Writes TensorBoard logs, ``final
 
 from __future__ import annotations
 
+import dataclasses
 import argparse
 import json
 import time
