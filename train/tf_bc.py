@@ -18,8 +18,8 @@ recall/precision are reported per held-out set. Writes TensorBoard logs, ``final
 
 from __future__ import annotations
 
-import dataclasses
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
