@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import os
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -74,6 +75,40 @@ def _name(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "scenario"
 
 
+@dataclass(frozen=True)
+class _Reading:
+    """How every recording of the folder is read (the suite's replay sections repeat it)."""
+
+    fmt: str
+    coordinates: str
+    swap_xy: bool
+    flip_y: bool
+    offset: tuple[float, float]
+    reactive: str
+
+    def section(self, path: str, scenario: str | None) -> dict:
+        """A scenario's ``replay`` section (defaults left out), before the take-over is chosen."""
+        replay: dict = {"format": self.fmt, "path": path}
+        if scenario is not None:
+            replay["scenario"] = scenario
+        if self.fmt == "ngsim":
+            replay["coordinates"] = self.coordinates
+        if self.swap_xy:
+            replay["swap_xy"] = True
+        if self.flip_y:
+            replay["flip_y"] = True
+        if tuple(self.offset) != (0.0, 0.0):
+            replay["offset"] = [float(self.offset[0]), float(self.offset[1])]
+        if self.reactive != "off":
+            replay["reactive"] = self.reactive
+        return replay
+
+    def spec(self, source: Path, scenario: str | None) -> ReplaySpec:
+        return ReplaySpec(format=self.fmt, path=str(Path(source).resolve()), coordinates=self.coordinates,
+                          swap_xy=self.swap_xy, flip_y=self.flip_y,
+                          offset=(float(self.offset[0]), float(self.offset[1])), scenario=scenario)  # fmt: skip
+
+
 def build_suite(
     folder: str | Path,
     fmt: str,
@@ -91,84 +126,31 @@ def build_suite(
     """Write the suite YAML ``out`` from the recordings in ``folder``; returns the number of
     scenarios written and one line per candidate left out (with the reason)."""
     from smarts.maps import load_map
-    from smarts.replay.lane_map import compile_lane_map
-    from smarts.replay.load import TakeOver, most_at_once, plan_replay, take_over_mission
 
     out = Path(out)
     if fmt == "ngsim" and map_path is None:
         raise ReplayError("--map: NGSIM recordings have no map of their own; name the map they run on")
     base = out.parent.resolve()
+    reading = _Reading(fmt, coordinates, swap_xy, flip_y, tuple(offset), reactive)
     fixed_map = load_map(Path(map_path)) if map_path is not None else None
+    map_value = REPLAY_MAP if fixed_map is None else os.path.relpath(Path(map_path).resolve(), base)
     entries, skipped, names = [], [], set()
     for source, scenario in scenario_sources(Path(folder), fmt):
         label = f"{source.name}" + (f" (scenario {scenario})" if scenario is not None else "")
-        path = os.path.relpath(Path(source).resolve(), base)
-        replay = {"format": fmt, "path": path}
-        if scenario is not None:
-            replay["scenario"] = scenario
-        if fmt == "ngsim":
-            replay["coordinates"] = coordinates
-        if swap_xy:
-            replay["swap_xy"] = True
-        if flip_y:
-            replay["flip_y"] = True
-        if tuple(offset) != (0.0, 0.0):
-            replay["offset"] = [float(offset[0]), float(offset[1])]
-        if reactive != "off":
-            replay["reactive"] = reactive
-        spec = ReplaySpec(format=fmt, path=str(Path(source).resolve()), coordinates=coordinates, swap_xy=swap_xy,
-                          flip_y=flip_y, offset=(float(offset[0]), float(offset[1])), scenario=scenario)  # fmt: skip
         try:
-            rec = plan_replay(spec, None, label).recording
-            road_map = fixed_map if fixed_map is not None else (
-                compile_lane_map(rec.road_map) if rec.road_map is not None else None)  # fmt: skip
+            rec, road_map = _recording_and_map(reading.spec(source, scenario), label, fixed_map)
         except (ReplayError, ScenarioError, MapError) as err:
             skipped.append(str(err))
             continue
         if road_map is None:
             skipped.append(f"{label}: the recording has no map of its own; give --map")
             continue
-        chosen, reasons = None, []
-        for vid in _candidates(rec, vehicles):
-            k = rec.index_of[vid]
-            start, end = rec.entry_time(k), rec.exit_time(k)
-            if end - start < MIN_DRIVE:
-                reasons.append(f"vehicle {vid!r} is recorded for {end - start:.1f} s only")
-                continue
-            _, state = rec.state_at(rec.frame_of(start), np.array([k]))
-            take = TakeOver("ego", vid, "", state[:2, 0].copy(), float(state[2, 0]), float(state[3, 0]),
-                            rec.track(k)[-1, :2].copy())  # fmt: skip
-            try:
-                take_over_mission(road_map, take, f"{label}: replay.take_over.ego")
-            except MapError as err:
-                reasons.append(str(err))
-                continue
-            chosen = (vid, start, end)
-            break
+        chosen, reasons = _take_over(rec, road_map, vehicles, label)
         if chosen is None:
             skipped.append(f"{label}: " + ("; ".join(reasons[:3]) if reasons else "no vehicle to take over"))
             continue
-        vid, start, end = chosen
-        replay["take_over"] = {"ego": vid}
-        replay["start"] = round(start, 6)
-        peak = most_at_once(rec, start)
-        body = {"map": REPLAY_MAP if fixed_map is None else os.path.relpath(Path(map_path).resolve(), base),
-                "replay": replay, "agents": [{"id": "ego"}]}  # fmt: skip
-        if peak + 1 > DEFAULT_CAPACITY:
-            body["vehicle_capacity"] = int(peak + 8)
-        entry_name = _name(
-            f"{Path(source).stem}_{scenario}_{vid}" if scenario is not None else f"{Path(source).stem}_{vid}"
-        )
-        while entry_name in names:
-            entry_name += "_"
-        names.add(entry_name)
-        difficulty = next((level for limit, level in DIFFICULTY if peak < limit), "hard")
-        entries.append({
-            "name": entry_name,
-            "difficulty": difficulty,
-            "time_limit": math.ceil(((end - start) * TIME_FACTOR + TIME_SLACK) * 10) / 10,
-            "scenario": body,
-        })  # fmt: skip
+        replay = reading.section(os.path.relpath(Path(source).resolve(), base), scenario)
+        entries.append(_entry(rec, chosen, replay, map_value, source, scenario, names))
     if not entries:
         reasons = "\n  ".join(skipped) if skipped else "no scenario files"
         raise ReplayError(f"{folder}: no scenario to take over in the {fmt} recordings:\n  {reasons}")
@@ -184,3 +166,65 @@ def build_suite(
               "# the recorded vehicle to where it ended; the other road users replay as recorded.\n")  # fmt: skip
     out.write_text(header + yaml.safe_dump(suite, sort_keys=False))
     return len(entries), skipped
+
+
+def _recording_and_map(spec: ReplaySpec, label: str, fixed_map):
+    """The recording and the map it runs on (the given one, else its own lanes; None: neither)."""
+    from smarts.replay.lane_map import compile_lane_map
+    from smarts.replay.load import plan_replay
+
+    rec = plan_replay(spec, None, label).recording
+    if fixed_map is not None:
+        return rec, fixed_map
+    return rec, compile_lane_map(rec.road_map) if rec.road_map is not None else None
+
+
+def _take_over(rec: Recording, road_map, vehicles: list[str] | None, label: str):
+    """The first candidate recorded long enough whose drive is a mission on the map, as
+    ``(id, start, end)`` (None if none), and why the others were passed over."""
+    from smarts.replay.load import TakeOver, take_over_mission
+
+    reasons = []
+    for vid in _candidates(rec, vehicles):
+        k = rec.index_of[vid]
+        start, end = rec.entry_time(k), rec.exit_time(k)
+        if end - start < MIN_DRIVE:
+            reasons.append(f"vehicle {vid!r} is recorded for {end - start:.1f} s only")
+            continue
+        _, state = rec.state_at(rec.frame_of(start), np.array([k]))
+        take = TakeOver("ego", vid, "", state[:2, 0].copy(), float(state[2, 0]), float(state[3, 0]),
+                        rec.track(k)[-1, :2].copy())  # fmt: skip
+        try:
+            take_over_mission(road_map, take, f"{label}: replay.take_over.ego")
+        except MapError as err:
+            reasons.append(str(err))
+            continue
+        return (vid, start, end), reasons
+    return None, reasons
+
+
+def _entry(rec: Recording, chosen, replay: dict, map_value: str, source: Path, scenario, names: set) -> dict:
+    """The suite entry of one take-over: a unique name, difficulty by the most road users at
+    once, a time limit from the recorded drive."""
+    from smarts.replay.load import most_at_once
+
+    vid, start, end = chosen
+    replay["take_over"] = {"ego": vid}
+    replay["start"] = round(start, 6)
+    peak = most_at_once(rec, start)
+    body = {"map": map_value, "replay": replay, "agents": [{"id": "ego"}]}
+    if peak + 1 > DEFAULT_CAPACITY:
+        body["vehicle_capacity"] = int(peak + 8)
+    entry_name = _name(
+        f"{Path(source).stem}_{scenario}_{vid}" if scenario is not None else f"{Path(source).stem}_{vid}"
+    )
+    while entry_name in names:
+        entry_name += "_"
+    names.add(entry_name)
+    difficulty = next((level for limit, level in DIFFICULTY if peak < limit), "hard")
+    return {
+        "name": entry_name,
+        "difficulty": difficulty,
+        "time_limit": math.ceil(((end - start) * TIME_FACTOR + TIME_SLACK) * 10) / 10,
+        "scenario": body,
+    }
