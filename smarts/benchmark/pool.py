@@ -6,8 +6,8 @@ file system). A worker process that dies (killed, out of memory, a crash in nati
 only the episode it was running: that episode runs once more in a fresh worker (:data:`RETRIES`),
 and if its worker dies again it is recorded as a failed episode whose reason says how the process
 ended; the other episodes go on. On Ray, Ray runs a task whose worker died once more, and a task
-that still fails becomes a failed episode the same way. Only Ctrl-C in the parent stops the
-workers.
+that still fails becomes a failed episode the same way. Ctrl-C is the parent's alone: it stops
+the workers (:func:`_sigint_deferred`).
 
 The function that runs a unit is given by the caller (a module-level function, so spawned
 workers and Ray tasks receive it by reference): this module never imports the runner, which
