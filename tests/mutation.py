@@ -138,7 +138,7 @@ MUTATIONS: tuple[Mutation, ...] = (
              "hit = (cached >= 0) & table.alive[cached] & (table.serial[cached] == serials[agents])",
              "hit = (cached >= 0) & table.alive[cached]", ("tests/core",),
              "a cached lead row is trusted after another vehicle took the row"),
-    Mutation("episode-timeout-ignored", "smarts/benchmark/runner.py",
+    Mutation("episode-timeout-ignored", "smarts/benchmark/pool.py",
              "and time.monotonic() - w.since >= self.timeout:", "and False:",
              ("tests/benchmark/test_runner_failures.py",), "a hung episode holds its worker past the timeout"),
     # Trainers and the run contract.

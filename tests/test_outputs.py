@@ -170,9 +170,9 @@ def test_a_benchmark_out_that_cannot_be_made_fails_before_any_episode(tmp_path, 
 
 
 def test_a_benchmark_out_without_the_free_space_fails_before_any_episode(tmp_path, monkeypatch, capsys, no_episodes):
-    import smarts.benchmark.runner as runner
+    import smarts.benchmark.jobs as jobs
 
-    monkeypatch.setattr(runner, "EPISODE_LOG_BYTES", 1 << 58)  # 9 episodes of these fill any disk
+    monkeypatch.setattr(jobs, "EPISODE_LOG_BYTES", 1 << 58)  # 9 episodes of these fill any disk
     assert main([*BENCH, "--out", str(tmp_path / "bench")]) == 2
     err = capsys.readouterr().err
     assert f"error: output folder {tmp_path / 'bench'}: " in err and "MiB free on its disk" in err
@@ -180,7 +180,7 @@ def test_a_benchmark_out_without_the_free_space_fails_before_any_episode(tmp_pat
 
 
 def test_the_check_leaves_nothing_behind_in_a_folder_it_accepts(tmp_path):
-    from smarts.benchmark.runner import check_output_folder
+    from smarts.benchmark.jobs import check_output_folder
 
     check_output_folder(tmp_path / "new" / "run", 1)
     check_output_folder(tmp_path, 1)

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 import zoo.registry
+from smarts.benchmark.jobs import plan_jobs
 from smarts.benchmark.metrics import read_episode
-from smarts.benchmark.runner import plan_jobs, run_jobs
+from smarts.benchmark.runner import run_jobs
 from smarts.benchmark.suites import load_suite
 from smarts.core import policies
 from smarts.core.policies import NoResolverError, default_resolver, resolve_policy

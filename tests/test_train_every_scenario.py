@@ -8,7 +8,8 @@ import pytest
 import torch
 import yaml
 
-from smarts.benchmark.runner import Job, run_episode
+from smarts.benchmark.jobs import Job
+from smarts.benchmark.runner import run_episode
 from smarts.benchmark.suites import SUITES_DIR
 from smarts.scenario import list_scenarios
 from smarts.scenario.library import scenario_path

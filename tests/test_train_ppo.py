@@ -38,7 +38,7 @@ def test_bad_training_settings_name_the_field(tmp_path, capsys):
 
 def test_sb3_training_exports_a_checkpoint_the_benchmark_can_load(tmp_path):
     from agents.loader import load_policy_file
-    from smarts.benchmark.runner import policy_setup
+    from smarts.benchmark.agents import policy_setup
 
     out = tmp_path / "sb3"
     args = ["ppo", "--task", "platoon", "--lib", "sb3", "--total-steps", "128", "--envs", "2", "--frames-per-batch",

@@ -11,7 +11,7 @@ from zoo import ZOO, make_policy
 def test_every_zoo_agent_acts_in_its_action_space(name):
     """Each agent, in the env built as the benchmark builds it (its action space, controller and
     observation interface), returns actions of that env's action box."""
-    from smarts.benchmark.runner import policy_setup, scenario_for
+    from smarts.benchmark.agents import policy_setup, scenario_for
     from smarts.env import DrivingParallelEnv
     from smarts.scenario import load_scenario
 
@@ -48,8 +48,9 @@ def test_unknown_locator_lists_the_known_ones():
 
 
 def test_stand_still_brakes_gently_to_a_stop_in_its_lane(tmp_path):
+    from smarts.benchmark.jobs import Job
     from smarts.benchmark.metrics import read_episode, score_episode
-    from smarts.benchmark.runner import Job, run_episode
+    from smarts.benchmark.runner import run_episode
 
     suite = tmp_path / "ramp.yaml"
     suite.write_text(

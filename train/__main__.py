@@ -22,16 +22,10 @@ from smarts.command_line import Command, HelpFormatter, add_commands
 
 
 def _benchmark(args: argparse.Namespace) -> int:
+    from smarts.benchmark.agents import REFERENCE_AGENTS, agent_locator
+    from smarts.benchmark.jobs import benchmark_folder, claim_folder, plan_jobs
     from smarts.benchmark.report import write_report
-    from smarts.benchmark.runner import (
-        REFERENCE_AGENTS,
-        BenchmarkInterrupted,
-        agent_locator,
-        benchmark_folder,
-        claim_folder,
-        plan_jobs,
-        run_jobs,
-    )
+    from smarts.benchmark.runner import BenchmarkInterrupted, run_jobs
     from smarts.benchmark.suites import load_suite
 
     suite = load_suite(args.suite)

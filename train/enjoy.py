@@ -143,7 +143,7 @@ def policy_env(agent: str, scenario: str, seed: int = 0, task: str | None = None
     """(policy, env, spec, reward name): the policy ``agent`` names, loaded as the benchmark
     loads it, and an env of ``scenario`` whose learning agents act in the policy's action space
     and whose rewards are :func:`task_reward`'s."""
-    from smarts.benchmark.runner import agent_locator, load_policy, policy_setup, scenario_for
+    from smarts.benchmark.agents import agent_locator, load_policy, policy_setup, scenario_for
     from smarts.env import DrivingParallelEnv
 
     agent = agent_locator(agent)

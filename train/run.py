@@ -289,7 +289,7 @@ def lane_relative_dict(cfg: TrainConfig) -> dict | None:
 def check_run_folder(out: Path) -> None:
     """Before anything is built: the run folder (or where it will be made) takes files and has
     :data:`RUN_FREE_BYTES` free; ``OutputError`` naming it otherwise (fail fast, not mid-run)."""
-    from smarts.benchmark.runner import check_output_folder
+    from smarts.benchmark.jobs import check_output_folder
 
     check_output_folder(out, RUN_FREE_BYTES, "run folder")
 
@@ -457,8 +457,9 @@ def evaluate_into(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: i
 def _evaluate(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int, progress: bool) -> dict:
     from PIL import Image
 
+    from smarts.benchmark.jobs import plan_jobs
     from smarts.benchmark.report import write_report
-    from smarts.benchmark.runner import plan_jobs, run_jobs
+    from smarts.benchmark.runner import run_jobs
     from smarts.benchmark.suites import load_suite
 
     suite = load_suite(cfg.eval_suite or TASK_SUITE[cfg.task])

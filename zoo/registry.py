@@ -11,7 +11,7 @@ controller and interface.
 ``make_policy`` is the simulator's default policy resolver (``smarts.core.policies``, registered as
 an entry point in ``pyproject.toml``): the simulator reaches the zoo through it, never by import.
 
-Reference agents (benchmarked beside every agent, ``smarts.benchmark.runner.REFERENCE_AGENTS``):
+Reference agents (benchmarked beside every agent, ``smarts.benchmark.agents.REFERENCE_AGENTS``):
 ``zoo:keep-lane`` (IDM on the route's waypoints), ``zoo:random`` (uniform random steps) and
 ``zoo:stand-still`` (brakes gently to a stop: the floor that doing nothing scores). PPO baselines
 are checkpoints with model cards under ``zoo/cards/`` (``cards/stand-still.md`` describes the

@@ -116,7 +116,7 @@ def write_report(
     ``plan_jobs``) are reported beside them. Intervals: ``score_suite``'s stratified bootstrap
     with ``ci_level``, ``resamples`` and ``ci_seed``. ``not_run``: planned episodes that did not
     run (an interrupted run); the report says so and ``results.json`` has ``complete: false``."""
-    from smarts.benchmark.runner import REFERENCE_AGENTS, agent_label, agent_name
+    from smarts.benchmark.agents import REFERENCE_AGENTS, agent_label, agent_name
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -149,7 +149,7 @@ def _score(
     suite: Suite, agents: list[str], results: list[dict], ci_level: float, resamples: int, ci_seed: int
 ) -> _Scored:
     """Each agent's logs read and scored; seeds, failures and re-runs gathered from the results."""
-    from smarts.benchmark.runner import REFERENCE_AGENTS
+    from smarts.benchmark.agents import REFERENCE_AGENTS
 
     params = load_params()
     references = [a for a in REFERENCE_AGENTS if a not in agents and any(r["agent"] == a for r in results)]
@@ -199,7 +199,7 @@ def _score(
 
 def _results_doc(suite: Suite, sc: _Scored, not_run: int, ci_level: float, resamples: int, ci_seed: int) -> dict:
     """``results.json``'s content."""
-    from smarts.benchmark.runner import REFERENCE_AGENTS, agent_name
+    from smarts.benchmark.agents import REFERENCE_AGENTS, agent_name
 
     return {
         "suite": suite.name,
@@ -236,7 +236,7 @@ def _results_doc(suite: Suite, sc: _Scored, not_run: int, ci_level: float, resam
 
 def _results_csv(suite: Suite, sc: _Scored) -> str:
     """``results.csv``: a row per agent and scenario, then its overall row."""
-    from smarts.benchmark.runner import REFERENCE_AGENTS
+    from smarts.benchmark.agents import REFERENCE_AGENTS
 
     names, order = sc.names, [s.name for s in suite.scenarios]
     difficulty = {s.name: s.difficulty for s in suite.scenarios}
@@ -265,7 +265,7 @@ def _results_csv(suite: Suite, sc: _Scored) -> str:
 
 def _summary_lines(suite: Suite, sc: _Scored, not_run: int, label) -> list[str]:
     """The report's head: what ran, how intervals were made, the references, the overall table."""
-    from smarts.benchmark.runner import REFERENCE_AGENTS
+    from smarts.benchmark.agents import REFERENCE_AGENTS
 
     names, shown = sc.names, sc.shown
     no_spread = _no_spread(sc)

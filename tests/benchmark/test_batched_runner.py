@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from smarts.benchmark.jobs import plan_jobs, plan_units
 from smarts.benchmark.metrics import read_episode
 from smarts.benchmark.report import write_report
-from smarts.benchmark.runner import plan_jobs, plan_units, run_jobs
+from smarts.benchmark.runner import run_jobs
 from smarts.benchmark.suites import load_suite
 from tests.benchmark.batched_agents import resolve
 from tests.benchmark.dying_agent import MARKER_DIR

@@ -7,11 +7,13 @@ import numpy as np
 import pytest
 
 from agents.keep_lane import KeepLanePolicy
+from smarts.benchmark.agents import PolicySetup
+from smarts.benchmark.jobs import Job, job_inputs
 from smarts.benchmark.metrics import read_episode, score_episode
 from smarts.benchmark.metrics.params import MetricParams
 from smarts.benchmark.metrics.scores import time_gap_to_margin
 from smarts.benchmark.recorder import EpisodeRecorder
-from smarts.benchmark.runner import Job, PolicySetup, build_env, job_inputs, run_episode
+from smarts.benchmark.runner import build_env, run_episode
 from smarts.benchmark.suites import load_suite
 
 CONTINUITY = """

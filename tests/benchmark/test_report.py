@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from smarts.benchmark.jobs import plan_jobs
 from smarts.benchmark.report import REFERENCE_COLOURS, TRAFFIC_COLOUR, write_report
-from smarts.benchmark.runner import plan_jobs, run_jobs
+from smarts.benchmark.runner import run_jobs
 from smarts.benchmark.suites import load_suite
 
 TINY = str(Path(__file__).with_name("tiny_suite.yaml"))

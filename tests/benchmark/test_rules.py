@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from agents.keep_lane import KeepLanePolicy
+from smarts.benchmark.agents import PolicySetup
 from smarts.benchmark.metrics import LogError, MetricParams, score_episode, validate_episode
 from smarts.benchmark.metrics.synthetic import make_episode, make_trace
 from smarts.benchmark.recorder import EpisodeRecorder
-from smarts.benchmark.runner import PolicySetup, build_env
+from smarts.benchmark.runner import build_env
 from smarts.benchmark.suites import load_suite
 
 CROSSING = """

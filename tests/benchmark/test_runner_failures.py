@@ -11,9 +11,10 @@ from pathlib import Path
 
 import pytest
 
+from smarts.benchmark.jobs import finished_episode, plan_jobs, write_failed_episode
 from smarts.benchmark.metrics import MetricParams, read_episode
 from smarts.benchmark.report import write_report
-from smarts.benchmark.runner import finished_episode, plan_jobs, run_jobs, write_failed_episode
+from smarts.benchmark.runner import run_jobs
 from smarts.benchmark.suites import load_suite
 from tests.benchmark.dying_agent import MARKER_DIR, resolve
 from train.__main__ import main
@@ -204,7 +205,7 @@ def test_resume_runs_again_the_episodes_of_a_zoo_agent_whose_checkpoint_changed(
 
 def test_every_zoo_agent_with_learned_weights_is_keyed_by_its_checkpoint_file():
     import zoo.registry
-    from smarts.benchmark.runner import policy_files_digest
+    from smarts.benchmark.agents import policy_files_digest
     from zoo import make_policy
 
     learned = {"platoon-rtp", "drive", "platoon-c", "tf", "vcr", "aid"}
@@ -262,7 +263,7 @@ def test_ctrl_c_writes_what_finished_and_resume_finishes_the_run(tmp_path):
 def test_a_ctrl_c_while_a_worker_starts_is_not_lost():
     """Worker starts hold Ctrl-C back from the child (born with it blocked), but the parent still
     gets it: it is never ignored and lost."""
-    from smarts.benchmark.runner import _sigint_deferred
+    from smarts.benchmark.pool import _sigint_deferred
 
     probe = "import signal; print(signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, []))"
     before = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal, even in the background

@@ -8,20 +8,13 @@ import numpy as np
 import pytest
 
 import zoo.registry
+from smarts.benchmark.agents import REFERENCE_AGENTS, PolicySetup, load_policy, policy_setup, scenario_for
+from smarts.benchmark.jobs import plan_jobs
 from smarts.benchmark.metrics import read_episode
 from smarts.benchmark.report import write_report
-from smarts.benchmark.runner import (
-    REFERENCE_AGENTS,
-    AgentSetupError,
-    PolicySetup,
-    build_env,
-    load_policy,
-    plan_jobs,
-    policy_setup,
-    run_jobs,
-    scenario_for,
-)
+from smarts.benchmark.runner import build_env, run_jobs
 from smarts.benchmark.suites import load_suite
+from smarts.core.errors import AgentSetupError
 from smarts.scenario import ScenarioError, replace
 from train.__main__ import main
 

@@ -23,7 +23,7 @@ def test_old_import_paths_give_the_same_classes():
     import smarts.scenario.errors as scenario_errors
     import smarts.sensors as sensors
     import smarts.sensors.interface as sensors_interface
-    from smarts.benchmark.runner import AgentSetupError
+    from smarts.core.errors import AgentSetupError
     from smarts.core.policies import NoResolverError
     from smarts.dynamics.action_spaces import ActionError
     from smarts.env.sb3_vec_env import WorkerError

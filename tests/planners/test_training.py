@@ -61,7 +61,8 @@ def test_tf_bc_and_vcr_classifier(tiny_suite, tmp_path):
 
 def _drive(policy, steps: int = 30):
     """A few steps of a collaborative scenario through the benchmark's env for this policy."""
-    from smarts.benchmark.runner import build_env, policy_setup
+    from smarts.benchmark.agents import policy_setup
+    from smarts.benchmark.runner import build_env
     from smarts.benchmark.suites import load_suite
 
     entry = load_suite("collaborative").scenarios[0]

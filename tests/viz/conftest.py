@@ -45,7 +45,8 @@ def recorded(tmp_path_factory) -> dict:
 @pytest.fixture(scope="session")
 def benchmark_log(tmp_path_factory) -> Path:
     """One adaptive-suite episode of zoo:keep-lane, written by the benchmark runner."""
-    from smarts.benchmark.runner import plan_jobs, run_jobs
+    from smarts.benchmark.jobs import plan_jobs
+    from smarts.benchmark.runner import run_jobs
     from smarts.benchmark.suites import load_suite
 
     out = tmp_path_factory.mktemp("benchmark") / "adaptive"
@@ -61,7 +62,8 @@ def benchmark_log(tmp_path_factory) -> Path:
 def benchmark_log_with_traffic(tmp_path_factory) -> Path:
     """One episode of adaptive a09 (a lead turning right at a signalised junction among built-in
     traffic) of zoo:keep-lane, written by the benchmark runner: its log carries the scene."""
-    from smarts.benchmark.runner import plan_jobs, run_jobs
+    from smarts.benchmark.jobs import plan_jobs
+    from smarts.benchmark.runner import run_jobs
     from smarts.benchmark.suites import load_suite
 
     out = tmp_path_factory.mktemp("benchmark") / "adaptive"
