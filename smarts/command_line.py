@@ -14,9 +14,11 @@ import importlib
 import re
 import textwrap
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable, Sequence
 
 _DEFAULT_SAID = re.compile(r"default", re.IGNORECASE)
+_TYPE_NAMES = {int: "INT", float: "FLOAT", Path: "PATH"}
 
 
 class HelpFormatter(argparse.HelpFormatter):
@@ -43,6 +45,12 @@ class HelpFormatter(argparse.HelpFormatter):
         ):
             return text
         return text + " (default: %(default)s)"
+
+    def _get_default_metavar_for_optional(self, action: argparse.Action) -> str:
+        """An option's value named by its type where that says more than its name (``--episodes
+        INT``, ``--lr FLOAT``, ``--out PATH``); text values keep their name (``--agent AGENT``)."""
+        kind = _TYPE_NAMES.get(action.type)
+        return kind if kind is not None else super()._get_default_metavar_for_optional(action)
 
     def _fill_text(self, text: str, width: int, indent: str) -> str:
         paragraphs = re.split(r"\n\s*\n", text.strip("\n"))

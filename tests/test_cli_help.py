@@ -107,3 +107,23 @@ def test_every_option_says_its_default_once():
     assert problems == []
     helps = {name: parser for name, parser in _all_parsers()}
     assert "(default: collaborative)" in " ".join(helps["python -m train benchmark"].format_help().split())
+
+
+def test_every_option_value_shows_its_type_or_choices():
+    """A number or a path is named as such in the usage (``--episodes INT``); an option with
+    choices lists them; the options made from a config schema say their type in their help."""
+    problems = []
+    for name, parser in _all_parsers():
+        usage = " ".join(parser.format_usage().split())
+        for action in parser._actions:
+            if not action.option_strings or action.nargs == 0 or action.help is argparse.SUPPRESS:
+                continue
+            flag = action.option_strings[0]
+            kinds = {int: "INT", float: "FLOAT"}
+            if action.type in kinds and action.metavar is None and f"{flag} {kinds[action.type]}" not in usage:
+                problems.append(f"{name} {flag}: {action.type.__name__} value not named in {usage}")
+            if action.choices is not None and action.metavar is None and "{" not in usage:
+                problems.append(f"{name} {flag}: choices not listed")
+    assert problems == []
+    ppo = dict(_all_parsers())["python -m train ppo"].format_help()
+    assert "(int; default:" in ppo and "(float; default:" in ppo
