@@ -35,8 +35,8 @@ from smarts.core.errors import ConfigError
 from smarts.core.resources import config_path
 from smarts.core.schema import Schema, describe, load_yaml
 from smarts.core.spec import CONTROLLERS
-from smarts.dynamics.lane_relative import LaneRelativeParams
-from smarts.env.task_rewards import RewardWeights
+from smarts.core.spec.lane_relative import LaneRelativeParams
+from smarts.env.reward_weights import RewardWeights
 
 CONFIG_DIR = config_path("train")
 """The shipped task configs (``configs/train/``, installed as ``smarts.configs``)."""
@@ -97,7 +97,7 @@ def _section(settings: type, name: str, doc: str, kinds: dict[str, Any], default
 RewardSection = _section(
     RewardWeights,
     "RewardSection",
-    "Task reward weights and limits (``smarts.env.task_rewards.RewardWeights`` fields).",
+    "Task reward weights and limits (``smarts.env.reward_weights.RewardWeights`` fields).",
     {
         "task": (Task | None, Field(None, description="The task whose reward terms count; None: the config's task.")),
         **{
@@ -157,7 +157,7 @@ class TrainConfig(Schema):
     )
     reward: RewardSection = Field(
         default_factory=RewardSection,
-        description="Task reward weights (smarts.env.task_rewards.RewardWeights fields); task defaults to this "
+        description="Task reward weights (smarts.env.reward_weights.RewardWeights fields); task defaults to this "
         "config's task.",
     )
     lib: Literal[LIBS] = Field("torchrl", description="torchrl | sb3 (Stable-Baselines3's PPO).")

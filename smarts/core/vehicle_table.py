@@ -12,6 +12,7 @@ from enum import IntEnum
 import numpy as np
 
 from smarts.core.geometry import box_corners
+from smarts.core.vehicle_types import VEHICLE_DIMENSIONS, VehicleType
 
 
 class Role(IntEnum):
@@ -24,26 +25,6 @@ class Role(IntEnum):
     REPLAY = 4  # replayed from a dataset
     PEDESTRIAN = 5
 
-
-class VehicleType(IntEnum):
-    PASSENGER = 0
-    BUS = 1
-    TRUCK = 2
-    MOTORCYCLE = 3
-    PEDESTRIAN = 4
-    BICYCLE = 5  # a cyclist (replayed from datasets that record them)
-
-
-# Typical box size (length, width, height) in metres and mass in kg per vehicle type; scenarios may
-# override each value per agent.
-VEHICLE_DIMENSIONS: dict[VehicleType, tuple[float, float, float, float]] = {
-    VehicleType.PASSENGER: (4.6, 1.9, 1.5, 1500.0),
-    VehicleType.BUS: (12.0, 2.55, 3.2, 12000.0),
-    VehicleType.TRUCK: (10.0, 2.5, 3.6, 10000.0),
-    VehicleType.MOTORCYCLE: (2.2, 0.8, 1.4, 250.0),
-    VehicleType.PEDESTRIAN: (0.5, 0.5, 1.7, 75.0),
-    VehicleType.BICYCLE: (1.8, 0.7, 1.7, 90.0),
-}
 
 NO_OWNER = -1
 

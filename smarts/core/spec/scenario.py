@@ -26,7 +26,7 @@ from smarts.core.spec.comms import CommsConfig
 from smarts.core.spec.interface import AgentInterface
 from smarts.core.spec.replay import REPLAY_MAP, ReplaySpec
 from smarts.core.spec.traffic import TrafficSpec
-from smarts.core.vehicle_table import VEHICLE_DIMENSIONS, VehicleType
+from smarts.core.vehicle_types import VEHICLE_DIMENSIONS, VehicleType
 
 BUILTIN_PREFIX = "builtin:"
 """A scenario's ``map`` naming a built-in map: ``builtin:<name>``."""
