@@ -250,7 +250,9 @@ def test_ctrl_c_writes_what_finished_and_resume_finishes_the_run(tmp_path):
     doc = json.loads((out / "results.json").read_text())
     done = sorted((out / "logs").rglob("*.npz"))
     finished = 3 * 2 * 12 - doc["episodes_not_run"]
-    assert not doc["complete"] and 0 < finished <= len(done) <= finished + 2  # + the 2 workers' last logs
+    # A worker may have written the logs of a batch's episodes that ended together before the parent
+    # heard of them; --resume keeps every log on disk (their stamps, below) and runs only the rest.
+    assert not doc["complete"] and 0 < finished <= len(done)
     assert "**Incomplete:**" in (out / "report.md").read_text()
     stamps = {p: p.stat().st_mtime_ns for p in done}
     assert _bench(out, "--episodes", "12", "--workers", "1", "--resume") == 0
