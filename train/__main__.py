@@ -22,9 +22,13 @@ from smarts.command_line import Command, HelpFormatter, add_commands
 
 
 def _benchmark(args: argparse.Namespace) -> int:
+    from smarts.worker_processes import start_worker_server
+
+    if (args.workers > 1 or args.episode_timeout is not None) and not args.ray_address:
+        start_worker_server()  # it imports what workers need while this process loads the agents
     from smarts.benchmark.agents import REFERENCE_AGENTS, agent_locator
     from smarts.benchmark.jobs import benchmark_folder, claim_folder, plan_jobs
-    from smarts.benchmark.report import write_report
+    from smarts.benchmark.report import FigureHelpers, write_report
     from smarts.benchmark.runner import BenchmarkInterrupted, run_jobs
     from smarts.benchmark.suites import load_suite
 
@@ -42,17 +46,22 @@ def _benchmark(args: argparse.Namespace) -> int:
     shown = agents + [a for a in REFERENCE_AGENTS if a not in agents]
     print(f"{suite.name}: {len(suite.scenarios)} scenarios x {episodes} episodes x {len(shown)} agent(s) "
           f"({', '.join(shown)}; references always included) -> {out}")  # fmt: skip
+    helpers = FigureHelpers.for_figures(len(suite.scenarios))  # they load matplotlib while episodes run
     try:
         results = run_jobs(jobs, workers=args.workers, progress=not args.quiet, ray_address=args.ray_address,
                            resume=args.resume, episode_timeout=args.episode_timeout,
                            batch=not args.per_episode)  # fmt: skip
     except BenchmarkInterrupted as stop:  # Ctrl-C: report what finished, no traceback
+        helpers.close()  # Ctrl-C reached them too
         write_report(out, suite, agents, stop.finished, not_run=stop.not_run)
         print(f"interrupted: {len(stop.finished)} of {len(jobs)} episodes finished, reported in {out}; "
               f"the same command with --resume{'' if numbered else f' --out {out}'} runs the rest",
               file=sys.stderr)  # fmt: skip
         return exit_codes.INTERRUPTED
-    report = write_report(out, suite, agents, results)
+    except BaseException:
+        helpers.close()
+        raise
+    report = write_report(out, suite, agents, results, helpers=helpers)
     print(report.read_text())
     failed = [r for r in results if r.get("failure")]
     if failed:

@@ -7,9 +7,9 @@ only the episode it was running: that episode runs once more in a fresh worker (
 and if its worker dies again it is recorded as a failed episode whose reason says how the process
 ended; the other episodes go on. On Ray, Ray runs a task whose worker died once more, and a task
 that still fails becomes a failed episode the same way. Ctrl-C is the parent's alone: it stops
-the workers (:func:`_sigint_deferred`).
+the workers (:func:`sigint_deferred`).
 
-The function that runs a unit is given by the caller (a module-level function, so spawned
+The function that runs a unit is given by the caller (a module-level function, so
 workers and Ray tasks receive it by reference): this module never imports the runner, which
 imports it.
 """
@@ -19,14 +19,15 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import multiprocessing.connection
+import os
 import signal
-import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import Any
 
 from smarts.benchmark.jobs import Job, finished_episode, write_failed_episode
+from smarts.worker_processes import sigint_deferred, worker_context
 from smarts.core.policies import PolicyResolver
 
 RETRIES = 1
@@ -59,41 +60,24 @@ def _lost(job: Job, reasons: list[str], info: dict[str, Any] | None = None) -> d
     return {**summary, "attempts": n}
 
 
-@contextlib.contextmanager
-def _sigint_deferred() -> Iterator[None]:
-    """Hold Ctrl-C back while starting a worker. Blocked, not ignored: the child is born with it
-    blocked (its loop then ignores it, so only the parent handles Ctrl-C and stops the workers
-    instead of every worker printing a traceback), and a Ctrl-C pressed meanwhile is not lost: it
-    reaches the parent as soon as the worker has started."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    if not hasattr(signal, "pthread_sigmask"):  # no signal masks (Windows): ignore it meanwhile
-        before = signal.signal(signal.SIGINT, signal.SIG_IGN)
-        try:
-            yield
-        finally:
-            signal.signal(signal.SIGINT, before)
-        return
-    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-
-
 RunUnit = Callable[[list[Job], "PolicyResolver | None", Callable[[int, dict], None]], None]
 """Runs a unit of jobs, calling ``report(i, summary)`` as ``jobs[i]`` finishes (the runner's
-``run_unit``); a module-level function, so spawned workers receive it by reference."""
+``run_unit``); a module-level function, so workers receive it by reference."""
 
 
-def _worker_loop(conn, run_unit: RunUnit, policy_resolver: PolicyResolver | None) -> None:
+def _worker_loop(conn, run_unit: RunUnit, policy_resolver: PolicyResolver | None, cwd: str,
+                 environ: dict[str, str]) -> None:  # fmt: skip
     """A worker process: run the units it is sent with ``run_unit``, one at a time, until told to
     stop; each finished episode is sent at once (``("episode", k, summary)``, so a unit whose
-    process dies loses only the episodes it had not finished), then ``("unit", None, None)``."""
+    process dies loses only the episodes it had not finished), then ``("unit", None, None)``.
+    It works in the parent's folder and environment as they were when it started (a fork server
+    may have started before either changed)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if hasattr(signal, "pthread_sigmask"):
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked by the parent for the start
+    os.chdir(cwd)
+    os.environ.clear()
+    os.environ.update(environ)
     while True:
         try:
             message = conn.recv()
@@ -113,9 +97,11 @@ class _Worker:
     def __init__(self, ctx, run_unit: RunUnit, policy_resolver: PolicyResolver | None):
         self.conn, child = ctx.Pipe()
         self.process = ctx.Process(
-            target=_worker_loop, args=(child, run_unit, policy_resolver), name="smarts-benchmark-worker"
+            target=_worker_loop,
+            args=(child, run_unit, policy_resolver, os.getcwd(), dict(os.environ)),
+            name="smarts-benchmark-worker",
         )
-        with _sigint_deferred():
+        with sigint_deferred():
             self.process.start()
         child.close()
         self.unit: list[int] | None = None
@@ -173,7 +159,7 @@ class _Pool:
                  done: Callable[[int, dict], None], timeout: float | None, run_unit: RunUnit):  # fmt: skip
         self.jobs, self.resolver, self.done, self.timeout = jobs, policy_resolver, done, timeout
         self.run_unit = run_unit
-        self.ctx = multiprocessing.get_context("spawn")
+        self.ctx = worker_context()
         self.queue = deque(units)
         self.reasons: dict[int, list[str]] = {}
         self.workers: list[_Worker] = []
@@ -261,7 +247,7 @@ def run_in_processes(
     run_unit: RunUnit,
     timeout: float | None = None,
 ) -> None:
-    """Run ``units`` with ``run_unit`` on ``workers`` spawned processes. A process that dies is
+    """Run ``units`` with ``run_unit`` on ``workers`` processes (:func:`worker_context`). A process that dies is
     replaced; the episodes it had not finished run again (:data:`RETRIES` times), then fail. A
     unit running longer than ``timeout`` seconds is stopped: one episode fails at once, a unit of
     several runs its unfinished episodes again, each alone."""

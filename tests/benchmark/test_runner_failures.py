@@ -265,13 +265,13 @@ def test_ctrl_c_writes_what_finished_and_resume_finishes_the_run(tmp_path):
 def test_a_ctrl_c_while_a_worker_starts_is_not_lost():
     """Worker starts hold Ctrl-C back from the child (born with it blocked), but the parent still
     gets it: it is never ignored and lost."""
-    from smarts.benchmark.pool import _sigint_deferred
+    from smarts.worker_processes import sigint_deferred
 
     probe = "import signal; print(signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, []))"
     before = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal, even in the background
     try:
         with pytest.raises(KeyboardInterrupt):
-            with _sigint_deferred():
+            with sigint_deferred():
                 child = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
                 os.kill(os.getpid(), signal.SIGINT)
                 time.sleep(0.1)
@@ -279,3 +279,22 @@ def test_a_ctrl_c_while_a_worker_starts_is_not_lost():
         signal.signal(signal.SIGINT, before)
     assert child.stdout.strip() == "True"
     assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, [])  # the parent's mask is restored
+
+
+def test_workers_run_in_the_folder_and_environment_the_parent_has_when_they_start(tmp_path, monkeypatch):
+    """Workers come from a fork server that may have started long before (``train benchmark``
+    starts it first thing); they still see the parent's folder and environment of the moment they
+    start, as fresh interpreters would."""
+    from smarts.benchmark.pool import run_in_processes
+    from smarts.worker_processes import start_worker_server
+    from tests.benchmark.worker_probe import PROBE_VAR, where_and_what
+
+    start_worker_server()
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv(PROBE_VAR, "set after the server started")
+    seen = {}
+    run_in_processes([None, None], [[0], [1]], 2, None, seen.__setitem__, where_and_what)
+    assert sorted(seen) == [0, 1]
+    assert {r["cwd"] for r in seen.values()} == {str(tmp_path)}
+    assert {r["probe"] for r in seen.values()} == {"set after the server started"}
+    assert len({r["pid"] for r in seen.values()} | {os.getpid()}) == 3

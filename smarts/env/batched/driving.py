@@ -457,12 +457,9 @@ class _Shard:
     answers every command, with ``("error", message, exception)`` on failure."""
 
     def __init__(self, parent: BatchedDriving, copies: list[int], options: dict, slots: list[int]):
-        import multiprocessing as mp
+        from smarts.worker_processes import worker_context
 
-        method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
-        ctx = mp.get_context(method)
-        if method == "forkserver":
-            ctx.set_forkserver_preload([__name__])
+        ctx = worker_context()
         self.copies = copies
         self.slots = np.array(slots, dtype=np.int64)
         self.rows = _rows(self.slots)
