@@ -28,6 +28,7 @@ Figures, all embedded in ``report.md`` (paths relative to it, so the folder can 
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -108,6 +109,7 @@ def write_report(
     resamples: int = CI_RESAMPLES,
     ci_seed: int = CI_SEED,
     not_run: int = 0,
+    helpers: FigureHelpers | None = None,
 ) -> Path:
     """Score each agent's logs and write ``results.json``, ``results.csv``, ``report.md``,
     ``plots/`` and TensorBoard events under ``out``; returns the report path.
@@ -115,26 +117,33 @@ def write_report(
     ``agents`` are the requested agents; the reference agents found in ``results`` (added by
     ``plan_jobs``) are reported beside them. Intervals: ``score_suite``'s stratified bootstrap
     with ``ci_level``, ``resamples`` and ``ci_seed``. ``not_run``: planned episodes that did not
-    run (an interrupted run); the report says so and ``results.json`` has ``complete: false``."""
+    run (an interrupted run); the report says so and ``results.json`` has ``complete: false``.
+    ``helpers``: figure helpers started ahead (:class:`FigureHelpers`), else they start here."""
     from smarts.benchmark.agents import REFERENCE_AGENTS, agent_label, agent_name
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    scored = _score(suite, list(dict.fromkeys(agents)), results, ci_level, resamples, ci_seed)
-    atomic_write_text(
-        out / "results.json",
-        json.dumps(_results_doc(suite, scored, not_run, ci_level, resamples, ci_seed), indent=2, default=float),
-    )
-    atomic_write_text(out / "results.csv", _results_csv(suite, scored))
+    agents = list(dict.fromkeys(agents))
 
     def label(agent: str) -> str:
         return f"{agent_name(agent)} (reference)" if agent in REFERENCE_AGENTS else agent_name(agent)
 
     plots = out / "plots"
     plots.mkdir(parents=True, exist_ok=True)
-    drawing = _trajectory_plots(plots, suite, scored.shown, results, label)  # drawn beside what follows
-    metric_figures = _metric_plots(plots, suite, scored.scores, scored.names, label)
-    _tensorboard(out / "tensorboard", suite, scored.scores, scored.names, agent_label)
+    # Drawn beside the scoring and the metric plots (from the logs alone, so it can start first).
+    drawing = _trajectory_plots(plots, suite, _shown(agents, results)[0], results, label, helpers)
+    try:
+        scored = _score(suite, agents, results, ci_level, resamples, ci_seed)
+        atomic_write_text(
+            out / "results.json",
+            json.dumps(_results_doc(suite, scored, not_run, ci_level, resamples, ci_seed), indent=2, default=float),
+        )
+        atomic_write_text(out / "results.csv", _results_csv(suite, scored))
+        metric_figures = _metric_plots(plots, suite, scored.scores, scored.names, label)
+        _tensorboard(out / "tensorboard", suite, scored.scores, scored.names, agent_label)
+    except BaseException:
+        drawing.cancel()
+        raise
     trajectory_figures = drawing.result()
     lines = _summary_lines(suite, scored, not_run, label)
     lines += _figure_lines(metric_figures)
@@ -145,15 +154,22 @@ def write_report(
     return report
 
 
+def _shown(agents: list[str], results: list[dict]) -> tuple[list[str], list[str]]:
+    """(the agents a report shows, the references among them): the requested agents, then the
+    reference agents that have results."""
+    from smarts.benchmark.agents import REFERENCE_AGENTS
+
+    references = [a for a in REFERENCE_AGENTS if a not in agents and any(r["agent"] == a for r in results)]
+    return agents + references, references
+
+
 def _score(
     suite: Suite, agents: list[str], results: list[dict], ci_level: float, resamples: int, ci_seed: int
 ) -> _Scored:
     """Each agent's logs read and scored; seeds, failures and re-runs gathered from the results."""
-    from smarts.benchmark.agents import REFERENCE_AGENTS
 
     params = load_params()
-    references = [a for a in REFERENCE_AGENTS if a not in agents and any(r["agent"] == a for r in results)]
-    shown = agents + references
+    shown, references = _shown(agents, results)
     scores, crashed, setup = {}, {}, {}
     seeds: dict[str, dict[int, Any]] = {}  # scenario -> episode -> seed, over every job
     for agent in shown:
@@ -527,7 +543,9 @@ class _TrajectoryFigure:
     colours: tuple[tuple[str, str], ...]
 
 
-def _trajectory_plots(plots: Path, suite: Suite, agents: list[str], results: list[dict], label) -> _Drawing:
+def _trajectory_plots(
+    plots: Path, suite: Suite, agents: list[str], results: list[dict], label, helpers: FigureHelpers | None = None
+) -> _Drawing:
     """Per scenario: the road around the episode, each agent's path in episode 0 (start o, end x),
     and from the first agent's log the lead's path and the other road users'. Drawn beside the
     caller: :meth:`_Drawing.result` gives scenario -> file."""
@@ -544,73 +562,140 @@ def _trajectory_plots(plots: Path, suite: Suite, agents: list[str], results: lis
             figures.append(_TrajectoryFigure(plots, suite.name, entry.name, entry.spec, tuple(logs),
                                              tuple((a, label(a)) for a, _ in logs),
                                              tuple((a, colours[a]) for a, _ in logs)))  # fmt: skip
-    return _Drawing(figures)
+    return _Drawing(figures, helpers)
+
+
+class FigureHelpers:
+    """Helper processes for a report's trajectory figures, started ahead of it: a helper first
+    spends a second or two importing matplotlib and the map code, which a caller can overlap with
+    running the episodes (``train benchmark`` starts them beside its workers), then waits for
+    :func:`write_report` to give it figures. Fresh interpreters (``python -c``), never a fork or a
+    re-run of the caller's script. One per spare core, at most three, none on one core or for a few
+    figures (:meth:`for_figures`). Unused helpers end when told (:meth:`close`) or when this process
+    ends."""
+
+    def __init__(self, count: int):
+        self.processes = [_start_helper() for _ in range(max(count, 0))]
+
+    @classmethod
+    def for_figures(cls, figures: int) -> FigureHelpers:
+        import os
+
+        return cls(min((os.cpu_count() or 1) - 1, 3, figures // 3))
+
+    def close(self) -> None:
+        for process in self.processes:
+            process.kill()
+            process.communicate()
+        self.processes = []
 
 
 class _Drawing:
-    """Trajectory figures drawn by helper processes while the caller goes on (the metric plots,
-    TensorBoard), the caller drawing its share in :meth:`result`: each figure costs about half a
-    second of text layout and PNG encoding, and a report has one per scenario. One helper per
-    spare core, at most three; none on one core or for a few figures. Helpers are fresh
-    interpreters (``python -c``), never a fork or a re-run of the caller's script; a helper that
-    fails leaves its share to the caller."""
+    """Trajectory figures drawn by helper processes (:class:`FigureHelpers`) while the caller goes
+    on (scoring, the metric plots, TensorBoard), the caller joining in at :meth:`result`: each
+    figure costs about half a second of text layout and PNG encoding, and a report has one per
+    scenario. A figure is drawn by whoever claims it first (:func:`_claim`), the helpers from the
+    front of the list and the caller from the back, so the work divides itself however long the
+    caller's own part took; what a helper claimed but did not draw (it failed) the caller draws.
+    ``helpers``: started ones (used up here), how many to start, or None: as many as suit."""
 
-    def __init__(self, figures: list[_TrajectoryFigure], helpers: int | None = None):
-        import os
+    def __init__(self, figures: list[_TrajectoryFigure], helpers: FigureHelpers | int | None = None):
+        import pickle
+        import tempfile
 
         self.figures = figures
-        if helpers is None:
-            helpers = min((os.cpu_count() or 1) - 1, 3, len(figures) // 3)
-        shares = [figures[k :: helpers + 1] for k in range(helpers + 1)]
-        self.mine = shares[0]
-        self.helpers = [(share, _start_helper(share)) for share in shares[1:]]
+        if not isinstance(helpers, FigureHelpers):
+            helpers = FigureHelpers.for_figures(len(figures)) if helpers is None else FigureHelpers(helpers)
+        self.folder = Path(tempfile.mkdtemp(prefix="smarts-figures-"))
+        (self.folder / "figures.pickle").write_bytes(pickle.dumps(figures))
+        self.helpers, helpers.processes = helpers.processes, []
+        for process in self.helpers:
+            with contextlib.suppress(OSError):  # one that died: its exit status says so below
+                process.stdin.write(f"{self.folder}\n".encode())
+                process.stdin.flush()  # (closed by communicate())
+
+    def cancel(self) -> None:
+        """Stop the helpers and remove the scratch folder (the report failed before its figures)."""
+        import shutil
+
+        for process in self.helpers:
+            process.kill()
+            process.communicate()
+        shutil.rmtree(self.folder, ignore_errors=True)
 
     def result(self) -> dict[str, Path]:
+        import shutil
+
         try:
-            drawn = _draw_trajectories(self.mine)
-        finally:  # the helpers are waited for (and their files removed) whatever happens here
-            finished = [(share, *process.communicate(), process.returncode) for share, (process, _) in self.helpers]
-            for _, (_, pickled) in self.helpers:
-                pickled.unlink(missing_ok=True)
-        for share, out, err, code in finished:
+            drawn = {}
+            for k in reversed(range(len(self.figures))):
+                if _claim(self.folder, k) and (path := _trajectory_figure(self.figures[k])) is not None:
+                    drawn[self.figures[k].scenario] = path
+        finally:  # the helpers are waited for (and the scratch folder removed) whatever happens here
+            finished = [(*process.communicate(), process.returncode) for process in self.helpers]
+            shutil.rmtree(self.folder, ignore_errors=True)
+        failed = False
+        for out, err, code in finished:
             if code == 0:
                 drawn.update({name: Path(path) for name, path in json.loads(out).items()})
             else:
+                failed = True
                 why = err.decode(errors="replace").strip().splitlines()[-1:] or [f"exit status {code}"]
                 _log.warning("a figure helper failed (%s); drawing its figures here", why[0])
-                drawn.update(_draw_trajectories(share))
+        if failed:
+            drawn.update(_draw_trajectories([f for f in self.figures if f.scenario not in drawn]))
         return {f.scenario: drawn[f.scenario] for f in self.figures if f.scenario in drawn}
 
 
-def _start_helper(share: list[_TrajectoryFigure]):
-    """A helper drawing ``share``: (its process, the file holding its figures pickled)."""
+def _claim(folder: Path, k: int) -> bool:
+    """Whether this process is the first to claim figure ``k`` (a file created exclusively)."""
     import os
-    import pickle
+
+    try:
+        os.close(os.open(folder / f"{k}.claim", os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+    except FileExistsError:
+        return False
+    return True
+
+
+def _start_helper():
+    """A helper process (:func:`_helper_main`), its figures' folder still to be written to its stdin."""
+    import os
     import subprocess
     import sys
-    import tempfile
 
     import smarts
 
     env = dict(os.environ)  # the helper imports this process's smarts, wherever it came from
     root = str(Path(smarts.__file__).resolve().parents[1])
     env["PYTHONPATH"] = os.pathsep.join([root, *filter(None, [env.get("PYTHONPATH")])])
-    with tempfile.NamedTemporaryFile("wb", prefix="smarts-figures-", suffix=".pickle", delete=False) as fh:
-        pickle.dump(share, fh)
-    process = subprocess.Popen(
-        [sys.executable, "-c", "from smarts.benchmark.report import _helper_main; _helper_main()", fh.name],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+    return subprocess.Popen(
+        [sys.executable, "-c", "from smarts.benchmark.report import _helper_main; _helper_main()"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
     )  # fmt: skip
-    return process, Path(fh.name)
 
 
 def _helper_main() -> None:
-    """A figure helper: the figures its parent pickled (file in argv), scenario -> file as JSON out."""
+    """A figure helper: imports what drawing takes, then reads the folder of its parent's pickled
+    figures from stdin (nothing: it is not needed after all) and draws those it claims first,
+    writing scenario -> file as JSON."""
     import pickle
     import sys
 
-    drawn = _draw_trajectories(pickle.loads(Path(sys.argv[1]).read_bytes()))
-    sys.stdout.write(json.dumps({name: str(path) for name, path in drawn.items()}))
+    _pyplot()
+    import smarts.env.assembly  # noqa: F401 - the maps, for the roads
+    import smarts.replay.render  # noqa: F401
+
+    line = sys.stdin.readline().strip()
+    if not line:
+        return
+    folder = Path(line)
+    figures = pickle.loads((folder / "figures.pickle").read_bytes())
+    drawn = {}
+    for k, figure in enumerate(figures):
+        if _claim(folder, k) and (path := _trajectory_figure(figure)) is not None:
+            drawn[figure.scenario] = str(path)
+    sys.stdout.write(json.dumps(drawn))
 
 
 def _draw_trajectories(figures: list[_TrajectoryFigure]) -> dict[str, Path]:

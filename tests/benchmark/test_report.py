@@ -122,7 +122,7 @@ def test_figures_drawn_by_a_helper_process_are_the_figures_drawn_here(adaptive_r
     from dataclasses import replace
 
     from smarts.benchmark.metrics import read_episode
-    from smarts.benchmark.report import _draw_trajectories, _Drawing, _trajectory_plots
+    from smarts.benchmark.report import FigureHelpers, _draw_trajectories, _Drawing, _trajectory_plots
 
     suite = load_suite(adaptive_report / "two.yaml")
     results = []
@@ -139,6 +139,16 @@ def test_figures_drawn_by_a_helper_process_are_the_figures_drawn_here(adaptive_r
     for name in drawn:
         assert drawn[name].parent == tmp_path
         assert drawn[name].read_bytes() == expected[name].read_bytes(), name
+    for path in drawn.values():
+        path.unlink()
+    started = FigureHelpers(1)  # started ahead (as beside a benchmark's episodes), then given the figures
+    drawn = _Drawing(figures, helpers=started).result()
+    assert started.processes == [] and {name: p.read_bytes() for name, p in drawn.items()} == {
+        name: p.read_bytes() for name, p in expected.items()
+    }
+    unused = FigureHelpers(2)
+    unused.close()
+    assert unused.processes == []
     for path in drawn.values():
         path.unlink()
     monkeypatch.setenv("PYTHONHOME", str(tmp_path / "no-python-here"))  # the helper cannot start
