@@ -7,6 +7,7 @@ recipe change or a SUMO upgrade produces a fresh build instead of silently reusi
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import logging
@@ -23,6 +24,7 @@ from typing import Any
 
 from smarts import cache
 from smarts.cache import cache_home
+from smarts.files import atomic_write_text
 from smarts.core.errors import NetconvertError, ScenarioError
 
 CACHE_LAYOUT_VERSION = 3
@@ -417,8 +419,27 @@ def netconvert_binary() -> str:
 
 @functools.cache
 def netconvert_version() -> str:
-    """First line of ``netconvert --version`` (part of the cache key)."""
+    """First line of ``netconvert --version`` (part of the cache key), remembered on disk for
+    this binary (its path, size and modification time): running it costs about 0.2 s, paid by
+    every process that loads a built-in map (each benchmark worker, each figure helper)."""
     binary = netconvert_binary()
+    try:
+        st = os.stat(binary)
+    except OSError:
+        return _ask_netconvert_version(binary)  # which says what is wrong with it
+    stamp = f"{os.path.realpath(binary)}\0{st.st_size}\0{st.st_mtime_ns}"
+    memo = cache_home() / "netconvert-versions" / hashlib.sha256(stamp.encode()).hexdigest()[:32]
+    with contextlib.suppress(OSError, UnicodeDecodeError):
+        if version := memo.read_text(encoding="utf-8").strip():
+            return version
+    version = _ask_netconvert_version(binary)
+    with contextlib.suppress(OSError):  # a cache that cannot be written only costs the time
+        memo.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(memo, version)
+    return version
+
+
+def _ask_netconvert_version(binary: str) -> str:
     try:
         result = subprocess.run([binary, "--version"], capture_output=True, text=True, check=False)
     except OSError as exc:

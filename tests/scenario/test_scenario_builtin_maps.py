@@ -336,3 +336,27 @@ def test_read_only_cache_falls_back_and_still_reads_its_entries(tmp_path, fresh_
     finally:
         for folder in (tmp_path, cache_root(tmp_path)):
             folder.chmod(0o700)
+
+
+def test_netconvert_version_is_asked_once_per_binary(tmp_path, monkeypatch):
+    """The version (part of every map's cache key) is remembered on disk for the binary (path,
+    size, modification time), so later processes do not run netconvert for it; another binary at
+    the same path is asked again."""
+    from smarts.scenario import builtin_maps
+
+    monkeypatch.setenv(cache.ENV_VAR, str(tmp_path / "cache"))
+    asked = []
+    ask = builtin_maps._ask_netconvert_version
+    monkeypatch.setattr(builtin_maps, "_ask_netconvert_version", lambda binary: asked.append(binary) or ask(binary))
+    real = builtin_maps.netconvert_version.__wrapped__
+    first = real()
+    assert first.startswith("Eclipse SUMO netconvert") and len(asked) == 1
+    assert real() == first and len(asked) == 1  # as a new process would: from the file
+    stand_in = tmp_path / "netconvert"  # a binary replaced in place: its size and time change
+    stand_in.write_text("#!/bin/sh\necho 'Eclipse SUMO netconvert 0.0.1'\n")
+    stand_in.chmod(0o755)
+    monkeypatch.setattr(builtin_maps, "netconvert_binary", lambda: str(stand_in))
+    assert real() == "Eclipse SUMO netconvert 0.0.1" and len(asked) == 2
+    stand_in.write_text("#!/bin/sh\necho 'Eclipse SUMO netconvert 0.0.22'\n")
+    assert real() == "Eclipse SUMO netconvert 0.0.22" and len(asked) == 3
+    assert real() == "Eclipse SUMO netconvert 0.0.22" and len(asked) == 3
