@@ -99,6 +99,7 @@ class StatefulPlanner:
 
     action_space = RELATIVE_TARGET_POSE
     dt = 0.1
+    batching = "instances"  # per-agent memory across calls: one instance per benchmark episode
 
     def __init__(self) -> None:
         self._states: list[AgentState] = []

@@ -55,13 +55,15 @@ def _same(a, b, where: str) -> None:
         assert a == b, where
 
 
-def _run_both(tmp_path, suite_file, agents, episodes, resolver=None, workers=1):
-    """Per-episode and batched runs of the same jobs: (results, folder) of each."""
+def _run_both(tmp_path, suite_file, agents, episodes, resolver=None, workers=1, references=None):
+    """Per-episode and batched runs of the same jobs: (results, folder) of each; with the
+    reference agents unless ``references`` is False (default: with the installed resolver)."""
     suite = load_suite(suite_file)
+    references = resolver is None if references is None else references
     out = {}
     for batch in (False, True):
         folder = tmp_path / ("batched" if batch else "per_episode")
-        jobs = plan_jobs(agents, suite, episodes, folder, policy_resolver=resolver, references=resolver is None)
+        jobs = plan_jobs(agents, suite, episodes, folder, policy_resolver=resolver, references=references)
         results = run_jobs(jobs, workers=workers, progress=False, policy_resolver=resolver, batch=batch)
         write_report(folder, suite, agents, results)
         out[batch] = (results, folder)
@@ -97,6 +99,17 @@ def test_a_suite_gives_the_same_logs_and_results_batched_as_one_env_per_episode(
     if suite_file == FOLLOW:  # both endings of a following episode happened
         ends = {r["scenario"]: read_episode(r["log"]).end_time for r in results if r["agent"] == "zoo:stand-still"}
         assert ends["f1_lead_stays"] == pytest.approx(6.0) and ends["f2_lead_leaves_the_map"] < 7.0
+
+
+def test_the_ported_planners_give_the_same_logs_batched_as_one_env_per_episode(tmp_path):
+    """TF, VCR and AID keep memory per agent across calls (``instances``: an instance per
+    episode), with their learned parts (the stop/move veto, the event classifier over rasters,
+    the motion predictor); a suite's episodes of each share one simulation."""
+    agents = ["zoo:tf", "zoo:vcr", "zoo:aid"]
+    suite = load_suite(TINY)
+    jobs = plan_jobs(agents, suite, 1, tmp_path / "plan", references=False)
+    assert sorted(map(len, plan_units(jobs, list(range(len(jobs)))))) == [len(suite.scenarios)] * 3
+    _assert_identical(_run_both(tmp_path, TINY, agents, 1, references=False))
 
 
 def test_episodes_whose_policy_fails_in_a_batch_are_recorded_as_alone(tmp_path):
