@@ -27,8 +27,8 @@ from collections.abc import Callable
 from typing import Any
 
 from smarts.benchmark.jobs import Job, finished_episode, write_failed_episode
-from smarts.worker_processes import sigint_deferred, worker_context
 from smarts.core.policies import PolicyResolver
+from smarts.worker_processes import sigint_deferred, worker_context
 
 RETRIES = 1
 """How many times an episode whose worker process died runs again, in a fresh worker, before it is

@@ -33,8 +33,10 @@ from enum import IntEnum
 import numba
 import numpy as np
 
+import smarts.core.geometry as _geometry
 from smarts.comms.config import CommsConfig
 from smarts.core.geometry import wrap_scalar
+from smarts.core.records import cache_depends_on
 from smarts.core.vehicle_table import COLUMN, Role, VehicleTable
 
 TRAFFIC_PAYLOAD_FIELDS: tuple[str, ...] = (
@@ -520,6 +522,7 @@ def _nearest_first(dist2, index, m, take):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_geometry)
 def _deliver(
     steps,
     episode,

@@ -182,6 +182,7 @@ _END_MARGIN = 0.5
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_drivable)
 def event_tables(tables):  # pragma: no cover - compiled
     """The ``EventTables`` of a frozen ``SimTables`` (read once per kernel call: the per-episode
     calls then pass values, not the record)."""
@@ -347,6 +348,7 @@ def _collides(data, alive, r, x, y, radius, own, other):  # pragma: no cover - c
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+@cache_depends_on(_drivable)
 def _corner_off_road(flat_raster, raster_width, raster_origin, inv_res, cell_max, own):  # pragma: no cover - compiled
     """Whether any of the four box corners ``own`` lies off the drivable raster."""
     off = False

@@ -54,6 +54,7 @@ def advance_clocks(episode_step, episode_time, dt):  # pragma: no cover - compil
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_projection_module)
 def project_rows(t, rows):  # pragma: no cover - compiled
     """Lane, s, t, lane heading and distance of ``rows``, each on its episode's map."""
     grids = Grids(t.grid_table, t.grid_offsets, t.grid_segs, t.grid_cell_base, t.grid_ny, t.grid_origin,

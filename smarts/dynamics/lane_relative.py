@@ -40,8 +40,9 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+import smarts.core.geometry as _geometry
 from smarts.core.geometry import wrap_scalar
-from smarts.core.records import declare, freeze_fields, view
+from smarts.core.records import cache_depends_on, declare, freeze_fields, view
 from smarts.core.sim_records import lanes_record
 from smarts.core.spec.lane_relative import LaneRelativeParams
 from smarts.core.vehicle_table import COLUMN
@@ -224,6 +225,7 @@ def _point_on_lane(offsets, points, point_s, heading, lane, s):  # pragma: no co
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_geometry)
 def _turn_of(lanes, lane, nxt):  # pragma: no cover - compiled
     """Heading change from the end of ``lane`` through the junction that ``nxt`` enters (rad, +
     left): junction lanes with a single successor are followed to the lane leaving the junction."""
@@ -244,6 +246,7 @@ def _turn_of(lanes, lane, nxt):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_geometry)
 def _next_lane(lanes, route_road, lane, branch, agent):  # pragma: no cover - compiled
     """The successor to follow at the end of ``lane``: the default one (on the agent's route, else
     the straightest), or with a branch request the next one to its left (+1) or right (-1)."""
@@ -352,6 +355,7 @@ def _project_near(offsets, points, point_s, lane, x, y, s_hint):  # pragma: no c
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_geometry)
 def _targets_kernel(
     frozen_lanes,
     frozen_state,

@@ -23,7 +23,9 @@ import math
 import numba
 import numpy as np
 
+import smarts.core.geometry as _geometry
 from smarts.core.geometry import wrap_scalar
+from smarts.core.records import cache_depends_on
 from smarts.core.vehicle_table import COLUMN, VehicleTable
 from smarts.dynamics.action_spaces import ActionSpaceType, check_actions
 from smarts.dynamics.limits import ReachLimits
@@ -98,6 +100,7 @@ def _limit_kernel(req, speed, dt, params, out):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_geometry)
 def _move_kernel(data, rows, req, world_frame, dt, params):  # pragma: no cover - compiled
     """Limit each row's request and write its new pose and derived kinematic columns."""
     for i in range(rows.shape[0]):

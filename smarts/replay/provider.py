@@ -20,8 +20,10 @@ from typing import TYPE_CHECKING
 import numba
 import numpy as np
 
+import smarts.core.geometry as _geometry
 from smarts.core.geometry import wrap_scalar
 from smarts.core.provider import ProviderBase
+from smarts.core.records import cache_depends_on
 from smarts.core.vehicle_table import COLUMN, Role, VehicleType
 from smarts.replay.recording import FRAME_EPS, ObjectKind, Recording, interpolate
 
@@ -218,6 +220,7 @@ _ACC, _YAW, _LAT = COLUMN["accel"], COLUMN["yaw_rate"], COLUMN["lat_accel"]
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_geometry)
 def _advance_tracks(
     frame, first, count, offsets, xs, ys, hs, vs, state, row, data, dt, enter, leave
 ):  # pragma: no cover - compiled

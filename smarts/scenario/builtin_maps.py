@@ -24,8 +24,8 @@ from typing import Any
 
 from smarts import cache
 from smarts.cache import cache_home
-from smarts.files import atomic_write_text
 from smarts.core.errors import NetconvertError, ScenarioError
+from smarts.files import atomic_write_text
 
 CACHE_LAYOUT_VERSION = 3
 """Part of the cache key; bump it when the layout of a cache entry changes (3: SHA256SUMS)."""

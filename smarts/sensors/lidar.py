@@ -18,6 +18,8 @@ import gymnasium as gym
 import numba
 import numpy as np
 
+import smarts.sensors.rays as _rays
+from smarts.core.records import cache_depends_on
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import COLUMN, Role
 from smarts.sensors.interface import LidarInterface
@@ -93,6 +95,7 @@ class LidarSensor:
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_rays)
 def lidar_scan(
     data,
     role,
@@ -116,6 +119,7 @@ def lidar_scan(
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
+@cache_depends_on(_rays)
 def lidar_scan_parallel(
     data,
     role,
@@ -139,6 +143,7 @@ def lidar_scan_parallel(
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_rays)
 def _scan_one(
     data, role, alive, r, max_range, origin, inv_res, cell_max, width, clearance, dist, hit
 ):  # pragma: no cover - compiled

@@ -388,6 +388,7 @@ def _observe(
 # The blocks of ``_observe`` per agent, inlined into it by numba; they take plain arrays, not the
 # frozen records (``smarts.core.records``: a field read per agent would cost a load and a reference).
 @numba.njit(cache=True, nogil=True, inline="always")
+@cache_depends_on(_geometry)
 def _ego_features(data, r, ln, lane_width, lane_speed_limit, h, speed, ego, i):  # pragma: no cover - compiled
     """The ego block's first 12 columns of row ``r`` (lane ``ln``, -1: off every lane) into ``ego[i]``."""
     ego[i, 0] = speed
@@ -493,6 +494,7 @@ def _neighbour_features(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+@cache_depends_on(_geometry)
 def _waypoint_features(
     flat_paths, flat_valid, stride, index, offsets, a, x, y, h, c, s, waypoints, waypoint_mask, i
 ):  # pragma: no cover - compiled

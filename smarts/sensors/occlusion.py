@@ -21,6 +21,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+import smarts.sensors.rays as _rays
+from smarts.core.records import cache_depends_on
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import COLUMN
 from smarts.sensors.rays import box_interval, parallel_worth_it, slab
@@ -66,6 +68,7 @@ class ShadowCaster:
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_rays)
 def cast_shadows(
     data, alive, alive_lo, alive_hi, row_base, rows, sensor_range, depth, owner, visible
 ):  # pragma: no cover - compiled
@@ -79,6 +82,7 @@ def cast_shadows(
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
+@cache_depends_on(_rays)
 def cast_shadows_parallel(
     data, alive, alive_lo, alive_hi, row_base, rows, sensor_range, depth, owner, visible
 ):  # pragma: no cover - compiled
@@ -91,6 +95,7 @@ def cast_shadows_parallel(
 
 
 @numba.njit(cache=True, nogil=True)
+@cache_depends_on(_rays)
 def _cast_one(data, alive, base, r, sensor_range, depth, owner, visible):  # pragma: no cover - compiled
     """One agent's depth buffer, owners and visible fractions."""
     n_bins = depth.shape[0]
