@@ -5,28 +5,32 @@ Readers turn each format into a :class:`Recording` (tracks as flat arrays); the
 vehicles over and hands vehicles to the traffic model when they turn reactive.
 """
 
-from smarts.replay.load import (
-    ReplayPlan,
-    TakeOver,
-    load_recording,
-    plan_replay,
-    read_recording,
-    replay_road_map,
-    take_over_mission,
-)
-from smarts.replay.provider import ReplayProvider, table_id
-from smarts.replay.recording import DatasetMap, Recording
+from __future__ import annotations
 
-__all__ = [
-    "DatasetMap",
-    "Recording",
-    "ReplayPlan",
-    "ReplayProvider",
-    "TakeOver",
-    "load_recording",
-    "plan_replay",
-    "read_recording",
-    "replay_road_map",
-    "table_id",
-    "take_over_mission",
-]
+import importlib
+
+_EXPORTS = {
+    "ReplayPlan": "load",
+    "TakeOver": "load",
+    "load_recording": "load",
+    "plan_replay": "load",
+    "read_recording": "load",
+    "replay_road_map": "load",
+    "take_over_mission": "load",
+    "ReplayProvider": "provider",
+    "table_id": "provider",
+    "DatasetMap": "recording",
+    "Recording": "recording",
+}
+"""Public name -> submodule, imported on first use: the ``smarts replay`` commands import this
+package, and their ``--help`` needs none of the readers (about 1 s of imports)."""
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(f"smarts.replay.{_EXPORTS[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'smarts.replay' has no attribute {name!r}")

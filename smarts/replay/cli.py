@@ -20,9 +20,7 @@ from smarts import exit_codes
 from smarts.command_line import HelpFormatter
 from smarts.core.errors import MapError, ReplayError, ScenarioError
 from smarts.core.schema import Schema, locate
-from smarts.core.spec.replay import COORDINATES, REACTIVE_MODES, REPLAY_FORMATS
-from smarts.replay.load import most_at_once
-from smarts.replay.recording import MAX_COORDINATE, ObjectKind
+from smarts.core.spec.replay import COORDINATES, MAX_COORDINATE, REACTIVE_MODES, REPLAY_FORMATS
 
 MAX_WIDTH = 4096
 """Pixels: the widest picture ``show`` draws."""
@@ -141,6 +139,9 @@ def _read(args: argparse.Namespace):
 
 def summary(rec) -> dict:
     """What ``info`` prints: counts, times and extent of a recording."""
+    from smarts.replay.load import most_at_once
+    from smarts.replay.recording import ObjectKind
+
     types = {ObjectKind(int(t)).name.lower(): int(n) for t, n in zip(*np.unique(rec.kind, return_counts=True))}
     xmin, ymin, xmax, ymax = rec.extent()
     out = {

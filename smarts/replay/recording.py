@@ -22,6 +22,7 @@ import numpy as np
 
 from smarts.core.errors import ReplayError
 from smarts.core.geometry import wrap_angle
+from smarts.core.spec.replay import MAX_COORDINATE  # noqa: F401 - the readers' bound, kept importable here
 from smarts.core.vehicle_table import VehicleType
 
 
@@ -61,8 +62,6 @@ MAX_GAP_SECONDS = 10.0
 road users sharing an id (or a broken file), refused with both frames named."""
 MAX_SAMPLES = 50_000_000
 """Samples (after filling gaps) one recording may hold: about 2 GB of state arrays."""
-MAX_COORDINATE = 1.0e8
-"""m (or feet) beyond which a coordinate is not a position on Earth in any projection."""
 MAX_SPEED = 200.0
 """m/s: no road user is faster; a larger speed is a broken value."""
 MAX_SIZE = 100.0

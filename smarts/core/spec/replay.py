@@ -24,6 +24,8 @@ COORDINATES = ("local", "global")
 Global_X/Global_Y (state plane coordinates)."""
 REPLAY_MAP = "replay"
 """A scenario's ``map`` naming the dataset's own map (Argoverse 2's map JSON, Waymo's map features)."""
+MAX_COORDINATE = 1.0e8
+"""m (or feet) beyond which a coordinate is not a position on Earth in any projection."""
 MAX_REACTIVE_DISTANCE = 1000.0
 
 
