@@ -167,7 +167,6 @@ def _score(
     suite: Suite, agents: list[str], results: list[dict], ci_level: float, resamples: int, ci_seed: int
 ) -> _Scored:
     """Each agent's logs read and scored; seeds, failures and re-runs gathered from the results."""
-
     params = load_params()
     shown, references = _shown(agents, results)
     scores, crashed, setup = {}, {}, {}
@@ -584,9 +583,7 @@ class FigureHelpers:
         return cls(min((os.cpu_count() or 1) - 1, 3, figures // 3))
 
     def close(self) -> None:
-        for process in self.processes:
-            process.kill()
-            process.communicate()
+        _stop(self.processes)
         self.processes = []
 
 
@@ -618,9 +615,7 @@ class _Drawing:
         """Stop the helpers and remove the scratch folder (the report failed before its figures)."""
         import shutil
 
-        for process in self.helpers:
-            process.kill()
-            process.communicate()
+        _stop(self.helpers)
         shutil.rmtree(self.folder, ignore_errors=True)
 
     def result(self) -> dict[str, Path]:
@@ -645,6 +640,12 @@ class _Drawing:
         if failed:
             drawn.update(_draw_trajectories([f for f in self.figures if f.scenario not in drawn]))
         return {f.scenario: drawn[f.scenario] for f in self.figures if f.scenario in drawn}
+
+
+def _stop(processes: list) -> None:
+    for process in processes:
+        process.kill()
+        process.communicate()
 
 
 def _claim(folder: Path, k: int) -> bool:
