@@ -112,6 +112,30 @@ def test_the_ported_planners_give_the_same_logs_batched_as_one_env_per_episode(t
     _assert_identical(_run_both(tmp_path, TINY, agents, 1, references=False))
 
 
+def test_sb3_and_v2v_checkpoints_give_the_same_logs_batched_as_one_env_per_episode(tmp_path):
+    """A Stable-Baselines3 checkpoint (``episodes`` batching) and a PPO checkpoint trained with
+    every sensor and V2V messaging (seeded losses, connected traffic): each episode's messages,
+    sensors and actions are its own in a batch, so the logs equal one env per episode."""
+    from train.__main__ import main
+
+    common = ["--task", "platoon", "--total-steps", "64", "--envs", "2", "--frames-per-batch", "64",
+              "--minibatch-size", "32", "--epochs", "1", "--eval-episodes", "0", "--quiet",
+              "--scenarios", "adaptive:a01_straight_free"]  # fmt: skip
+    sensors = ("{neighbours: {extended: true}, occlusion: {enabled: true, mode: hide}, lidar: {rays: 8, range: 30}, "
+               "rasters: {size: 8, resolution: 2.0, layers: [drivable, occupancy, occlusion], rgb: true}}")  # fmt: skip
+    v2v = "{range: 60, latency: 1, loss: 0.2, message_size: 4, max_messages: 4, penetration: 0.5}"
+    assert main(["ppo", *common, "--lib", "sb3", "--out-dir", str(tmp_path / "sb3")]) == 0
+    assert main(["ppo", *common, "--interface", sensors, "--comms", v2v, "--out-dir", str(tmp_path / "v2v")]) == 0
+    agents = [str(tmp_path / "sb3" / "final.pt"), str(tmp_path / "v2v" / "final.pt")]
+    suite = load_suite(FOLLOW)
+    jobs = plan_jobs(agents, suite, 2, tmp_path / "plan", references=False)
+    assert sorted(map(len, plan_units(jobs, list(range(len(jobs)))))) == [2 * len(suite.scenarios)] * 2
+    out = _run_both(tmp_path, FOLLOW, agents, 2, references=False)
+    _assert_identical(out)
+    v2v_logs = [read_episode(r["log"]) for r in out[True][0] if r["agent"] == agents[1]]
+    assert all(log.info["comms"]["loss"] == 0.2 for log in v2v_logs)
+
+
 def test_episodes_whose_policy_fails_in_a_batch_are_recorded_as_alone(tmp_path):
     """A policy that raises in some episodes and sends NaN in others, each after a while: those
     episodes leave the batch and run alone, failing exactly as they always did, while the others
