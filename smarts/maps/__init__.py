@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import importlib
+from smarts.lazy_exports import lazy_exports
 
 _EXPORTS = {
     "on_road": "drivable",
@@ -29,9 +29,4 @@ command-line tool does) need not load the compiled map code (about 0.6 s of impo
 __all__ = sorted(_EXPORTS)
 
 
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        value = getattr(importlib.import_module(f"smarts.maps.{_EXPORTS[name]}"), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'smarts.maps' has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS, globals())

@@ -7,7 +7,7 @@ vehicles over and hands vehicles to the traffic model when they turn reactive.
 
 from __future__ import annotations
 
-import importlib
+from smarts.lazy_exports import lazy_exports
 
 _EXPORTS = {
     "ReplayPlan": "load",
@@ -28,9 +28,4 @@ package, and their ``--help`` needs none of the readers (about 1 s of imports)."
 __all__ = sorted(_EXPORTS)
 
 
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        value = getattr(importlib.import_module(f"smarts.replay.{_EXPORTS[name]}"), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'smarts.replay' has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS, globals())
