@@ -22,10 +22,14 @@ all-sensors case (10 agents with occlusion, 64x64 rasters of every layer with RG
 extended neighbours, and V2V messaging among 50 built-in traffic vehicles) against the same batch
 with the sensors and V2V off, and their ratio; ``SMARTS_SENSOR_THREADS`` sets the sensors' threads.
 
-``--ppo-steps N`` adds end-to-end rows: ``python -m train ppo --task platoon`` with the copies in
-``--ppo-workers`` worker processes (default 1 and 2; 0 steps them in the training process), run
-as users run it, each row the env-steps/s it records over the whole run, its update's seconds per
-batch and the rate against the first row.
+``--ppo-steps N`` adds end-to-end rows: ``python -m train ppo --task platoon`` run as users run
+it, one row per PPO setting, each the env-steps/s the run records over its whole length, its
+update's seconds per batch and its rate against the first setting. A setting is one position of
+the comma-separated ``--ppo-envs``, ``--ppo-frames``, ``--ppo-minibatch``, ``--ppo-epochs``,
+``--ppo-workers`` and ``--ppo-lr`` lists (a single value holds for every setting), e.g. the
+default compares 1 and 2 worker processes (0 steps the copies in the training process).
+``--ppo-rounds R`` runs the settings in turn R times (A B A B ...), so a machine whose speed
+drifts slows every setting alike, and reports each setting's median.
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ import platform
 import time
 import tracemalloc
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -233,43 +238,93 @@ def sensor_rows(batch: int, steps: int, warmup: int, seed: int = 0) -> list[dict
 SENSOR_AGENTS, SENSOR_VEHICLES = 10, 50
 
 
-def ppo_rate(workers: int, envs: int, steps: int, out_dir: Path, frames: int, minibatch: int, epochs: int,
-             extra: tuple[str, ...] = ()) -> dict:  # fmt: skip
-    """End-to-end env-steps/s of ``python -m train ppo --task platoon`` with the copies in
-    ``workers`` worker processes: run as users run it (a subprocess), the rate read from the
-    metrics of its final checkpoint."""
+class PPOSetting(NamedTuple):
+    """The options of one end-to-end PPO row (``lr`` None: the task config's)."""
+
+    envs: int
+    frames: int
+    minibatch: int
+    epochs: int
+    workers: int
+    lr: float | None = None
+
+    def label(self) -> str:
+        lr = "" if self.lr is None else f", lr {self.lr:g}"
+        return (f"{self.envs} copies, {self.frames} frames, minibatch {self.minibatch}, {self.epochs} epochs, "
+                f"{self.workers} workers{lr}")  # fmt: skip
+
+
+def ppo_rate(setting: PPOSetting, steps: int, out: Path, extra: tuple[str, ...] = ()) -> dict:
+    """End-to-end env-steps/s of ``python -m train ppo --task platoon`` on the batched backend with
+    ``setting``: run as users run it (a subprocess writing its run to the new folder ``out``), the
+    rate read from the metrics of its final checkpoint."""
     import subprocess
     import sys
 
     import torch
 
-    out = Path(out_dir) / f"ppo_workers{workers}"
     command = [
-        sys.executable, "-m", "train", "ppo", "--task", "platoon", "--backend", "batched", "--envs", str(envs),
-        "--workers", str(workers), "--total-steps", str(steps), "--frames-per-batch", str(frames),
-        "--minibatch-size", str(minibatch), "--epochs", str(epochs), "--eval-episodes", "0", "--out-dir", str(out),
-        "--quiet", *extra,
+        sys.executable, "-m", "train", "ppo", "--task", "platoon", "--backend", "batched",
+        "--envs", str(setting.envs), "--workers", str(setting.workers), "--total-steps", str(steps),
+        "--frames-per-batch", str(setting.frames), "--minibatch-size", str(setting.minibatch),
+        "--epochs", str(setting.epochs), *(("--lr", repr(setting.lr)) if setting.lr is not None else ()),
+        "--eval-episodes", "0", "--out-dir", str(out), "--quiet", *extra,
     ]  # fmt: skip
     done = subprocess.run(command, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
-    metrics = torch.load(out / "final.pt", weights_only=True)["metrics"]
+    metrics = torch.load(Path(out) / "final.pt", weights_only=True)["metrics"]
     return {
-        "workers": workers, "envs": envs, "total_steps": steps, "frames_per_batch": frames,
-        "minibatch_size": minibatch, "epochs": epochs, "options": list(extra),
+        **setting._asdict(), "total_steps": steps, "options": list(extra),
         "env_steps_per_s": float(metrics["perf/env_steps_per_s"]),
         "update_s": float(metrics.get("perf/update_s", float("nan"))),
         "episode_return": float(metrics.get("episode/return", float("nan"))),
     }  # fmt: skip
 
 
-def _ints(text: str, flag: str, parser: argparse.ArgumentParser) -> list[int]:
+def ppo_rows(settings: list[PPOSetting], steps: int, rounds: int, folder: Path, extra: tuple[str, ...] = (),
+             progress=None) -> list[dict]:  # fmt: skip
+    """One row per setting: the settings run in turn ``rounds`` times (runs under ``folder``, a new
+    folder per run), each row with its runs' rates, their median and its ratio to the first
+    setting's median."""
+    runs: list[list[dict]] = [[] for _ in settings]
+    for r in range(rounds):
+        for k, setting in enumerate(settings):
+            if progress is not None:
+                progress(f"PPO round {r + 1}/{rounds}, setting {k + 1}/{len(settings)}: {setting.label()}")
+            runs[k].append(ppo_rate(setting, steps, Path(folder) / f"setting{k}_round{r}", extra))
+    rows = []
+    for setting, done in zip(settings, runs):
+        rates = [run["env_steps_per_s"] for run in done]
+        rows.append({
+            **done[0], "rounds": rounds, "env_steps_per_s": float(np.median(rates)), "runs_env_steps_per_s": rates,
+            "update_s": float(np.median([run["update_s"] for run in done])),
+            "episode_return": [run["episode_return"] for run in done],
+        })  # fmt: skip
+    for row in rows:
+        row["ratio_to_first"] = row["env_steps_per_s"] / rows[0]["env_steps_per_s"]
+    return rows
+
+
+def _ints(text: str, flag: str, parser: argparse.ArgumentParser, least: int = 1) -> list[int]:
     try:
         values = [int(v) for v in text.split(",") if v.strip()]
     except ValueError:
         values = []
-    if not values or min(values) < 1:
-        parser.error(f"{flag}: expected comma-separated positive integers, got {text!r}")
+    if not values or min(values) < least:
+        what = "positive integers" if least == 1 else f"integers >= {least}"
+        parser.error(f"{flag}: expected comma-separated {what}, got {text!r}")
+    return values
+
+
+def _floats(text: str, flag: str, parser: argparse.ArgumentParser) -> list[float]:
+    """Comma-separated positive numbers (empty text: none)."""
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        values = [-1.0]
+    if values and not all(0 < v < float("inf") for v in values):
+        parser.error(f"{flag}: expected comma-separated positive numbers, got {text!r}")
     return values
 
 
@@ -279,7 +334,9 @@ def _parser() -> argparse.ArgumentParser:
         description="Batched backend against the per-env path: agent-steps/s, memory per episode, PPO env-steps/s.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument("--batches", default=",".join(map(str, DEFAULT_BATCHES)), help="episode counts B")
+    parser.add_argument(
+        "--batches", default=",".join(map(str, DEFAULT_BATCHES)), help="episode counts B ('none': no backend rows)"
+    )
     parser.add_argument("--cases", default=",".join(CASES), help=f"cases among {', '.join(CASES)}")
     parser.add_argument(
         "--steps", type=int, default=300, help="timed steps of the whole batch per row (batched backend)"
@@ -292,12 +349,16 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--ppo-steps", type=int, default=0, help="env steps of each end-to-end PPO run (0: no PPO rows)"
     )
-    parser.add_argument("--ppo-envs", type=int, default=256, help="scenario copies of the PPO runs")
-    parser.add_argument("--ppo-frames", type=int, default=16384, help="frames per batch of the PPO runs")
-    parser.add_argument("--ppo-minibatch", type=int, default=4096, help="minibatch size of the PPO runs")
-    parser.add_argument("--ppo-epochs", type=int, default=4, help="epochs of the PPO runs")
+    parser.add_argument("--ppo-envs", default="256", help="scenario copies of the PPO runs (a list: one per setting)")
+    parser.add_argument("--ppo-frames", default="16384", help="frames per batch of the PPO runs (a list)")
+    parser.add_argument("--ppo-minibatch", default="4096", help="minibatch size of the PPO runs (a list)")
+    parser.add_argument("--ppo-epochs", default="4", help="epochs of the PPO runs (a list)")
     parser.add_argument(
-        "--ppo-workers", default="1,2", help="worker processes of each PPO run (0: the training process)"
+        "--ppo-workers", default="1,2", help="worker processes of the PPO runs (a list; 0: the training process)"
+    )
+    parser.add_argument("--ppo-lr", default="", help="learning rates of the PPO runs (a list; empty: the task's)")
+    parser.add_argument(
+        "--ppo-rounds", type=int, default=1, help="times every PPO setting runs, in turn with the others"
     )
     parser.add_argument(
         "--ppo-options",
@@ -312,22 +373,37 @@ def _parser() -> argparse.ArgumentParser:
 def _checked(parser: argparse.ArgumentParser, argv: list[str] | None) -> tuple[argparse.Namespace, list, list, list]:
     """The options, with the batch sizes, cases and PPO worker counts they name (or the parser's error)."""
     args = parser.parse_args(argv)
-    batches = _ints(args.batches, "--batches", parser)
+    batches = [] if args.batches.strip() == "none" else _ints(args.batches, "--batches", parser)
     cases = [c for c in args.cases.split(",") if c.strip()]
     unknown = [c for c in cases if c not in CASES]
     if unknown or not cases:
         parser.error(f"--cases: unknown case(s) {unknown}; expected some of {', '.join(CASES)}")
     if args.steps < CHUNKS or args.warmup < 0 or args.per_env_agent_steps < 1 or args.ppo_steps < 0:
         parser.error(f"--steps must be >= {CHUNKS}, --warmup >= 0, --per-env-agent-steps >= 1, --ppo-steps >= 0")
-    if args.ppo_steps and args.ppo_minibatch > args.ppo_frames:
-        parser.error("--ppo-minibatch must be <= --ppo-frames")
-    try:
-        ppo_workers = [int(v) for v in args.ppo_workers.split(",") if v.strip()]
-    except ValueError:
-        ppo_workers = []
-    if not ppo_workers or min(ppo_workers) < 0:
-        parser.error(f"--ppo-workers: expected comma-separated numbers >= 0, got {args.ppo_workers!r}")
-    return args, batches, cases, ppo_workers
+    if args.ppo_rounds < 1:
+        parser.error(f"--ppo-rounds: expected a positive integer, got {args.ppo_rounds}")
+    return args, batches, cases, _ppo_settings(args, parser)
+
+
+def _ppo_settings(args: argparse.Namespace, parser: argparse.ArgumentParser) -> list[PPOSetting]:
+    """The PPO settings the ``--ppo-*`` lists name (position k of every list; single values broadcast)."""
+    lists = {
+        "--ppo-envs": _ints(args.ppo_envs, "--ppo-envs", parser),
+        "--ppo-frames": _ints(args.ppo_frames, "--ppo-frames", parser),
+        "--ppo-minibatch": _ints(args.ppo_minibatch, "--ppo-minibatch", parser),
+        "--ppo-epochs": _ints(args.ppo_epochs, "--ppo-epochs", parser),
+        "--ppo-workers": _ints(args.ppo_workers, "--ppo-workers", parser, least=0),
+        "--ppo-lr": _floats(args.ppo_lr, "--ppo-lr", parser) or [None],
+    }
+    count = max(len(v) for v in lists.values())
+    uneven = [flag for flag, values in lists.items() if len(values) not in (1, count)]
+    if uneven:
+        parser.error(f"{', '.join(uneven)}: give one value or {count} (one per PPO setting), as the longest list has")
+    settings = [PPOSetting(*(v[k] if len(v) > 1 else v[0] for v in lists.values())) for k in range(count)]
+    for s in settings:
+        if args.ppo_steps and s.minibatch > s.frames:
+            parser.error(f"--ppo-minibatch must be <= --ppo-frames (setting {s.label()})")
+    return settings
 
 
 def _print_batched(rows: list[dict], console) -> None:
@@ -361,40 +437,38 @@ def _sensors(args: argparse.Namespace, console) -> list[dict]:
     return sensors
 
 
-def _ppo(args: argparse.Namespace, ppo_workers: list[int], console) -> list[dict]:
-    """One end-to-end PPO run per worker count, printed against the first."""
+def _ppo(args: argparse.Namespace, settings: list[PPOSetting], console) -> list[dict]:
+    """The end-to-end PPO rows of ``settings``, printed against the first."""
+    from datetime import datetime
+
     from rich.table import Table
 
-    rows = []
-    extra = tuple(args.ppo_options.split())
-    for workers in ppo_workers:
-        console.log(f"PPO with {workers} worker process(es): {args.ppo_steps} env steps")
-        rows.append(ppo_rate(workers, args.ppo_envs, args.ppo_steps, args.ppo_dir, args.ppo_frames,
-                             args.ppo_minibatch, args.ppo_epochs, extra))  # fmt: skip
-    table = Table(title=f"PPO platoon end to end ({args.ppo_envs} copies, {args.ppo_steps} steps, frames "
-                        f"{args.ppo_frames}, minibatch {args.ppo_minibatch}, {args.ppo_epochs} epochs"
-                        f"{', ' + args.ppo_options if args.ppo_options else ''})")  # fmt: skip
-    for col in ("workers", "env-steps/s end to end", "ratio", "update s/batch"):
+    folder = args.ppo_dir / datetime.now().strftime("%Y%m%d-%H%M%S-%f")  # a new folder: runs never clash
+    rows = ppo_rows(settings, args.ppo_steps, args.ppo_rounds, folder, tuple(args.ppo_options.split()), console.log)
+    table = Table(title=f"PPO platoon end to end ({args.ppo_steps} steps per run, median of {args.ppo_rounds} "
+                        f"alternated run(s){', ' + args.ppo_options if args.ppo_options else ''})")  # fmt: skip
+    for col in ("setting", "env-steps/s end to end", "runs", "ratio", "update s/batch"):
         table.add_column(col, justify="right")
-    base = rows[0]["env_steps_per_s"]
     for r in rows:
-        table.add_row(str(r["workers"]), f"{r['env_steps_per_s']:,.0f}", f"{r['env_steps_per_s'] / base:.2f}x",
+        table.add_row(PPOSetting(*(r[f] for f in PPOSetting._fields)).label(), f"{r['env_steps_per_s']:,.0f}",
+                      ", ".join(f"{v:,.0f}" for v in r["runs_env_steps_per_s"]), f"{r['ratio_to_first']:.2f}x",
                       f"{r['update_s']:.2f}")  # fmt: skip
     console.print(table)
     return rows
 
 
 def main(argv: list[str] | None = None) -> int:
-    args, batches, cases, ppo_workers = _checked(_parser(), argv)
+    args, batches, cases, settings = _checked(_parser(), argv)
 
     from rich.console import Console
 
     console = Console(width=max(Console().width, 120))
     rows = batched_rows(batches, cases, args.steps, args.warmup, args.per_env_agent_steps,
                         progress=lambda r: console.log(f"{r['case']} B={r['batch']}: {r['agent_steps_per_s']:.0f} agent-steps/s"))  # fmt: skip
-    _print_batched(rows, console)
+    if rows:
+        _print_batched(rows, console)
     sensors = _sensors(args, console) if args.sensor_batch else []
-    ppo_rows = _ppo(args, ppo_workers, console) if args.ppo_steps else []
+    ppo = _ppo(args, settings, console) if args.ppo_steps else []
     args.out.parent.mkdir(parents=True, exist_ok=True)
     report = {
         "machine": {
@@ -404,7 +478,7 @@ def main(argv: list[str] | None = None) -> int:
         },
         "rows": rows,
         "sensors": sensors,
-        "ppo": ppo_rows,
+        "ppo": ppo,
     }
     args.out.write_text(json.dumps(report, indent=2))
     console.print(f"written: {args.out}")
