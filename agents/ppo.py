@@ -159,7 +159,10 @@ class ObsNormalizer(nn.Module):
         """Fold a batch into the running statistics, in place: torchrl's losses hold references to
         these very buffers, so replacing them would leave the loss normalising with stale ones."""
         x = x.reshape(-1, x.shape[-1])
-        batch_mean, batch_var, n = x.mean(0), x.var(0, unbiased=False), x.shape[0]
+        batch_mean, n = x.mean(0), x.shape[0]
+        # Two passes rather than ``x.var(0)``: torch's variance down the rows is a strided
+        # reduction about 4x slower than these on a training batch (32,768 x 365).
+        batch_var = (x - batch_mean).square_().mean(0)
         delta = batch_mean - self.mean
         total = self.count + n
         self.var.copy_((self.var * self.count + batch_var * n + delta**2 * self.count * n / total) / total)
@@ -168,18 +171,27 @@ class ObsNormalizer(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         std = torch.sqrt(self.var + 1e-8).clamp(min=float(self.std_floor))
-        scaled = ((x - self.mean) / std).clamp(-float(self.clip_value), float(self.clip_value))
+        limit = float(self.clip_value)
+        scaled = (x - self.mean).div_(std).clamp_(-limit, limit)  # in place on the one new tensor
         return torch.where(self.raw > 0, x, scaled)
 
-    def clipped_fraction(self, x: torch.Tensor, normalised: torch.Tensor | None = None) -> float:
+    def clipped_fraction(
+        self, x: torch.Tensor, normalised: torch.Tensor | None = None, rows: torch.Tensor | None = None
+    ) -> float:
         """Share of the (non-raw) normalised inputs that sit at the clip: a health check
-        (``normalised``: ``self(x)`` when the caller has it already)."""
+        (``normalised``: ``self(x)`` when the caller has it already; ``rows``: only these rows of
+        ``[N, D]`` inputs count)."""
+        keep = self.raw <= 0
+        if not bool(keep.any()):
+            return 0.0
         if normalised is None:
             std = torch.sqrt(self.var + 1e-8).clamp(min=float(self.std_floor))
             normalised = (x - self.mean) / std
-        at_clip = normalised.abs() >= float(self.clip_value)
-        keep = self.raw <= 0
-        return float(at_clip[..., keep].float().mean()) if bool(keep.any()) else 0.0
+        normalised = normalised.reshape(-1, keep.numel())
+        if rows is not None:
+            normalised = normalised[rows]
+        at_clip = (normalised.abs() >= float(self.clip_value)) & keep
+        return float(at_clip.sum()) / max(normalised.shape[0] * int(keep.sum()), 1)
 
     def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
         """Checkpoints written before flags and the std floor existed normalise every feature."""

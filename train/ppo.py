@@ -656,10 +656,11 @@ class Learner:
         policy must see its inputs exactly as it did when it acted, or PPO's probability ratios are
         off); the fraction of inputs its clip cut."""
         size = batch.obs.shape[-1]
-        inputs = batch.obs.reshape(-1, size)[rows]
-        clipped = self.parts.normalizer.clipped_fraction(inputs, normalised=x.reshape(-1, size)[rows])
+        inputs = batch.obs.reshape(-1, size)
+        # The health check on every 8th valid step: an estimate at an eighth of the cost of all.
+        clipped = self.parts.normalizer.clipped_fraction(inputs, normalised=x.reshape(-1, size), rows=rows[::8])
         if self.cfg.obs_norm:
-            self.parts.normalizer.update(inputs)
+            self.parts.normalizer.update(inputs[rows])
         return clipped
 
     def summary(self, stats: dict[str, list[float]], clipped: float, valid: int, frames: int) -> dict[str, float]:

@@ -23,9 +23,9 @@ extended neighbours, and V2V messaging among 50 built-in traffic vehicles) again
 with the sensors and V2V off, and their ratio; ``SMARTS_SENSOR_THREADS`` sets the sensors' threads.
 
 ``--ppo-steps N`` adds end-to-end rows: ``python -m train ppo --task platoon`` run as users run
-it, one row per PPO setting, each the env-steps/s the run records over its whole length, its
-update's seconds per batch and its rate against the first setting. A setting is one position of
-the comma-separated ``--ppo-envs``, ``--ppo-frames``, ``--ppo-minibatch``, ``--ppo-epochs``,
+it, one row per PPO setting, each the env-steps/s the run records over its whole length, the
+median seconds per batch of its update and of its wait for collection, and its rate against the
+first setting. A setting is one position of the comma-separated ``--ppo-envs``, ``--ppo-frames``, ``--ppo-minibatch``, ``--ppo-epochs``,
 ``--ppo-workers`` and ``--ppo-lr`` lists (a single value holds for every setting), e.g. the
 default compares 1 and 2 worker processes (0 steps the copies in the training process).
 ``--ppo-rounds R`` runs the settings in turn R times (A B A B ...), so a machine whose speed
@@ -274,12 +274,26 @@ def ppo_rate(setting: PPOSetting, steps: int, out: Path, extra: tuple[str, ...] 
     if done.returncode != 0:
         raise RuntimeError(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
     metrics = torch.load(Path(out) / "final.pt", weights_only=True)["metrics"]
+    per_batch = _tensorboard_series(Path(out) / "tensorboard", ("perf/update_s", "perf/wait_s"))
     return {
         **setting._asdict(), "total_steps": steps, "options": list(extra),
         "env_steps_per_s": float(metrics["perf/env_steps_per_s"]),
-        "update_s": float(metrics.get("perf/update_s", float("nan"))),
+        # Medians over the batches: the last batch's own figures (in final.pt) have no collection
+        # running beside its update.
+        "update_s": float(np.median(per_batch["perf/update_s"])) if per_batch["perf/update_s"] else float("nan"),
+        "wait_s": float(np.median(per_batch["perf/wait_s"])) if per_batch["perf/wait_s"] else float("nan"),
         "episode_return": float(metrics.get("episode/return", float("nan"))),
     }  # fmt: skip
+
+
+def _tensorboard_series(folder: Path, tags: tuple[str, ...]) -> dict[str, list[float]]:
+    """The values of ``tags`` in a run's TensorBoard events, in step order."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    events = EventAccumulator(str(folder), size_guidance={"scalars": 0})
+    events.Reload()
+    found = events.Tags()["scalars"]
+    return {tag: [e.value for e in events.Scalars(tag)] if tag in found else [] for tag in tags}
 
 
 def ppo_rows(settings: list[PPOSetting], steps: int, rounds: int, folder: Path, extra: tuple[str, ...] = (),
@@ -299,6 +313,7 @@ def ppo_rows(settings: list[PPOSetting], steps: int, rounds: int, folder: Path, 
         rows.append({
             **done[0], "rounds": rounds, "env_steps_per_s": float(np.median(rates)), "runs_env_steps_per_s": rates,
             "update_s": float(np.median([run["update_s"] for run in done])),
+            "wait_s": float(np.median([run["wait_s"] for run in done])),
             "episode_return": [run["episode_return"] for run in done],
         })  # fmt: skip
     for row in rows:
@@ -447,12 +462,12 @@ def _ppo(args: argparse.Namespace, settings: list[PPOSetting], console) -> list[
     rows = ppo_rows(settings, args.ppo_steps, args.ppo_rounds, folder, tuple(args.ppo_options.split()), console.log)
     table = Table(title=f"PPO platoon end to end ({args.ppo_steps} steps per run, median of {args.ppo_rounds} "
                         f"alternated run(s){', ' + args.ppo_options if args.ppo_options else ''})")  # fmt: skip
-    for col in ("setting", "env-steps/s end to end", "runs", "ratio", "update s/batch"):
+    for col in ("setting", "env-steps/s end to end", "runs", "ratio", "update s/batch", "wait s/batch"):
         table.add_column(col, justify="right")
     for r in rows:
         table.add_row(PPOSetting(*(r[f] for f in PPOSetting._fields)).label(), f"{r['env_steps_per_s']:,.0f}",
                       ", ".join(f"{v:,.0f}" for v in r["runs_env_steps_per_s"]), f"{r['ratio_to_first']:.2f}x",
-                      f"{r['update_s']:.2f}")  # fmt: skip
+                      f"{r['update_s']:.2f}", f"{r['wait_s']:.2f}")  # fmt: skip
     console.print(table)
     return rows
 

@@ -69,6 +69,7 @@ def test_ppo_settings_are_trained_and_reported(tmp_path):
     rows = report["ppo"]
     assert [(r["epochs"], r["lr"], r["workers"], r["envs"]) for r in rows] == [(2, 0.0001, 0, 2), (1, 0.0003, 0, 2)]
     assert all(r["env_steps_per_s"] > 0 and r["runs_env_steps_per_s"] == [r["env_steps_per_s"]] for r in rows)
+    assert all(r["update_s"] > 0 and r["wait_s"] >= 0 for r in rows)  # medians over the batches
     assert rows[1]["ratio_to_first"] == rows[1]["env_steps_per_s"] / rows[0]["env_steps_per_s"]
     (stamp,) = (tmp_path / "runs").iterdir()  # each run in its own folder, with the asked settings
     configs = {f.name: json.loads((f / "config.json").read_text()) for f in stamp.iterdir()}
@@ -87,7 +88,7 @@ def test_ppo_rounds_alternate_the_settings_and_take_medians(tmp_path, monkeypatc
 
     def rate(setting, steps, out, extra=()):
         calls.append((setting.epochs, Path(out).name))
-        return {**setting._asdict(), "total_steps": steps, "options": list(extra), "update_s": 0.5,
+        return {**setting._asdict(), "total_steps": steps, "options": list(extra), "update_s": 0.5, "wait_s": 0.0,
                 "env_steps_per_s": 1000.0 * setting.epochs + len(calls), "episode_return": 1.0}  # fmt: skip
 
     monkeypatch.setattr(batched_step, "ppo_rate", rate)
