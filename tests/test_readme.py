@@ -70,6 +70,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "python -m pytest -q -n auto": (CI, "the whole suite, this file included; .ci/run runs exactly this"),
     "python -m train ppo --task platoon": (PARSE, "300k training steps, about 7 minutes"),
     "python -m train ppo --task drive": (PARSE, "a full PPO training run"),
+    "python -m train ppo --config configs/train/platoon-batched.yaml": (PARSE, "9.6M training steps, about 13 minutes"),
     "python -m train ppo --task platoon --action-space continuous --init-from "
     "runs/train/platoon/latest/best.pt --runs-dir runs/train/platoon-c": (
         PARSE,
@@ -83,6 +84,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "python -m smarts.diagnostic --batched --ppo-steps 98304": (
         NOT_RUN,
         "minutes of timing up to B = 1,024 and two PPO runs; tests/batched/test_batched_diagnostic.py runs it on a tiny budget",
+    ),
+    "python -m smarts.diagnostic --batched --batches none --sensor-batch 0 --ppo-steps 786432 --ppo-envs 256,512 "
+    "--ppo-frames 16384,32768 --ppo-minibatch 4096,2048 --ppo-epochs 4,1 --ppo-workers 1 --ppo-lr 0.0001,0.0003 "
+    "--ppo-rounds 3": (
+        NOT_RUN,
+        "six PPO runs of 786k steps, about 5 minutes; tests/batched/test_batched_diagnostic.py runs the PPO rows on a "
+        "tiny budget",
     ),
     "python -m train eval --agent runs/train/platoon/latest/best.pt --suite adaptive": (
         PARSE,
