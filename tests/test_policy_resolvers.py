@@ -147,3 +147,25 @@ print(json.dumps({"action": sb3.act(obs).tolist(), "setup": [sb3.action_space, s
     expected, _ = sb3.predict(obs, deterministic=True)
     expected = np.array(low) + (np.clip(expected, -1, 1) + 1) * 0.5 * (np.array(high) - np.array(low))
     np.testing.assert_allclose(out["action"], expected, rtol=1e-5, atol=1e-6)
+
+
+def test_a_folder_named_like_the_zoo_in_the_current_directory_is_named_in_the_error(tmp_path):
+    """``python -m`` looks in the current directory first: an output folder ``zoo/`` there hides an
+    editable install's zoo package. Either the installed zoo still loads (a regular install wins
+    over a bare folder) or the error names the folder; never the bare ``has no attribute``."""
+    (tmp_path / "zoo").mkdir()
+    code = (
+        "from smarts.core.errors import NoResolverError\n"
+        "from smarts.core.policies import default_resolver\n"
+        "try:\n"
+        "    print('loaded', default_resolver('zoo:keep-lane').action_space)\n"
+        "except NoResolverError as err:\n"
+        "    print('refused', err)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    if done.stdout.startswith("refused"):
+        assert str(tmp_path / "zoo") in done.stdout and "hides the installed one" in done.stdout
+        assert "run from another directory or rename that folder" in done.stdout
+    else:
+        assert done.stdout.strip() == "loaded relative_target_pose"

@@ -75,8 +75,29 @@ def default_resolver(locator: str, /, **kwargs: Any) -> Policy:
             f"(packages register them in the {ENTRY_POINT_GROUP!r} entry-point group; "
             "reinstall this project with `pip install -e .`)"
         )
-    resolver: PolicyResolver = points[name].load()  # imported once; later loads are lookups
+    resolver = _load_resolver(points[name])
     return resolver(locator, **kwargs)
+
+
+def _load_resolver(point: EntryPoint) -> PolicyResolver:
+    """The entry point's resolver (imported once; later loads are lookups). A folder in the current
+    directory named like the resolver's package (``zoo/``, say an output folder) comes first on
+    ``python -m``'s search path and hides the installed package: said in so many words."""
+    import sys
+
+    try:
+        return point.load()
+    except (ImportError, AttributeError) as err:
+        package = point.module.split(".")[0]
+        found = sys.modules.get(package)
+        if found is not None and getattr(found, "__file__", None) is None:  # a namespace package: a bare folder
+            folders = ", ".join(str(f) for f in getattr(found, "__path__", [])) or "?"
+            raise NoResolverError(
+                f"the policy resolver {point.name!r} ({point.value}) could not be loaded ({err}): the package "
+                f"{package!r} was found as the folder {folders}, which hides the installed one (Python looks in "
+                "the current directory first); run from another directory or rename that folder"
+            ) from None
+        raise NoResolverError(f"the policy resolver {point.name!r} ({point.value}) could not be loaded: {err}") from err
 
 
 def resolve_policy(locator: str, resolver: PolicyResolver | None = None, **kwargs: Any) -> Policy:
