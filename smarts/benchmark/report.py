@@ -308,11 +308,29 @@ def _summary_lines(suite: Suite, sc: _Scored, not_run: int, label) -> list[str]:
     for agent in shown:
         s = sc.scores[agent]
         cells = " | ".join(_cell(s.overall[n], s.overall_ci.get(n)) if s else "no episode scored" for n in names)
+        setup = sc.setup[agent]
         lines.append(
-            f"| {label(agent)} | {sc.setup[agent]['action_space']} | {sc.setup[agent]['controller']} | {cells} |"
+            f"| {label(agent)} | {setup['action_space'] or 'unknown'} | {setup['controller'] or 'unknown'} | {cells} |"
         )
+    lines += _all_failed_lines(sc, label)
     if no_spread:
         lines += ["", f"n/a: {NA_REASON}."]
+    return lines
+
+
+def _all_failed_lines(sc: _Scored, label) -> list[str]:
+    """A warning under the table for each agent none of whose episodes ran to a score: its row is
+    the score the suite gives failures, not its driving (e.g. a policy that could not be loaded)."""
+    planned = sum(len(episodes) for episodes in sc.seeds.values())
+    lines = []
+    for agent in sc.shown:
+        reasons = [f["failure"] for f in sc.failures if f["agent"] == agent]
+        if planned and len(reasons) >= planned:
+            first = next((r for r in reasons if r), "no reason recorded")
+            others = len(set(reasons)) - 1
+            lines += ["", f"**Every episode of {label(agent)} failed**, so its row scores failures, not driving. "
+                          f"Reason: {first}" + (f" (and {others} other reason(s), listed below)" if others else "")
+                          + "."]  # fmt: skip
     return lines
 
 

@@ -74,7 +74,13 @@ def test_an_episode_whose_worker_always_dies_fails_with_the_reason_and_the_rest_
         ("test:die-always", "t1_left", reason), ("test:die-always", "t2_straight_traffic", reason)]  # fmt: skip
     assert doc["agents"]["test:die-always"]["scores"]["overall"]["S_bench"] == 0.0
     assert doc["agents"]["zoo:keep-lane"]["scores"]["overall"]["S_bench"] > 0.3
-    assert f"test:die-always: t1_left #0 (seed 7): {reason}" in (tmp_path / "report.md").read_text()
+    report = (tmp_path / "report.md").read_text()
+    assert f"test:die-always: t1_left #0 (seed 7): {reason}" in report
+    assert (
+        f"**Every episode of test:die-always failed**, so its row scores failures, not driving. Reason: {reason}."
+        in report
+    )
+    assert "Every episode of zoo:keep-lane" not in report
     # A resumed run gives episodes lost to dead workers another chance (and keeps the others).
     assert finished_episode(jobs[0]) is None and finished_episode(jobs[-1]) is not None
 
