@@ -398,17 +398,21 @@ def _platoon_parts(envs: int, **overrides):
     return cfg
 
 
-def test_the_slot_collector_plays_what_the_torchrl_env_plays():
+@pytest.mark.parametrize("workers", [0, 2])
+def test_the_slot_collector_plays_what_the_torchrl_env_plays(workers):
     """The collector on the flat buffers against the TorchRL env over the same copies and seed,
     driven by the collector's own actions: the same observations the policy acted on, valid
     flags, rewards, ends and next observations (the final one where an episode ended), over
-    several episode ends and the batch's last step, so both trainers learn from the same data."""
+    several episode ends and the batch's last step, so both trainers learn from the same data.
+    With two workers the env steps in two parts and the policy acts for one while the other
+    steps; the data must be the same as in lockstep."""
     from train.ppo import Inference, SlotCollector, driving_parts, make_driving, make_env
 
     cfg = _platoon_parts(3, controller="direct", init_log_std=[0.5])  # wide raw actions: crashes, waits, restarts
-    driving = make_driving(cfg)
+    driving = make_driving(cfg.model_copy(update={"workers": workers}))
     env = make_env(cfg)
     try:
+        assert len(driving.parts) == (2 if workers == 2 else 1)
         parts = driving_parts(driving, cfg)
         parts.normalizer.update(torch.randn(256, parts.layout.size) * 2.0 + 0.5)
         policy = Inference(parts, torch.device("cpu"), seed=3)

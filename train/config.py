@@ -193,7 +193,8 @@ class TrainConfig(Schema):
         1,
         description="Processes that step the envs (<= envs): 0 steps them in this process, N >= 1 in N worker "
         "processes, each one simulation of its share, writing into one shared-memory buffer this process reads "
-        "(SUMO copies always get a process of their own); with ray_address, the Ray collectors (>= 1).",
+        "(SUMO copies always get a process of their own); with 2 or more, the policy acts for one half of the "
+        "workers' copies while the other half steps (lib torchrl); with ray_address, the Ray collectors (>= 1).",
     )
     overlap: bool = Field(
         True,

@@ -40,7 +40,7 @@ import functools
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import gymnasium as gym
@@ -349,29 +349,45 @@ class Batch:
         return int(self.valid.numel())
 
 
+class _Part:
+    """Slots a ``BatchedDriving`` steps together (one of its ``parts``), with the collector's
+    buffers for them."""
+
+    def __init__(self, index: int, rows, n: int, d: int, device: torch.device):
+        self.index = index
+        self.ids = np.arange(n)[rows]  # the part's slots
+        whole = isinstance(rows, slice)
+        self.rows = rows if whole else torch.from_numpy(self.ids)  # indexes torch tensors
+        self.device_rows = rows if whole else self.rows.to(device)
+        self.flat = torch.zeros(len(self.ids), d)  # its slots' observations after a step
+        self.first = torch.zeros(len(self.ids), d)  # ... and first observations of restarted copies
+
+
 class SlotCollector:
     """Steps a ``BatchedDriving`` for batches of slot-steps with an ``Inference`` policy, reading
     and writing the env's flat buffers (in shared memory when the copies run in workers).
 
     A slot whose agent has finished *waits* (zero observation, not valid) until every agent of its
     copy has finished; the copy then restarts and the slot goes on from the new episode's first
-    observation. ``stop`` ends a collection at the next step (Ctrl-C while overlapping)."""
+    observation. Where the env steps its slots in two parts (copies in two or more worker
+    processes), the policy acts for one part while the other part's workers step, so inference
+    and simulation overlap instead of taking turns; each slot sees the same sequence of steps.
+    ``stop`` ends a collection at the next step (Ctrl-C while overlapping)."""
 
     def __init__(self, driving, layout: ObservationLayout, policy: Inference, device: torch.device):
         self.driving, self.layout, self.policy, self.device = driving, layout, policy, device
         n, d = driving.num_slots, layout.size
         self.width = driving.action_width
+        self.parts = [_Part(i, rows, n, d, device) for i, rows in enumerate(driving.parts)]
         self.obs = torch.zeros(n, d)  # the observation each slot acts on next
         self.live = np.zeros(n, dtype=bool)
-        self._flat = torch.zeros(n, d)
-        self._first = torch.zeros(n, d)
         self.returns = np.zeros(n)
         self.lengths = np.zeros(n, dtype=np.int64)
         self.stop = threading.Event()
         self.started = False
 
     def flatten(self, obs: dict[str, np.ndarray], out: torch.Tensor) -> torch.Tensor:
-        """The per-key arrays of every slot as one [slots, D] float32 tensor (one copy)."""
+        """The per-key arrays of some slots as one [slots, D] float32 tensor (one copy)."""
         n = out.shape[0]
         torch.cat([torch.from_numpy(obs[k]).reshape(n, -1) for k in self.layout.keys], dim=1, out=out)
         return out
@@ -387,63 +403,97 @@ class SlotCollector:
         if not self.started:
             self.reset()
         n, d, dev = self.driving.num_slots, self.layout.size, self.device
-        obs = torch.empty(steps, n, d, device=dev)
-        action = torch.empty(steps, n, self.width, device=dev)
-        log_prob = torch.empty(steps, n, device=dev)
-        reward = np.zeros((steps, n), dtype=np.float32)
-        done = np.zeros((steps, n), dtype=bool)
-        terminated = np.zeros((steps, n), dtype=bool)
-        valid = np.zeros((steps, n), dtype=bool)
-        own_rows, own_obs, returns, lengths = [], [], [], []
+        batch = _Steps(
+            obs=torch.empty(steps, n, d, device=dev), action=torch.empty(steps, n, self.width, device=dev),
+            log_prob=torch.empty(steps, n, device=dev), reward=np.zeros((steps, n), dtype=np.float32),
+            done=np.zeros((steps, n), dtype=bool), terminated=np.zeros((steps, n), dtype=bool),
+            valid=np.zeros((steps, n), dtype=bool),
+        )  # fmt: skip
+        for part in self.parts:
+            self.driving.begin_step(self.act(batch, 0, part), part.index)
         for t in range(steps):
-            if self.stop.is_set():
-                raise KeyboardInterrupt
-            obs[t].copy_(self.obs, non_blocking=True)
-            valid[t] = self.live
-            act, lp = self.policy(obs[t])
-            action[t], log_prob[t] = act, lp
-            res = self.driving.step(act.cpu().numpy()[:, : self.width])
-            ended = res.terminated | res.truncated
-            reward[t], done[t], terminated[t] = res.reward, ended, res.terminated
-            following = self.flatten(res.obs, self._flat)
-            self.returns[res.acted] += res.reward[res.acted]
-            self.lengths[res.acted] += 1
-            last = t == steps - 1
-            if ended.any():
-                rows = np.flatnonzero(ended)
-                returns.append(self.returns[rows].copy())
-                lengths.append(self.lengths[rows].copy())
-                self.returns[rows], self.lengths[rows] = 0.0, 0
-                if not last:  # the last step's next observations are taken below, for every slot
-                    own_rows.append(t * n + rows)
-                    own_obs.append(following[rows].clone())
-            # What each slot acts on next: the following observation, zeros once its agent has
-            # finished, the new episode's first observation where its copy restarted.
-            nxt = following.clone() if last else following
-            nxt[torch.from_numpy(ended)] = 0.0
-            self.live &= ~ended
-            if res.restarted.any():
-                again = torch.from_numpy(res.restarted)
-                nxt[again] = self.flatten(res.first, self._first)[again]
-                self.live |= res.restarted
-            if last:  # the next observation of every slot: its final one where it ended, else the carried one
-                ending = torch.from_numpy(ended)
-                tail = torch.where(ending[:, None], following, nxt)
-                own_rows.append(t * n + np.arange(n))
-                own_obs.append(tail)
-            self.obs.copy_(nxt)
+            for part in self.parts:  # while one part steps, the policy acts for the other
+                if self.stop.is_set():
+                    raise KeyboardInterrupt
+                self.record(batch, t, part, self.driving.end_step(part.index), last=t == steps - 1)
+                if t + 1 < steps:
+                    self.driving.begin_step(self.act(batch, t + 1, part), part.index)
+        return batch.done_batch(n, d, dev)
+
+    def act(self, batch: _Steps, t: int, part: _Part) -> np.ndarray:
+        """The policy's actions for ``part``'s slots at step ``t`` (recorded with what it acted on)."""
+        rows = part.device_rows
+        batch.obs[t][rows] = self.obs[part.rows].to(self.device, non_blocking=True)
+        batch.valid[t, part.ids] = self.live[part.ids]
+        action, log_prob = self.policy(batch.obs[t][rows])
+        batch.action[t][rows], batch.log_prob[t][rows] = action, log_prob
+        return action.cpu().numpy()[:, : self.width]
+
+    def record(self, batch: _Steps, t: int, part: _Part, res, last: bool) -> None:
+        """Step ``t``'s results for ``part``'s slots, and what each of them acts on next."""
+        ids, n = part.ids, self.driving.num_slots
+        ended = res.terminated | res.truncated
+        batch.reward[t, ids], batch.done[t, ids], batch.terminated[t, ids] = res.reward, ended, res.terminated
+        following = self.flatten(res.obs, part.flat)
+        acted = ids[res.acted]
+        self.returns[acted] += res.reward[res.acted]
+        self.lengths[acted] += 1
+        if ended.any():
+            local = np.flatnonzero(ended)
+            rows = ids[local]
+            batch.returns.append(self.returns[rows].copy())
+            batch.lengths.append(self.lengths[rows].copy())
+            self.returns[rows], self.lengths[rows] = 0.0, 0
+            if not last:  # the last step's next observations are taken below, for every slot
+                batch.own_rows.append(t * n + rows)
+                batch.own_obs.append(following[local].clone())
+        # What each slot acts on next: the following observation, zeros once its agent has
+        # finished, the new episode's first observation where its copy restarted.
+        nxt = following.clone() if last else following
+        nxt[torch.from_numpy(ended)] = 0.0
+        self.live[ids] &= ~ended
+        if res.restarted.any():
+            again = torch.from_numpy(res.restarted)
+            nxt[again] = self.flatten(res.first, part.first)[again]
+            self.live[ids] |= res.restarted
+        if last:  # the next observation of every slot: its final one where it ended, else the carried one
+            tail = torch.where(torch.from_numpy(ended)[:, None], following, nxt)
+            batch.own_rows.append(t * n + ids)
+            batch.own_obs.append(tail)
+        self.obs[part.rows] = nxt
+
+
+@dataclass
+class _Steps:
+    """A batch being collected: the per-step arrays [T, S, ...] and the rows whose next
+    observation is their own (``Batch.own_next``), with those observations."""
+
+    obs: torch.Tensor
+    action: torch.Tensor
+    log_prob: torch.Tensor
+    reward: np.ndarray
+    done: np.ndarray
+    terminated: np.ndarray
+    valid: np.ndarray
+    own_rows: list = field(default_factory=list)
+    own_obs: list = field(default_factory=list)
+    returns: list = field(default_factory=list)
+    lengths: list = field(default_factory=list)
+
+    def done_batch(self, n: int, d: int, dev: torch.device) -> Batch:
+        steps = self.obs.shape[0]
         own_next = torch.zeros(steps * n, dtype=torch.bool)
-        rows = np.concatenate(own_rows) if own_rows else np.zeros(0, dtype=np.int64)
+        rows = np.concatenate(self.own_rows) if self.own_rows else np.zeros(0, dtype=np.int64)
         own_next[torch.from_numpy(rows)] = True
         order = np.argsort(rows, kind="stable")  # own_next_obs in the row order of own_next
-        own_stack = torch.cat(own_obs)[torch.from_numpy(order)] if own_obs else torch.zeros(0, d)
+        own_stack = torch.cat(self.own_obs)[torch.from_numpy(order)] if self.own_obs else torch.zeros(0, d)
         return Batch(
-            obs=obs, action=action, log_prob=log_prob,
-            reward=torch.from_numpy(reward).to(dev), done=torch.from_numpy(done).to(dev),
-            terminated=torch.from_numpy(terminated).to(dev), valid=torch.from_numpy(valid).to(dev),
+            obs=self.obs, action=self.action, log_prob=self.log_prob,
+            reward=torch.from_numpy(self.reward).to(dev), done=torch.from_numpy(self.done).to(dev),
+            terminated=torch.from_numpy(self.terminated).to(dev), valid=torch.from_numpy(self.valid).to(dev),
             own_next=own_next.reshape(steps, n).to(dev), own_next_obs=own_stack.to(dev),
-            episode_returns=np.concatenate(returns) if returns else np.zeros(0),
-            episode_lengths=np.concatenate(lengths) if lengths else np.zeros(0),
+            episode_returns=np.concatenate(self.returns) if self.returns else np.zeros(0),
+            episode_lengths=np.concatenate(self.lengths) if self.lengths else np.zeros(0),
         )  # fmt: skip
 
 

@@ -5,8 +5,10 @@ import os
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from smarts.benchmark.suites import load_suite
+from smarts.core.errors import ActionError
 from smarts.env.batched import BatchedDriving
 from smarts.env.batched.driving import SharedArrays
 
@@ -65,3 +67,48 @@ def test_shared_arrays_attach_by_name_to_the_same_memory():
     finally:
         other.release()
         owner.release(unlink=True)
+
+
+def test_stepping_in_two_parts_gives_what_stepping_all_slots_at_once_gives():
+    """With the copies in two workers, ``begin_step``/``end_step`` step each worker's slots apart
+    (a caller acts for one part while the other steps); every slot sees the same observations,
+    rewards, ends and restarts as with ``step``, and misuse is refused by name."""
+    specs = _specs("a01_straight_free", "a02_straight_two_followers_low", "a01_straight_free", "a01_straight_free")
+    parted, whole = BatchedDriving(specs, workers=2), BatchedDriving(specs)
+    try:
+        assert len(whole.parts) == 1 and len(parted.parts) == 2
+        ids = [np.arange(parted.num_slots)[rows] for rows in parted.parts]
+        assert sorted(np.concatenate(ids).tolist()) == list(range(parted.num_slots))
+        parted.set_seed(9)
+        whole.set_seed(9)
+        parted.reset(), whole.reset()
+        rng = np.random.default_rng(1)
+        restarts = 0
+        for _ in range(120):
+            actions = rng.uniform(-1.0, 1.0, size=(whole.num_slots, whole.action_width))
+            for p, rows in enumerate(parted.parts):
+                parted.begin_step(actions[rows], p)
+            got = [parted.end_step(p) for p in range(len(parted.parts))]
+            want = whole.step(actions)
+            for rows, res in zip(parted.parts, got):
+                for key in res.obs:
+                    np.testing.assert_array_equal(res.obs[key], want.obs[key][rows])
+                for field in ("reward", "terminated", "truncated", "acted", "restarted"):
+                    np.testing.assert_array_equal(getattr(res, field), getattr(want, field)[rows])
+                again = res.restarted
+                for key in res.first:
+                    np.testing.assert_array_equal(res.first[key][again], want.first[key][rows][again])
+            restarts += int(want.restarted.sum())
+        assert restarts > 0  # copies ended and restarted in between
+        parted.begin_step(actions[parted.parts[0]], 0)
+        with pytest.raises(RuntimeError, match="part 0 is already stepping"):
+            parted.begin_step(actions[parted.parts[0]], 0)
+        with pytest.raises(RuntimeError, match="while a part is stepping"):
+            parted.step(actions)
+        with pytest.raises(RuntimeError, match="part 1 was not begun"):
+            parted.end_step(1)
+        with pytest.raises(ActionError, match="actions of part 1: expected shape"):
+            parted.begin_step(actions, 1)
+    finally:
+        parted.close()  # with part 0 still stepping: the worker's answer is taken, then it closes
+        whole.close()

@@ -16,6 +16,7 @@ given seed instead.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -166,6 +167,15 @@ class BatchedDriving:
         self._listeners: list[Callable[[], Any]] = []
         self._arange: np.ndarray | None = None
         self._started = False  # stepping before the first reset is refused (nothing would move)
+        self._part_shards = self._split_shards()
+        self.parts: list[slice | np.ndarray] = (
+            [_rows(np.sort(np.concatenate([s.slots for s in shards]))) for shards in self._part_shards]
+            if self._part_shards
+            else [slice(0, n)]
+        )
+        """Slots that can step apart (``begin_step``/``end_step``), as rows of the slot arrays."""
+        self._part_sizes = [len(np.arange(n)[rows]) for rows in self.parts]
+        self._stepping: list[np.ndarray | None] = [None] * len(self.parts)  # actions of parts begun
 
     def _shared_spaces(self) -> tuple[gym.spaces.Box | None, gym.spaces.Dict]:
         """The action space every slot shares (None when scenarios mix action spaces: then
@@ -248,6 +258,7 @@ class BatchedDriving:
             if len(seeds) != len(self.specs):
                 raise ValueError(f"seeds: expected {len(self.specs)} seeds (one per copy), got {len(seeds)}")
             self._next_seed = [check_seed(s, f"seeds[{i}]") for i, s in enumerate(seeds)]
+        self._check_idle("reset")
         for v in self._obs.values():
             v[:] = 0
         for shard in self.shards:
@@ -279,6 +290,7 @@ class BatchedDriving:
         ignored); copies that end are reset before this returns."""
         if not self._started:
             raise RuntimeError("BatchedDriving.step() before reset(): call reset() first")
+        self._check_idle("step")
         actions = np.asarray(actions)
         n = len(self.slots)
         k = self.action_width
@@ -344,12 +356,75 @@ class BatchedDriving:
                 v[~acted] = 0
         return StepResult(out, reward, terminated, truncated, acted, restarted, self._first)
 
+    # ------------------------------------------------------------------ stepping in parts
+    def _split_shards(self) -> list[list[_Shard]]:
+        """The workers of each part: with every copy in worker processes and at least two of them,
+        the first and the second half of the workers, so a caller can act for one half while the
+        other steps; else none (all slots are one part, stepped by ``step``)."""
+        if self.groups or len(self.shards) < 2:
+            return []
+        half = len(self.shards) // 2
+        return [self.shards[:half], self.shards[half:]]
+
+    def begin_step(self, actions: np.ndarray, part: int) -> None:
+        """Start the step of the slots of ``parts[part]`` with their actions (``actions[i]`` for
+        the part's ``i``-th slot); ``end_step(part)`` waits for it. The parts step in turn, each
+        once per step, so every copy sees the same steps as with ``step``; with one part this is
+        ``step`` split in two."""
+        if self._stepping[part] is not None:
+            raise RuntimeError(f"BatchedDriving.begin_step: part {part} is already stepping; end_step({part}) first")
+        actions = np.asarray(actions)
+        if len(self.parts) == 1:
+            self._stepping[part] = actions  # stepped by end_step
+            return
+        if not self._started:
+            raise RuntimeError("BatchedDriving.begin_step() before reset(): call reset() first")
+        rows, k, count = self.parts[part], self.action_width, self._part_sizes[part]
+        if actions.ndim != 2 or actions.shape != (count, k):
+            raise ActionError(f"actions of part {part}: expected shape ({count}, {k}) (its slots, action), got "
+                              f"{actions.shape}", [])  # fmt: skip
+        if actions.dtype.kind not in "fiu":
+            raise ActionError(f"actions: expected real numbers, got dtype {actions.dtype}", [])
+        shards = self._part_shards[part]
+        whole = self._buffer.arrays["actions"]
+        whole[rows, :k] = actions
+        for shard in shards:
+            shard.check(whole[:, :k])  # every worker of the part checks before any of them moves
+        for shard in shards:
+            shard.send("step", None)
+        self._stepping[part] = actions
+
+    def end_step(self, part: int) -> StepResult:
+        """Wait for the step ``begin_step(..., part)`` began; its results over the part's slots
+        (observations in place in the shared buffer, valid until the part's next step)."""
+        actions, self._stepping[part] = self._stepping[part], None
+        if actions is None:
+            raise RuntimeError(f"BatchedDriving.end_step: part {part} was not begun; call begin_step first")
+        if len(self.parts) == 1:
+            return self.step(actions)
+        for shard in self._part_shards[part]:
+            shard.receive()  # its rows of the shared buffer now hold its step
+        rows, flags = self.parts[part], self._buffer.arrays
+        return StepResult({k: v[rows] for k, v in self._obs.items()}, flags["reward"][rows].copy(),
+                          flags["terminated"][rows].copy(), flags["truncated"][rows].copy(), flags["acted"][rows].copy(),
+                          flags["restarted"][rows].copy(), {k: v[rows] for k, v in self._first.items()})  # fmt: skip
+
+    def _check_idle(self, what: str) -> None:
+        if self._part_shards and any(a is not None for a in self._stepping):
+            raise RuntimeError(f"BatchedDriving.{what}() while a part is stepping: end_step() it first")
+
     def _identity(self, slots: np.ndarray) -> bool:
         if self._arange is None or len(self._arange) != len(slots):
             self._arange = np.arange(len(slots))
         return bool((slots == self._arange).all())
 
     def close(self) -> None:
+        for shards, began in zip(self._part_shards, self._stepping):
+            if began is not None:  # a step left running (an interrupted collection)
+                for shard in shards:
+                    with contextlib.suppress(Exception):
+                        shard.receive()
+        self._stepping = [None] * len(self.parts)
         for shard in self.shards:
             shard.close()
         self.shards = []
