@@ -97,6 +97,11 @@ def holds_benchmark_run(folder: Path) -> bool:
     return logs.is_dir() and any(logs.rglob("*.npz"))
 
 
+PACKAGE_NAMES = ("smarts", "agents", "zoo", "train")
+"""The project's top-level packages: an output folder of one of these names in the current
+directory would be imported in their place (Python looks in the current directory first)."""
+
+
 def benchmark_folder(suite_name: str, out: Path | None, resume: bool, root: Path = BENCHMARK_ROOT) -> tuple[Path, bool]:
     """``(folder, numbered)``: where a benchmark run writes, never over another run.
 
@@ -108,6 +113,12 @@ def benchmark_folder(suite_name: str, out: Path | None, resume: bool, root: Path
 
     if out is not None:
         out = Path(out)
+        if out.name in PACKAGE_NAMES and out.resolve().parent == Path.cwd().resolve():
+            raise OutputError(
+                f"output folder {out}: a folder named {out.name!r} in the current directory hides the installed "
+                f"package {out.name!r} from `python -m` (the workers load the agents through it); give another "
+                f"name, e.g. runs/{out.name}"
+            )
         if not resume and holds_benchmark_run(out):
             raise OutputError(f"output folder {out}: already holds a benchmark run (report.md, results, logs); "
                               "give another --out, or add --resume to finish that run")  # fmt: skip

@@ -66,6 +66,18 @@ def test_an_out_folder_holding_a_run_is_refused_and_resume_finishes_the_latest(i
     assert log.is_file() and not (in_empty_folder / "runs/benchmark/tiny/002").exists()
 
 
+@pytest.mark.parametrize("name", ["zoo", "./agents"])
+def test_an_out_folder_that_would_hide_a_package_is_refused_before_anything_is_written(in_empty_folder, capsys, name):
+    """``--out zoo`` in the current directory would be imported in place of the zoo package by the
+    workers that load the agents: refused up front, naming the folder, and nothing is created."""
+    assert bench("--agent", "zoo:keep-lane", "--out", name) == 2
+    err = capsys.readouterr().err
+    package = name.split("/")[-1]
+    assert f"hides the installed package {package!r}" in err and f"runs/{package}" in err
+    assert not (in_empty_folder / package).exists()
+    assert bench("--agent", "zoo:keep-lane", "--out", f"runs/{package}") == 0  # one level down is fine
+
+
 def test_eval_requires_an_agent(capsys):
     with pytest.raises(SystemExit) as stop:
         main(["eval", "--suite", TINY])
