@@ -86,11 +86,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
         NOT_RUN,
         "minutes of timing up to B = 1,024 and two PPO runs; tests/batched/test_batched_diagnostic.py runs it on a tiny budget",
     ),
-    "python -m smarts.diagnostic --batched --batches none --sensor-batch 0 --ppo-steps 786432 --ppo-envs 256,512 "
-    "--ppo-frames 16384,32768 --ppo-minibatch 4096,2048 --ppo-epochs 4,1 --ppo-workers 1 --ppo-lr 0.0001,0.0003 "
-    "--ppo-rounds 3": (
+    "python -m smarts.diagnostic --batched --batches none --sensor-batch 0 --ppo-steps 786432 --ppo-envs 256,512,512 "
+    "--ppo-frames 16384,32768,32768 --ppo-minibatch 4096,2048,2048 --ppo-epochs 4,1,1 --ppo-workers 1,1,2 "
+    "--ppo-lr 0.0001,0.0003,0.0003 --ppo-rounds 3": (
         NOT_RUN,
-        "six PPO runs of 786k steps, about 5 minutes; tests/batched/test_batched_diagnostic.py runs the PPO rows on a "
+        "nine PPO runs of 786k steps, about 6 minutes; tests/batched/test_batched_diagnostic.py runs the PPO rows on a "
         "tiny budget",
     ),
     "python -m train eval --agent runs/train/platoon/latest/best.pt --suite adaptive": (
