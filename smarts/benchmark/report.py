@@ -130,7 +130,8 @@ def write_report(
 
     plots = out / "plots"
     plots.mkdir(parents=True, exist_ok=True)
-    # Drawn beside the scoring and the metric plots (from the logs alone, so it can start first).
+    # Drawn beside the scoring (from the logs alone, so they can start first); the metric figures
+    # join them once the scores are known.
     drawing = _trajectory_plots(plots, suite, _shown(agents, results)[0], results, label, helpers)
     try:
         scored = _score(suite, agents, results, ci_level, resamples, ci_seed)
@@ -139,12 +140,14 @@ def write_report(
             json.dumps(_results_doc(suite, scored, not_run, ci_level, resamples, ci_seed), indent=2, default=float),
         )
         atomic_write_text(out / "results.csv", _results_csv(suite, scored))
-        metric_figures = _metric_plots(plots, suite, scored.scores, scored.names, label)
+        drawing.add(_metric_figures(plots, suite, scored.scores, scored.names, label))
         _tensorboard(out / "tensorboard", suite, scored.scores, scored.names, agent_label)
     except BaseException:
         drawing.cancel()
         raise
-    trajectory_figures = drawing.result()
+    drawn = drawing.result()
+    metric_figures = {key[1]: path for key, path in drawn.items() if isinstance(key, tuple)}
+    trajectory_figures = {key: path for key, path in drawn.items() if not isinstance(key, tuple)}
     lines = _summary_lines(suite, scored, not_run, label)
     lines += _figure_lines(metric_figures)
     lines += _scenario_lines(suite, scored, trajectory_figures, label)
@@ -424,10 +427,43 @@ def _colours(agents: list[str]) -> dict[str, str]:
     return out
 
 
+SPARE_INCHES = (1.5, 6.0, 3.5, 1.0)
+"""Canvas added left, right, below and above a figure before it is drawn, so what sticks out of it
+(a legend beside the axes, slanted scenario names) is drawn on the canvas and cropped to after."""
+PAD_INCHES = 0.1  # around what was drawn, as ``bbox_inches="tight"`` pads
+
+
 def _save(fig, path: Path, dpi: int = 100) -> Path:
-    """A figure as PNG through the one atomic write (readable by others, never half written)."""
+    """A figure as PNG through the one atomic write (readable by others, never half written),
+    cropped to what was drawn as ``savefig(bbox_inches="tight")`` crops it, but from a single
+    rendering: "tight" lays the figure out twice, about a third of a report figure's cost. The
+    figure is drawn on a canvas grown by :data:`SPARE_INCHES` (the axes where they were), then the
+    pixels of its tight box are encoded; should anything still reach past the canvas, it is saved
+    the two-pass way."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from PIL import Image
+
+    width, height = fig.get_size_inches()
+    left, right, below, above = SPARE_INCHES
+    grown_w, grown_h = width + left + right, height + below + above
+    for ax in fig.axes:
+        box = ax.get_position()
+        ax.set_position([(box.x0 * width + left) / grown_w, (box.y0 * height + below) / grown_h,
+                         box.width * width / grown_w, box.height * height / grown_h])  # fmt: skip
+    fig.set_size_inches(grown_w, grown_h)
+    fig.set_dpi(dpi)
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    tight = fig.get_tightbbox(canvas.get_renderer()).padded(PAD_INCHES)
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
+    if tight.x0 < 0 or tight.y0 < 0 or tight.x1 > grown_w or tight.y1 > grown_h:
+        fig.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
+    else:
+        pixels = np.asarray(canvas.buffer_rgba())
+        rows = pixels.shape[0]
+        x0, x1 = int(np.floor(tight.x0 * dpi)), int(np.ceil(tight.x1 * dpi))
+        y0, y1 = rows - int(np.ceil(tight.y1 * dpi)), rows - int(np.floor(tight.y0 * dpi))
+        Image.fromarray(pixels[y0:y1, x0:x1]).save(buffer, format="png")
     return atomic_write_bytes(path, buffer.getvalue())
 
 
@@ -440,51 +476,80 @@ def _pyplot():
     return plt
 
 
-def _metric_plots(plots: Path, suite: Suite, scores: dict, names: tuple[str, ...], label) -> dict[str, Path]:
-    """One figure per metric: overall and per scenario, a bar per agent with its interval, the
-    stand-still floor across each group, the legend beside the axes. Returns metric -> file."""
-    plt = _pyplot()
+@dataclass(frozen=True)
+class _MetricFigure:
+    """What one metric's figure needs, as plain data (it may be drawn in another process): per
+    agent in legend order its name, colour, values and intervals over ``groups`` (overall, then
+    the scenarios), and the stand-still floor's values."""
+
+    plots: Path
+    suite: str
+    name: str
+    groups: tuple[str, ...]
+    bars: tuple[tuple[str, str, tuple[float, ...], tuple[Any, ...]], ...]  # (legend name, colour, values, intervals)
+    floor: tuple[float, ...] | None
+
+    @property
+    def key(self) -> tuple[str, str]:
+        return ("metric", self.name)
+
+
+def _metric_figures(plots: Path, suite: Suite, scores: dict, names: tuple[str, ...], label) -> list[_MetricFigure]:
+    """One figure per metric (see :func:`_metric_figure`), as jobs for :class:`_Drawing`."""
     agents = [a for a, s in scores.items() if s is not None]
     if not agents:
-        return {}
+        return []
     colours = _colours(list(scores))
-    groups = ["overall"] + [s.name for s in suite.scenarios]
-    x = np.arange(len(groups), dtype=float)
-    width = 0.8 / len(agents)
+    groups = ("overall", *(s.name for s in suite.scenarios))
     floor = scores.get(FLOOR_AGENT)
-    out = {}
-    for name in names:
-        fig, ax = plt.subplots(figsize=(max(7.0, 0.22 * len(groups) * len(agents) + 3.0), 4.2))
-        for k, agent in enumerate(agents):
-            sc = scores[agent]
-            values = np.array([sc.overall[name]] + [sc.scenarios.get(g, {}).get(name, np.nan) for g in groups[1:]])
-            cis = [sc.overall_ci.get(name)] + [sc.scenario_ci.get(g, {}).get(name) for g in groups[1:]]
-            low = np.array([v - ci[0] if has_spread(ci) else 0.0 for v, ci in zip(values, cis)])
-            high = np.array([ci[1] - v if has_spread(ci) else 0.0 for v, ci in zip(values, cis)])
-            at = x - 0.4 + (k + 0.5) * width
-            ax.bar(at, values, width * 0.92, color=colours[agent], label=label(agent), zorder=2)
-            spread = np.array([has_spread(ci) for ci in cis]) & np.isfinite(values)
-            if spread.any():  # no error bar at all where the interval is n/a
-                ax.errorbar(at[spread], values[spread], yerr=np.stack([low[spread], high[spread]]), fmt="none",
-                            ecolor="black", elinewidth=0.9, capsize=2, zorder=3)  # fmt: skip
-        if floor is not None:
-            level = [floor.overall[name]] + [floor.scenarios.get(g, {}).get(name, np.nan) for g in groups[1:]]
-            ax.hlines(level, x - 0.45, x + 0.45, colors="black", linestyles="--", linewidth=1.1, zorder=3,
-                      label="stand-still (the floor)")  # fmt: skip
-        ax.axvline(0.5, color="0.6", linewidth=0.8)
-        ax.set_xticks(x, groups, rotation=40, ha="right", fontsize=8)
-        ax.get_xticklabels()[0].set_fontweight("bold")
-        ax.set_xlim(-0.6, len(groups) - 0.4)
-        ax.set_ylim(0, 1.05)
-        ax.set_ylabel(f"{name} (higher is better)")
-        ax.grid(axis="y", color="0.9", zorder=0)
-        ax.set_title(
-            f"{suite.name}: {name}, overall and per scenario (bars: mean and confidence interval)", fontsize=10
-        )
-        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-        out[name] = _save(fig, plots / f"metric_{name}.png")
-        plt.close(fig)
-    return out
+
+    def values(sc, name: str) -> tuple[float, ...]:
+        return (float(sc.overall[name]), *(float(sc.scenarios.get(g, {}).get(name, np.nan)) for g in groups[1:]))
+
+    def intervals(sc, name: str) -> tuple:
+        return (sc.overall_ci.get(name), *(sc.scenario_ci.get(g, {}).get(name) for g in groups[1:]))
+
+    return [
+        _MetricFigure(plots, suite.name, name, groups,
+                      tuple((label(a), colours[a], values(scores[a], name), intervals(scores[a], name)) for a in agents),
+                      values(floor, name) if floor is not None else None)
+        for name in names
+    ]  # fmt: skip
+
+
+def _metric_figure(job: _MetricFigure) -> Path:
+    """One metric overall and per scenario: a bar per agent with its interval, the stand-still
+    floor across each group, the legend beside the axes."""
+    plt = _pyplot()
+    groups, name = job.groups, job.name
+    x = np.arange(len(groups), dtype=float)
+    width = 0.8 / len(job.bars)
+    fig, ax = plt.subplots(figsize=(max(7.0, 0.22 * len(groups) * len(job.bars) + 3.0), 4.2))
+    for k, (legend, colour, values, cis) in enumerate(job.bars):
+        values = np.array(values)
+        low = np.array([v - ci[0] if has_spread(ci) else 0.0 for v, ci in zip(values, cis)])
+        high = np.array([ci[1] - v if has_spread(ci) else 0.0 for v, ci in zip(values, cis)])
+        at = x - 0.4 + (k + 0.5) * width
+        ax.bar(at, values, width * 0.92, color=colour, label=legend, zorder=2)
+        spread = np.array([has_spread(ci) for ci in cis]) & np.isfinite(values)
+        if spread.any():  # no error bar at all where the interval is n/a
+            ax.errorbar(at[spread], values[spread], yerr=np.stack([low[spread], high[spread]]), fmt="none",
+                        ecolor="black", elinewidth=0.9, capsize=2, zorder=3)  # fmt: skip
+    if job.floor is not None:
+        ax.hlines(list(job.floor), x - 0.45, x + 0.45, colors="black", linestyles="--", linewidth=1.1, zorder=3,
+                  label="stand-still (the floor)")  # fmt: skip
+    ax.axvline(0.5, color="0.6", linewidth=0.8)
+    ax.set_xticks(x, list(groups), rotation=40, ha="right", fontsize=8)
+    ax.get_xticklabels()[0].set_fontweight("bold")
+    ax.set_xlim(-0.6, len(groups) - 0.4)
+    ax.set_ylim(0, 1.05)
+    ax.set_ylabel(f"{name} (higher is better)")
+    ax.grid(axis="y", color="0.9", zorder=0)
+    ax.set_title(f"{job.suite}: {name}, overall and per scenario (bars: mean and confidence interval)", fontsize=10)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    path = _save(fig, job.plots / f"metric_{name}.png")
+    plt.close(fig)
+    return path
 
 
 def _tracks(scene) -> dict[int, np.ndarray]:
@@ -559,6 +624,10 @@ class _TrajectoryFigure:
     labels: tuple[tuple[str, str], ...]  # (agent, legend name)
     colours: tuple[tuple[str, str], ...]
 
+    @property
+    def key(self) -> str:
+        return self.scenario
+
 
 def _trajectory_plots(
     plots: Path, suite: Suite, agents: list[str], results: list[dict], label, helpers: FigureHelpers | None = None
@@ -606,28 +675,43 @@ class FigureHelpers:
 
 
 class _Drawing:
-    """Trajectory figures drawn by helper processes (:class:`FigureHelpers`) while the caller goes
-    on (scoring, the metric plots, TensorBoard), the caller joining in at :meth:`result`: each
-    figure costs about half a second of text layout and PNG encoding, and a report has one per
-    scenario. A figure is drawn by whoever claims it first (:func:`_claim`), the helpers from the
-    front of the list and the caller from the back, so the work divides itself however long the
-    caller's own part took; what a helper claimed but did not draw (it failed) the caller draws.
-    ``helpers``: started ones (used up here), how many to start, or None: as many as suit."""
+    """A report's figures drawn by helper processes (:class:`FigureHelpers`) while the caller goes
+    on, the caller joining in at :meth:`result`: each figure costs a few tenths of a second of text
+    layout and PNG encoding, and a report has one per scenario and one per metric. The trajectory
+    figures are known first (from the logs alone); the metric figures follow once the scores are
+    (:meth:`add`). A figure is drawn by whoever claims it first (:func:`_claim`), the helpers from
+    the front of the list and the caller from the back, so the work divides itself however long
+    the caller's own part took; what a helper claimed but did not draw (it failed) the caller
+    draws. ``helpers``: started ones (used up here), how many to start, or None: as many as suit."""
 
-    def __init__(self, figures: list[_TrajectoryFigure], helpers: FigureHelpers | int | None = None):
+    def __init__(self, figures: list, helpers: FigureHelpers | int | None = None):
         import pickle
         import tempfile
 
-        self.figures = figures
+        self.figures = list(figures)
         if not isinstance(helpers, FigureHelpers):
             helpers = FigureHelpers.for_figures(len(figures)) if helpers is None else FigureHelpers(helpers)
         self.folder = Path(tempfile.mkdtemp(prefix="smarts-figures-"))
-        (self.folder / "figures.pickle").write_bytes(pickle.dumps(figures))
+        (self.folder / "figures.pickle").write_bytes(pickle.dumps(self.figures))
         self.helpers, helpers.processes = helpers.processes, []
+        self._tell(f"{self.folder}")
+
+    def _tell(self, line: str) -> None:
         for process in self.helpers:
-            with contextlib.suppress(OSError):  # one that died: its exit status says so below
-                process.stdin.write(f"{self.folder}\n".encode())
+            with contextlib.suppress(OSError):  # one that died: its exit status says so in result()
+                process.stdin.write(f"{line}\n".encode())
                 process.stdin.flush()  # (closed by communicate())
+
+    def add(self, figures: list) -> None:
+        """More figures for the helpers (they take them up after the first ones)."""
+        import pickle
+
+        if not figures:
+            return
+        name = f"more{len(self.figures)}.pickle"
+        (self.folder / name).write_bytes(pickle.dumps((len(self.figures), figures)))
+        self.figures += figures
+        self._tell(name)
 
     def cancel(self) -> None:
         """Stop the helpers and remove the scratch folder (the report failed before its figures)."""
@@ -636,28 +720,37 @@ class _Drawing:
         _stop(self.helpers)
         shutil.rmtree(self.folder, ignore_errors=True)
 
-    def result(self) -> dict[str, Path]:
+    def result(self) -> dict:
+        """Every figure drawn: its ``key`` (a trajectory figure's scenario, ``("metric", name)``)
+        -> file, in the order given; figures with nothing to draw are left out."""
         import shutil
 
         try:
             drawn = {}
             for k in reversed(range(len(self.figures))):
-                if _claim(self.folder, k) and (path := _trajectory_figure(self.figures[k])) is not None:
-                    drawn[self.figures[k].scenario] = path
+                if _claim(self.folder, k) and (path := _draw(self.figures[k])) is not None:
+                    drawn[k] = path
         finally:  # the helpers are waited for (and the scratch folder removed) whatever happens here
             finished = [(*process.communicate(), process.returncode) for process in self.helpers]
             shutil.rmtree(self.folder, ignore_errors=True)
         failed = False
         for out, err, code in finished:
             if code == 0:
-                drawn.update({name: Path(path) for name, path in json.loads(out).items()})
+                drawn.update({int(k): Path(path) for k, path in json.loads(out or "{}").items()})
             else:
                 failed = True
                 why = err.decode(errors="replace").strip().splitlines()[-1:] or [f"exit status {code}"]
                 _log.warning("a figure helper failed (%s); drawing its figures here", why[0])
         if failed:
-            drawn.update(_draw_trajectories([f for f in self.figures if f.scenario not in drawn]))
-        return {f.scenario: drawn[f.scenario] for f in self.figures if f.scenario in drawn}
+            for k, figure in enumerate(self.figures):
+                if k not in drawn and (path := _draw(figure)) is not None:
+                    drawn[k] = path
+        return {f.key: drawn[k] for k, f in enumerate(self.figures) if k in drawn}
+
+
+def _draw(figure) -> Path | None:
+    """Draw one figure job (trajectory or metric); its file, or None with nothing to draw."""
+    return _metric_figure(figure) if isinstance(figure, _MetricFigure) else _trajectory_figure(figure)
 
 
 def _stop(processes: list) -> None:
@@ -695,9 +788,10 @@ def _start_helper():
 
 
 def _helper_main() -> None:
-    """A figure helper: imports what drawing takes, then reads the folder of its parent's pickled
-    figures from stdin (nothing: it is not needed after all) and draws those it claims first,
-    writing scenario -> file as JSON."""
+    """A figure helper: imports what drawing takes, then reads from stdin the folder of its
+    parent's pickled figures (nothing: it is not needed after all) and draws those it claims
+    first; each further line names a pickle of more figures (their first index, the figures),
+    until stdin closes. Writes index -> file as JSON."""
     import pickle
     import sys
 
@@ -709,16 +803,18 @@ def _helper_main() -> None:
     if not line:
         return
     folder = Path(line)
-    figures = pickle.loads((folder / "figures.pickle").read_bytes())
     drawn = {}
-    for k, figure in enumerate(figures):
-        if _claim(folder, k) and (path := _trajectory_figure(figure)) is not None:
-            drawn[figure.scenario] = str(path)
+
+    def draw(first: int, figures: list) -> None:
+        for k, figure in enumerate(figures, start=first):
+            if _claim(folder, k) and (path := _draw(figure)) is not None:
+                drawn[k] = str(path)
+
+    draw(0, pickle.loads((folder / "figures.pickle").read_bytes()))
+    for line in sys.stdin:
+        if line.strip():
+            draw(*pickle.loads((folder / line.strip()).read_bytes()))
     sys.stdout.write(json.dumps(drawn))
-
-
-def _draw_trajectories(figures: list[_TrajectoryFigure]) -> dict[str, Path]:
-    return {f.scenario: path for f in figures if (path := _trajectory_figure(f)) is not None}
 
 
 def _trajectory_figure(figure: _TrajectoryFigure) -> Path | None:

@@ -117,32 +117,43 @@ def test_episodes_that_differ_give_intervals(tmp_path):
 
 
 def test_figures_drawn_by_a_helper_process_are_the_figures_drawn_here(adaptive_report, tmp_path, monkeypatch, caplog):
-    """Trajectory figures are shared out to helper interpreters; what a helper draws is byte for
-    byte what the report's own process draws, and a helper that fails leaves its share to it."""
+    """Trajectory and metric figures are shared out to helper interpreters (the metric ones added
+    after the first); what a helper draws is byte for byte what the report's own process draws,
+    and a helper that fails leaves its share to it."""
     from dataclasses import replace
 
     from smarts.benchmark.metrics import read_episode
-    from smarts.benchmark.report import FigureHelpers, _draw_trajectories, _Drawing, _trajectory_plots
+    from smarts.benchmark.report import FigureHelpers, _draw, _Drawing, _metric_figures, _score, _trajectory_plots
 
     suite = load_suite(adaptive_report / "two.yaml")
     results = []
     for path in sorted((adaptive_report / "logs").rglob("*.npz")):
         log = read_episode(path)
         results.append({"agent": log.info["agent"], "scenario": log.scenario, "episode": log.episode, "log": str(path)})
-    figures = _trajectory_plots(tmp_path, suite, ["zoo:keep-lane", "zoo:random"], results, str).figures
-    assert len(figures) == 2
+    agents = ["zoo:keep-lane", "zoo:random"]
+    figures = _trajectory_plots(tmp_path, suite, agents, results, str).figures
+    scored = _score(suite, agents, results, 0.95, 200, 0)
+    metrics = _metric_figures(tmp_path, suite, scored.scores, scored.names, str)
+    assert len(figures) == 2 and len(metrics) == len(scored.names) >= 4
     here = tmp_path / "here"
     here.mkdir()
-    expected = _draw_trajectories([replace(f, plots=here) for f in figures])
-    drawn = _Drawing(figures, helpers=1).result()
-    assert sorted(drawn) == sorted(expected) == ["a01_straight_free", "a09_lead_turns_right_at_signal_medium"]
+    expected = {f.key: _draw(replace(f, plots=here)) for f in [*figures, *metrics]}
+
+    def draw(helpers) -> dict:
+        drawing = _Drawing(figures, helpers=helpers)
+        drawing.add(metrics)  # once the scores are known, as write_report does
+        return drawing.result()
+
+    drawn = draw(1)
+    assert set(drawn) == set(expected)
+    assert {"a01_straight_free", "a09_lead_turns_right_at_signal_medium", ("metric", "S_bench")} <= set(drawn)
     for name in drawn:
         assert drawn[name].parent == tmp_path
         assert drawn[name].read_bytes() == expected[name].read_bytes(), name
     for path in drawn.values():
         path.unlink()
     started = FigureHelpers(1)  # started ahead (as beside a benchmark's episodes), then given the figures
-    drawn = _Drawing(figures, helpers=started).result()
+    drawn = draw(started)
     assert started.processes == [] and {name: p.read_bytes() for name, p in drawn.items()} == {
         name: p.read_bytes() for name, p in expected.items()
     }
@@ -153,6 +164,6 @@ def test_figures_drawn_by_a_helper_process_are_the_figures_drawn_here(adaptive_r
         path.unlink()
     monkeypatch.setenv("PYTHONHOME", str(tmp_path / "no-python-here"))  # the helper cannot start
     with caplog.at_level("WARNING"):
-        again = _Drawing(figures, helpers=1).result()
+        again = draw(1)
     assert "a figure helper failed" in caplog.text
     assert {name: p.read_bytes() for name, p in again.items()} == {name: p.read_bytes() for name, p in expected.items()}
