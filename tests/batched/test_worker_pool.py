@@ -11,6 +11,8 @@ from smarts.benchmark.suites import load_suite
 from smarts.core.errors import ActionError
 from smarts.env.batched import BatchedDriving
 from smarts.env.batched.driving import SharedArrays
+from smarts.scenario import load_scenario
+from smarts.sensors.observation import ObservationConfig
 
 
 def _specs(*names: str) -> list:
@@ -69,12 +71,19 @@ def test_shared_arrays_attach_by_name_to_the_same_memory():
         owner.release(unlink=True)
 
 
-def test_stepping_in_two_parts_gives_what_stepping_all_slots_at_once_gives():
+@pytest.mark.parametrize("with_sumo", [False, True])
+def test_stepping_in_two_parts_gives_what_stepping_all_slots_at_once_gives(with_sumo):
     """With the copies in two workers, ``begin_step``/``end_step`` step each worker's slots apart
     (a caller acts for one part while the other steps); every slot sees the same observations,
-    rewards, ends and restarts as with ``step``, and misuse is refused by name."""
+    rewards, ends and restarts as with ``step``, and misuse is refused by name. A SUMO copy (a
+    worker of its own) makes the second part beside one worker of the rest."""
     specs = _specs("a01_straight_free", "a02_straight_two_followers_low", "a01_straight_free", "a01_straight_free")
-    parted, whole = BatchedDriving(specs, workers=2), BatchedDriving(specs)
+    options: dict = {}
+    if with_sumo:
+        specs = [load_scenario("highway_merge_traffic"), *specs[:2]]
+        options = {"observation": ObservationConfig()}  # one interface for the SUMO scenario and the suite's
+    parted = BatchedDriving(specs, workers=1 if with_sumo else 2, **options)
+    whole = BatchedDriving(specs, **options)
     try:
         assert len(whole.parts) == 1 and len(parted.parts) == 2
         ids = [np.arange(parted.num_slots)[rows] for rows in parted.parts]
@@ -84,7 +93,7 @@ def test_stepping_in_two_parts_gives_what_stepping_all_slots_at_once_gives():
         parted.reset(), whole.reset()
         rng = np.random.default_rng(1)
         restarts = 0
-        for _ in range(120):
+        for _ in range(400 if with_sumo else 120):
             actions = rng.uniform(-1.0, 1.0, size=(whole.num_slots, whole.action_width))
             for p, rows in enumerate(parted.parts):
                 parted.begin_step(actions[rows], p)
