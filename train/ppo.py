@@ -7,7 +7,8 @@ The whole algorithm is one readable loop (``train``, at the end of this file, wi
    slot, all driven by one shared policy) run as one ``BatchedDriving``, in ``workers``
    processes over one shared-memory buffer (0: in this process). ``SlotCollector`` steps it for
    a batch of about ``frames_per_batch`` slot-steps, acting with a copy of the policy on the flat
-   observation buffer (one normalise-and-act pass per step, no TensorDict per step).
+   observation buffer (one normalise-and-act pass per step, no TensorDict per step); with two or
+   more workers it acts for one half of the workers' copies while the other half steps.
 2. ``overlap``: while the learner updates on one batch, the collector gathers the next with the
    policy of the update before (one update behind; PPO's probability ratio is taken against the
    policy that acted, so it corrects for that). Collection and update then share the machine's
