@@ -71,7 +71,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "python -m train ppo --task platoon": (PARSE, "300k training steps, about 7 minutes"),
     "python -m train ppo --task drive": (PARSE, "a full PPO training run"),
     "python -m train ppo --config configs/train/platoon-batched.yaml": (PARSE, "9.6M training steps, about 13 minutes"),
-    "python -m train ppo --config configs/train/platoon-two-cores.yaml": (PARSE, "18M training steps, about 12 minutes"),
+    "python -m train ppo --config configs/train/platoon-two-cores.yaml": (
+        PARSE,
+        "18M training steps, about 12 minutes",
+    ),
     "python -m train ppo --task platoon --action-space continuous --init-from "
     "runs/train/platoon/latest/best.pt --runs-dir runs/train/platoon-c": (
         PARSE,
