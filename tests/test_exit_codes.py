@@ -46,3 +46,23 @@ def test_a_port_in_use_is_one_clear_line(tmp_path):
 def test_the_codes_are_distinct():
     codes = [exit_codes.OK, exit_codes.FAILED, exit_codes.BAD_INPUT, exit_codes.INTERRUPTED]
     assert len(set(codes)) == 4 and exit_codes.BAD_INPUT == 2  # argparse's usage errors are 2 as well
+
+
+def test_python_m_train_ends_without_teardown_but_after_its_exit_handlers():
+    """``python -m train`` skips the interpreter's teardown (unloading torch alone is half a
+    second): its exit status is the command's, what it printed is flushed (also into a pipe), and
+    exit handlers still run (worker pools, TensorBoard writers)."""
+    code = (
+        "import atexit, sys\n"
+        "from train.__main__ import exit_without_teardown\n"
+        "atexit.register(lambda: sys.stdout.write('handler ran'))\n"
+        "sys.stdout.write('printed, ')\n"
+        "exit_without_teardown(3)\n"
+        "sys.stdout.write('never')\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                          cwd=Path(__file__).parents[1])  # fmt: skip
+    assert (done.returncode, done.stdout) == (3, "printed, handler ran"), done.stderr
+    help_run = subprocess.run([sys.executable, "-m", "train", "benchmark", "--help"], capture_output=True, text=True,
+                              timeout=60, cwd=Path(__file__).parents[1])  # fmt: skip
+    assert help_run.returncode == 0 and "--episodes" in help_run.stdout

@@ -28,7 +28,7 @@ def _benchmark(args: argparse.Namespace) -> int:
         start_worker_server()  # it imports what workers need while this process loads the agents
     from smarts.benchmark.agents import REFERENCE_AGENTS, agent_locator
     from smarts.benchmark.jobs import benchmark_folder, claim_folder, plan_jobs
-    from smarts.benchmark.report import FigureHelpers, write_report
+    from smarts.benchmark.report import FigureHelpers, LogPrefetch, write_report
     from smarts.benchmark.runner import BenchmarkInterrupted, run_jobs
     from smarts.benchmark.suites import load_suite
 
@@ -47,13 +47,14 @@ def _benchmark(args: argparse.Namespace) -> int:
     print(f"{suite.name}: {len(suite.scenarios)} scenarios x {episodes} episodes x {len(shown)} agent(s) "
           f"({', '.join(shown)}; references always included) -> {out}")  # fmt: skip
     helpers = FigureHelpers.for_figures(len(suite.scenarios))  # they load matplotlib while episodes run
+    logs = LogPrefetch()  # reads the logs as they come, while this process waits for the workers
     try:
         results = run_jobs(jobs, workers=args.workers, progress=not args.quiet, ray_address=args.ray_address,
                            resume=args.resume, episode_timeout=args.episode_timeout,
-                           batch=not args.per_episode)  # fmt: skip
+                           batch=not args.per_episode, on_result=logs.offer)  # fmt: skip
     except BenchmarkInterrupted as stop:  # Ctrl-C: report what finished, no traceback
         helpers.close()  # Ctrl-C reached them too
-        write_report(out, suite, agents, stop.finished, not_run=stop.not_run)
+        write_report(out, suite, agents, stop.finished, not_run=stop.not_run, logs=logs)
         print(f"interrupted: {len(stop.finished)} of {len(jobs)} episodes finished, reported in {out}; "
               f"the same command with --resume{'' if numbered else f' --out {out}'} runs the rest",
               file=sys.stderr)  # fmt: skip
@@ -61,7 +62,7 @@ def _benchmark(args: argparse.Namespace) -> int:
     except BaseException:
         helpers.close()
         raise
-    report = write_report(out, suite, agents, results, helpers=helpers)
+    report = write_report(out, suite, agents, results, helpers=helpers, logs=logs)
     print(report.read_text())
     failed = [r for r in results if r.get("failure")]
     if failed:
@@ -236,5 +237,22 @@ WRITE_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPE
 """Errors of writing that a user fixes (free space, permissions), reported without a traceback."""
 
 
+def exit_without_teardown(code: int | None) -> None:
+    """End the process once a command is done: the exit handlers run (worker pools, TensorBoard
+    writers, logging) and the standard streams are flushed, but the interpreter is not torn down
+    module by module. The commands' files are closed by then; the teardown only unloads the
+    libraries, and torch's alone takes about half a second of every command."""
+    import atexit
+    import os
+
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe (| head): nothing more can be said there
+            pass
+    os._exit(code or 0)
+
+
 if __name__ == "__main__":
-    raise SystemExit(main())
+    exit_without_teardown(main())

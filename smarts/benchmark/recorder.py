@@ -151,19 +151,21 @@ class EpisodeRecorder:
         of the lane is not distance still to drive."""
         rm = self.sim.road_map
         out = np.array(self.sim.mission_arrays.route_length, dtype=np.float64)
-        for a, m in enumerate(self.sim.missions):
+        for a in self.agents.tolist():  # its own agents (one episode of a batch: not the others')
+            m = self.sim.missions[a]
             if m.goal_kind == GOAL_ROAD and len(m.path_lane):
                 beyond = float(rm.lane_length[int(m.path_lane[-1])]) - float(m.goal_s)
                 out[a] = max(float(m.path_s[-1]) - max(beyond, 0.0), 0.0)
         return out
 
-    def _route_map_ends(self) -> list[frozenset[int]]:
-        """Per agent index: the lanes of its route without a successor (where the map stops)."""
+    def _route_map_ends(self) -> dict[int, frozenset[int]]:
+        """Per agent index of its own agents: the lanes of its route without a successor (where
+        the map stops)."""
         rm = self.sim.road_map
-        out = []
-        for m in self.sim.missions:
-            lanes = {int(lane) for lane in np.unique(np.asarray(m.path_lane)) if lane >= 0}
-            out.append(frozenset(lane for lane in lanes if len(rm.successors(lane)) == 0))
+        out = {}
+        for a in self.agents.tolist():
+            lanes = {int(lane) for lane in np.unique(np.asarray(self.sim.missions[a].path_lane)) if lane >= 0}
+            out[a] = frozenset(lane for lane in lanes if len(rm.successors(lane)) == 0)
         return out
 
     def _leaving_map(self, agents: np.ndarray, rows: np.ndarray) -> np.ndarray:

@@ -46,6 +46,8 @@ from smarts.files import atomic_write_bytes, atomic_write_text
 
 _log = logging.getLogger(__name__)
 
+PREFETCH_BYTES = 128 * 2**20
+"""Log files a :class:`LogPrefetch` keeps read ahead at most (about four thousand episodes)."""
 ZERO_WIDTH = 1e-12
 """An interval narrower than this has no spread behind it and is shown as n/a."""
 NA_REASON = (
@@ -110,6 +112,7 @@ def write_report(
     ci_seed: int = CI_SEED,
     not_run: int = 0,
     helpers: FigureHelpers | None = None,
+    logs: LogPrefetch | None = None,
 ) -> Path:
     """Score each agent's logs and write ``results.json``, ``results.csv``, ``report.md``,
     ``plots/`` and TensorBoard events under ``out``; returns the report path.
@@ -118,7 +121,8 @@ def write_report(
     ``plan_jobs``) are reported beside them. Intervals: ``score_suite``'s stratified bootstrap
     with ``ci_level``, ``resamples`` and ``ci_seed``. ``not_run``: planned episodes that did not
     run (an interrupted run); the report says so and ``results.json`` has ``complete: false``.
-    ``helpers``: figure helpers started ahead (:class:`FigureHelpers`), else they start here."""
+    ``helpers``: figure helpers started ahead (:class:`FigureHelpers`), else they start here.
+    ``logs``: the logs read ahead while the episodes ran (:class:`LogPrefetch`), else read here."""
     from smarts.benchmark.agents import REFERENCE_AGENTS, agent_label, agent_name
 
     out = Path(out)
@@ -134,7 +138,7 @@ def write_report(
     # join them once the scores are known.
     drawing = _trajectory_plots(plots, suite, _shown(agents, results)[0], results, label, helpers)
     try:
-        scored = _score(suite, agents, results, ci_level, resamples, ci_seed)
+        scored = _score(suite, agents, results, ci_level, resamples, ci_seed, logs.read if logs else read_episode)
         atomic_write_text(
             out / "results.json",
             json.dumps(_results_doc(suite, scored, not_run, ci_level, resamples, ci_seed), indent=2, default=float),
@@ -157,6 +161,55 @@ def write_report(
     return report
 
 
+class LogPrefetch:
+    """Episode logs read in a thread of the caller's process while the workers run the other
+    episodes, and matplotlib imported there first: during the episodes that process only waits,
+    and a report otherwise starts by reading back every log (about 5 ms each) and importing
+    pyplot (half a second). Give :meth:`offer` to ``run_jobs`` (its ``on_result``) and this to
+    :func:`write_report`; the report reads through :meth:`read`, which takes what the thread read
+    and reads the rest itself, so it scores the files on disk exactly as without it. At most
+    :attr:`budget` bytes of log files are kept ahead (about twice that in memory); later logs are
+    read when the report needs them."""
+
+    def __init__(self, budget: int = PREFETCH_BYTES):
+        import queue
+        import threading
+
+        self.budget = budget
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._logs: dict[str, Any] = {}
+        self._thread = threading.Thread(target=self._run, name="log-prefetch", daemon=True)
+        self._thread.start()
+
+    def offer(self, summary: dict) -> None:
+        """A finished episode's summary (``run_jobs``'s ``on_result``): its log is read ahead."""
+        if summary.get("log") and self.budget > 0:
+            self._queue.put(str(summary["log"]))
+
+    def _run(self) -> None:
+        import os
+
+        with contextlib.suppress(Exception):  # the report imports it again and says what is wrong
+            _pyplot()
+        while (path := self._queue.get()) is not None:
+            try:
+                size = os.path.getsize(path)
+                if size > self.budget:
+                    continue
+                self._logs[path] = read_episode(path)  # a path offered again (a re-run) is read again
+                self.budget -= size
+            except Exception:  # noqa: BLE001 - the report reads it again and says what is wrong
+                self._logs.pop(path, None)
+
+    def read(self, path: str | Path):
+        """The episode log at ``path``: read ahead, else read now (raising what ``read_episode`` raises)."""
+        if self._thread.is_alive():
+            self._queue.put(None)
+            self._thread.join()
+        log = self._logs.pop(str(path), None)
+        return log if log is not None else read_episode(path)
+
+
 def _shown(agents: list[str], results: list[dict]) -> tuple[list[str], list[str]]:
     """(the agents a report shows, the references among them): the requested agents, then the
     reference agents that have results."""
@@ -167,7 +220,13 @@ def _shown(agents: list[str], results: list[dict]) -> tuple[list[str], list[str]
 
 
 def _score(
-    suite: Suite, agents: list[str], results: list[dict], ci_level: float, resamples: int, ci_seed: int
+    suite: Suite,
+    agents: list[str],
+    results: list[dict],
+    ci_level: float,
+    resamples: int,
+    ci_seed: int,
+    read=read_episode,
 ) -> _Scored:
     """Each agent's logs read and scored; seeds, failures and re-runs gathered from the results."""
     params = load_params()
@@ -176,7 +235,7 @@ def _score(
     seeds: dict[str, dict[int, Any]] = {}  # scenario -> episode -> seed, over every job
     for agent in shown:
         mine = [r for r in results if r["agent"] == agent]
-        logs = [read_episode(r["log"]) for r in mine if r.get("log")]
+        logs = [read(r["log"]) for r in mine if r.get("log")]
         crashed[agent] = [r for r in mine if not r.get("log")]
         if logs and params.failed_episodes == "exclude" and all(log.failed for log in logs):
             crashed[agent] = [r for r in mine if r.get("failure")]  # nothing to score: list them all

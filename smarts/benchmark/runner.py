@@ -148,6 +148,7 @@ def run_jobs(
     resume: bool = False,
     episode_timeout: float | None = None,
     batch: bool = True,
+    on_result: Callable[[dict], None] | None = None,
 ) -> list[dict]:
     """Run jobs in ``workers`` processes (inline when 1), or as Ray tasks when ``ray_address`` is
     given (``auto``, ``local`` or ``HOST:PORT``); results in job order either way.
@@ -174,7 +175,10 @@ def run_jobs(
     episodes go on. A unit of several episodes (which all start together) past that long has its
     unfinished episodes run again, each alone under the same limit. With it, even ``workers`` 1
     runs in a worker process. Not for Ray tasks. A unit whose worker dies likewise keeps the
-    episodes it finished and runs the others again, each alone."""
+    episodes it finished and runs the others again, each alone.
+
+    ``on_result(summary)`` is called as each episode's result is known (a reused log's too), in
+    this process (``smarts.benchmark.report.LogPrefetch.offer`` reads the logs ahead)."""
     if episode_timeout is not None and not episode_timeout > 0:
         raise ValueError(f"episode_timeout: expected a positive number of seconds, got {episode_timeout!r}")
     if episode_timeout is not None and ray_address:
@@ -188,6 +192,8 @@ def run_jobs(
         def done(k: int, result: dict) -> None:
             results[k] = result
             bar.advance(task)
+            if on_result is not None:
+                on_result(result)
 
         todo = []
         for k, job in enumerate(jobs):

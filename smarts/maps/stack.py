@@ -144,7 +144,7 @@ class MapStack:
         """Map ``k`` in the stacked index space (see the module docstring)."""
         m, window = self.maps[k], copy.copy(self.combined)
         window.__dict__ = dict(self.combined.__dict__)
-        for name in ("_projection_index", "_raster_lookup", "_junction_table"):
+        for name in ("_projection_index", "_raster_lookup", "_junction_table", "_route_road_tables"):
             window.__dict__.pop(name, None)
         window.source, window.content_hash = m.source, m.content_hash
         for name in ("grid_origin", "grid_cell", "grid_shape", "grid_margin", "raster_origin", "raster_resolution",

@@ -167,3 +167,47 @@ def test_figures_drawn_by_a_helper_process_are_the_figures_drawn_here(adaptive_r
         again = draw(1)
     assert "a figure helper failed" in caplog.text
     assert {name: p.read_bytes() for name, p in again.items()} == {name: p.read_bytes() for name, p in expected.items()}
+
+
+def test_logs_read_ahead_score_as_the_files_on_disk(adaptive_report, tmp_path):
+    """``LogPrefetch`` reads the logs offered while episodes run; the report built from it is the
+    report built from the files, a log rewritten after it was offered is read as it is now, one
+    that does not read back raises what ``read_episode`` raises, and a budget too small for a
+    log leaves it to be read when asked for."""
+    import shutil
+
+    from smarts.benchmark.metrics import LogError, read_episode
+    from smarts.benchmark.report import LogPrefetch
+
+    paths = sorted((adaptive_report / "logs").rglob("*.npz"))
+    results = []
+    for path in paths:
+        log = read_episode(path)
+        results.append({"agent": log.info["agent"], "scenario": log.scenario, "episode": log.episode,
+                        "seed": log.seed, "log": str(path)})  # fmt: skip
+    suite = load_suite(adaptive_report / "two.yaml")
+    ahead = LogPrefetch()
+    for r in results:
+        ahead.offer(r)
+    ahead.offer({"agent": "zoo:random", "log": None})  # an episode without a log: nothing to read
+    out = tmp_path / "ahead"
+    write_report(out, suite, [], results, logs=ahead)
+    assert (out / "results.json").read_text() == (adaptive_report / "results.json").read_text()
+    assert not ahead._thread.is_alive() and ahead._logs == {}  # every log was taken by the report
+
+    first, second = tmp_path / "first.npz", tmp_path / "second.npz"
+    shutil.copy(paths[0], first)
+    second.write_bytes(b"not a log")
+    ahead = LogPrefetch()
+    ahead.offer({"log": str(first)})
+    ahead.offer({"log": str(second)})
+    first.write_bytes(paths[1].read_bytes())  # its episode ran again (a dead worker): offered again
+    ahead.offer({"log": str(first)})
+    assert read_episode(paths[0]).scenario != read_episode(paths[1]).scenario
+    assert ahead.read(first).scenario == read_episode(paths[1]).scenario
+    with pytest.raises(LogError, match="not a readable .npz episode log"):
+        ahead.read(second)
+
+    small = LogPrefetch(budget=paths[0].stat().st_size - 1)
+    small.offer({"log": str(paths[0])})
+    assert small.read(paths[0]).scenario == read_episode(paths[0]).scenario and small._logs == {}

@@ -51,3 +51,22 @@ def test_lazy_packing_gives_the_arrays_of_packing_after_every_route(crossing):
     route = lazy.add_from_lane(crossing.successors(lane)[0])
     assert lazy.slot_int.shape[1] > before and lazy.pack_count == 2
     assert lazy.slot_int[0, lazy.slot(route, int(crossing.successors(lane)[0]))] == int(crossing.successors(lane)[0])
+
+
+def test_the_road_tables_of_a_map_are_built_once_per_map_and_each_window_has_its_own():
+    """What routing reads of the map alone is built once per map instance (a batch's episodes on
+    one map share it), and each window of a map stack has its own map's tables, shifted into the
+    stack's lane indices, never another window's or the whole stack's."""
+    from smarts.maps.stack import stack_maps
+
+    maps = [load_map(builtin_map_path(n)) for n in ("highway_merge_exit", "t_junction", "intersection_4way_2lane")]
+    stack = stack_maps(maps)
+    for k, m in enumerate(maps):
+        window, base = stack.windows[k], int(stack.lane_base[k])
+        alone, first, second = RouteTable(m), RouteTable(window), RouteTable(window)
+        assert first._road_lanes is second._road_lanes and first._minor is second._minor
+        assert alone._minor and first._minor == {lane + base for lane in alone._minor}
+        for road in window.own_roads():
+            own = road - int(stack.road_base[k])
+            assert first._road_lanes[road] == [lane + base for lane in alone._road_lanes[own]]
+            assert first._road_length[road] == alone._road_length[own]

@@ -38,15 +38,7 @@ class RouteTable:
         self.map = road_map
         self.links = road_links(road_map)
         self.exits = lane_exits(road_map)
-        self._minor = self._minor_merge_lanes()
-        order = np.lexsort((road_map.lane_index, road_map.lane_road))
-        bounds = np.searchsorted(road_map.lane_road[order], np.arange(len(road_map.road_ids) + 1))
-        self._road_lanes: list[list[int]] = [
-            order[bounds[r] : bounds[r + 1]].tolist() for r in range(len(road_map.road_ids))
-        ]  # per road, rightmost first (``RoadMap.road_lanes`` scans every lane per call)
-        self._road_length = np.array(
-            [float(road_map.lane_length[lanes].mean()) if lanes else 0.0 for lanes in self._road_lanes]
-        )
+        self._minor, self._road_lanes, self._road_length = _road_tables(road_map)
         self.routes: list[tuple[int, ...]] = []  # road sequence per route
         self.slot_of: list[dict[int, int]] = []  # per route: lane -> slot
         self._key: dict[tuple, int] = {}
@@ -308,21 +300,6 @@ class RouteTable:
         self._packed = None
         return new
 
-    def _minor_merge_lanes(self) -> set[int]:
-        """First junction lanes of connections without right of way into a lane others also
-        enter (merging from an acceleration lane or a side road)."""
-        m = self.map
-        if len(m.conn_from) == 0:
-            return set()
-        entering: dict[int, int] = {}
-        for to in m.conn_to:
-            entering[int(to)] = entering.get(int(to), 0) + 1
-        return {
-            int(via)
-            for via, to, major in zip(m.conn_via, m.conn_to, m.conn_major)
-            if via >= 0 and not major and entering[int(to)] > 1
-        }
-
     # ------------------------------------------------------------------ queries
     def lanes_of_first_road(self, route: int) -> list[int]:
         """Lanes of the route's first road, rightmost first."""
@@ -330,3 +307,36 @@ class RouteTable:
 
     def slot(self, route: int, lane: int) -> int:
         return self.slot_of[route][lane]
+
+
+def _road_tables(road_map: RoadMap) -> tuple[frozenset[int], list[list[int]], np.ndarray]:
+    """What routing reads of the map alone: the minor merge lanes (:func:`_minor_merge_lanes`),
+    each road's lanes (rightmost first; ``RoadMap.road_lanes`` scans every lane per call) and
+    its mean lane length. Cached on the map instance (as the junction table is), so the
+    providers of a batch's episodes on one map build them once."""
+    cached = road_map.__dict__.get("_route_road_tables")
+    if cached is not None:
+        return cached
+    order = np.lexsort((road_map.lane_index, road_map.lane_road))
+    bounds = np.searchsorted(road_map.lane_road[order], np.arange(len(road_map.road_ids) + 1))
+    road_lanes = [order[bounds[r] : bounds[r + 1]].tolist() for r in range(len(road_map.road_ids))]
+    road_length = np.array([float(road_map.lane_length[lanes].mean()) if lanes else 0.0 for lanes in road_lanes])
+    road_length.flags.writeable = False
+    tables = (_minor_merge_lanes(road_map), road_lanes, road_length)
+    road_map.__dict__["_route_road_tables"] = tables
+    return tables
+
+
+def _minor_merge_lanes(m: RoadMap) -> frozenset[int]:
+    """First junction lanes of connections without right of way into a lane others also enter
+    (merging from an acceleration lane or a side road)."""
+    if len(m.conn_from) == 0:
+        return frozenset()
+    entering: dict[int, int] = {}
+    for to in m.conn_to:
+        entering[int(to)] = entering.get(int(to), 0) + 1
+    return frozenset(
+        int(via)
+        for via, to, major in zip(m.conn_via, m.conn_to, m.conn_major)
+        if via >= 0 and not major and entering[int(to)] > 1
+    )
