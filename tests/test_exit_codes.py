@@ -48,7 +48,7 @@ def test_the_codes_are_distinct():
     assert len(set(codes)) == 4 and exit_codes.BAD_INPUT == 2  # argparse's usage errors are 2 as well
 
 
-def test_python_m_train_ends_without_teardown_but_after_its_exit_handlers():
+def test_python_m_train_ends_without_teardown_but_after_its_exit_handlers(tmp_path):
     """``python -m train`` skips the interpreter's teardown (unloading torch alone is half a
     second): its exit status is the command's, what it printed is flushed (also into a pipe), and
     exit handlers still run (worker pools, TensorBoard writers)."""
@@ -66,3 +66,8 @@ def test_python_m_train_ends_without_teardown_but_after_its_exit_handlers():
     help_run = subprocess.run([sys.executable, "-m", "train", "benchmark", "--help"], capture_output=True, text=True,
                               timeout=60, cwd=Path(__file__).parents[1])  # fmt: skip
     assert help_run.returncode == 0 and "--episodes" in help_run.stdout
+    script = tmp_path / "ends.py"
+    script.write_text(f"import sys; sys.path.insert(0, {str(Path(__file__).parents[1])!r})\n{code}")
+    profiled = subprocess.run([sys.executable, "-m", "cProfile", str(script)], capture_output=True, text=True,
+                              timeout=60, cwd=Path(__file__).parents[1])  # fmt: skip
+    assert "handler ran" in profiled.stdout and "function calls" in profiled.stdout  # the profiler still reports

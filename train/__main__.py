@@ -245,6 +245,8 @@ def exit_without_teardown(code: int | None) -> None:
     import atexit
     import os
 
+    if sys.getprofile() is not None or sys.gettrace() is not None:
+        raise SystemExit(code)  # under a profiler or coverage, which write their results on the way out
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
         try:
