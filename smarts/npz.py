@@ -25,11 +25,16 @@ _PLAIN_HEADER = re.compile(
 
 
 def write_npz(fh: BinaryIO, arrays: Mapping[str, np.ndarray]) -> None:
-    """``arrays`` as a compressed .npz into the open binary file ``fh`` (no pickled objects)."""
-    with zipfile.ZipFile(fh, mode="w", compression=zipfile.ZIP_DEFLATED, compresslevel=COMPRESS_LEVEL) as zf:
+    """``arrays`` as a compressed .npz into the open binary file ``fh`` (no pickled objects).
+
+    The archive is built in memory and written at once: the zip writer seeks back over each
+    member's header when the member is done, and every seek of a buffered file flushes it."""
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, mode="w", compression=zipfile.ZIP_DEFLATED, compresslevel=COMPRESS_LEVEL) as zf:
         for name, value in arrays.items():
             with zf.open(f"{name}.npy", "w", force_zip64=True) as member:
                 np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
+    fh.write(buffer.getbuffer())
 
 
 def read_npz(path) -> dict[str, np.ndarray]:

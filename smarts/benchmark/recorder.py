@@ -46,7 +46,7 @@ from smarts.benchmark.metrics.params import MetricParams
 from smarts.benchmark.metrics.scores import time_gap_to_margin
 from smarts.core.errors import MapError
 from smarts.core.events import Event
-from smarts.core.following import LEAD_SIGHT, lead_state
+from smarts.core.following import LEAD_SIGHT, lead_rows, lead_state
 from smarts.core.missions import GOAL_ROAD
 from smarts.core.simulation import Simulation
 from smarts.maps import project, route_polyline, shortest_route
@@ -101,7 +101,8 @@ class EpisodeRecorder:
         self.sight = sight
         self.info = dict(info or {})
         self.rows: dict[str, list[np.ndarray]] = {a: [] for a in self.agent_ids}
-        self.lead_final: dict[str, tuple[float, float]] = {}
+        self._followers = np.array([sim.agent_index[a] for a in self.follow], dtype=np.int64)
+        self._lead_xy = np.full((len(sim.agent_ids), 2), np.nan)  # per agent index: its lead, last seen
         self.failure: str | None = None
         self.start_time = float(sim.time)
         self.end_time: float | None = None
@@ -276,11 +277,14 @@ class EpisodeRecorder:
         )  # fmt: skip
 
     def _note_leads(self) -> None:
-        t = self.sim.table
-        for agent_id, lead_id in self.follow.items():
-            lead_row = t.row_of.get(lead_id)
-            if lead_row is not None:
-                self.lead_final[agent_id] = (float(t.x[lead_row]), float(t.y[lead_row]))
+        """Where each follower's lead is now, while it is on the map."""
+        note_leads(self.sim, self._followers, self._lead_xy)
+
+    @property
+    def lead_final(self) -> dict[str, tuple[float, float]]:
+        """Follower agent id -> where its lead was last seen (x, y)."""
+        xy = self._lead_xy[self._followers]
+        return {a: (float(x), float(y)) for a, (x, y) in zip(self.follow, xy.tolist()) if not np.isnan(x)}
 
     def record(self) -> None:
         """Append the row of every agent still in the episode, for the step just taken.
@@ -409,6 +413,19 @@ class EpisodeRecorder:
         return path.s[goal_i] - path.s[nearest] + np.sqrt(d2)
 
 
+def note_leads(sim: Simulation, followers: np.ndarray, lead_xy: np.ndarray, rows: np.ndarray | None = None) -> None:
+    """``lead_xy[a]`` = the position of follower ``a``'s lead, for each of ``followers`` (agent
+    indices) whose lead is on the map now (one lookup for all of them: ``lead_rows``, or its
+    ``rows`` when already looked up)."""
+    if not len(followers):
+        return
+    rows = lead_rows(sim, followers) if rows is None else rows
+    seen = rows >= 0
+    t = sim.table
+    lead_xy[followers[seen], 0] = t.x[rows[seen]]
+    lead_xy[followers[seen], 1] = t.y[rows[seen]]
+
+
 def _flags(size: int, rows: np.ndarray) -> np.ndarray:
     """A boolean mask over ``size`` table rows, True at ``rows`` (``np.isin`` against the rows,
     without its sort, for the per-step scene)."""
@@ -457,7 +474,7 @@ class EpisodeRecorders:
     def __init__(self, sim: Simulation, recorders: list[EpisodeRecorder], episodes: list[int]):
         self.sim, self.recorders, self.episodes = sim, list(recorders), np.asarray(episodes, dtype=np.int64)
         first = self.recorders[0]
-        for name in ("_prev_lat", "_prev_lane", "_gone"):
+        for name in ("_prev_lat", "_prev_lane", "_gone", "_lead_xy"):
             shared = getattr(first, name)
             for r in self.recorders[1:]:
                 shared[r.agents] = getattr(r, name)[r.agents]
@@ -467,6 +484,7 @@ class EpisodeRecorders:
         for r in self.recorders:
             self.goal_s[r.agents] = r._goal_s[r.agents]
         self.follows = [bool(r.follow) for r in self.recorders]
+        self.followers = [r._followers for r in self.recorders]
         self.owner = {a: i for i, r in enumerate(self.recorders) for a in r.agents.tolist()}
         self.lanes = int(sim.road_map.num_lanes)
         self.end_keys = np.array(sorted(a * self.lanes + lane for r in self.recorders for a in r.agents.tolist()
@@ -489,16 +507,14 @@ class EpisodeRecorders:
             due.append(i)
         if not due:
             return
-        self._scenes(due)
+        followers = np.concatenate([self.followers[i] for i in due])
+        leads = lead_rows(sim, followers) if len(followers) else followers
+        self._scenes(due, leads[leads >= 0])
         live = self._leave_map(due)
         rows_of = [i for i in due if live[i].size]
-        for i in due:
-            if not live[i].size:
-                self.recorders[i]._note_leads()
         if rows_of:
             self._rows(rows_of, live)
-            for i in rows_of:
-                self.recorders[i]._note_leads()
+        note_leads(sim, followers, self.recorders[0]._lead_xy, leads)
 
     def _leave_map(self, due: list[int]) -> dict[int, np.ndarray]:
         """Per due recorder, its live agents after the end-of-map rule (``_leaving_map`` of all
@@ -589,8 +605,9 @@ class EpisodeRecorders:
         visible[following] = lead.in_lane.astype(np.float64)
         return gap, in_margin, visible
 
-    def _scenes(self, due: list[int]) -> None:
-        """One scene row per due recorder (as ``EpisodeRecorder._record_scene``)."""
+    def _scenes(self, due: list[int], leads: np.ndarray) -> None:
+        """One scene row per due recorder (as ``EpisodeRecorder._record_scene``); ``leads``: the
+        rows of their followers' leads on the map."""
         sim, t = self.sim, self.sim.table
         alive = np.asarray(t.alive_rows, dtype=np.int64)
         place = np.full(sim.episodes, -1, dtype=np.int64)
@@ -600,15 +617,13 @@ class EpisodeRecorders:
         all_agents = np.concatenate([r.agents for r in recs])
         agent_rows = sim.agent_row[all_agents]
         mine = agent_rows[(agent_rows >= 0) & sim.agent_active[all_agents]]
-        lead_rows = [np.array([x for x in (r.sim.table.row_of.get(v) for v in r.follow.values()) if x is not None],
-                              dtype=np.int64) for r in recs]  # fmt: skip
         others = rows[~_flags(len(t.serial), agent_rows[agent_rows >= 0])[rows]]
-        centres = np.concatenate([mine] + lead_rows)
+        centres = np.concatenate([mine, leads])
         c_owner = place[centres // sim.episode_capacity]
         order = np.argsort(c_owner, kind="stable")
         centres, c_owner = centres[order], c_owner[order]
         o_owner = place[others // sim.episode_capacity]
-        is_lead = _flags(len(t.serial), np.concatenate(lead_rows))[others]
+        is_lead = _flags(len(t.serial), leads)[others]
         near = self._near(others, o_owner, centres, c_owner, len(due)) | is_lead
         others, o_owner = others[near], o_owner[near]
         state = np.stack([t.x[others], t.y[others], t.heading[others], t.speed[others]], axis=1).astype(np.float32)
