@@ -494,12 +494,13 @@ PAD_INCHES = 0.1  # around what was drawn, as ``bbox_inches="tight"`` pads
 
 def _save(fig, path: Path, dpi: int = 100) -> Path:
     """A figure as PNG through the one atomic write (readable by others, never half written),
-    cropped to what was drawn as ``savefig(bbox_inches="tight")`` crops it, but from a single
+    cropped to what was drawn, padded as ``savefig(bbox_inches="tight")`` pads, but from a single
     rendering: "tight" lays the figure out twice, about a third of a report figure's cost. The
-    figure is drawn on a canvas grown by :data:`SPARE_INCHES` (the axes where they were), then the
-    pixels of its tight box are encoded; should anything still reach past the canvas, it is saved
-    the two-pass way."""
+    figure is drawn on a canvas grown by :data:`SPARE_INCHES` (the axes where they were), and the
+    pixels that differ from the figure's background, padded, are encoded (RGB: the figure is
+    opaque); should anything reach the canvas's edge, it is saved the two-pass way."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.colors import to_rgba
     from PIL import Image
 
     width, height = fig.get_size_inches()
@@ -513,16 +514,18 @@ def _save(fig, path: Path, dpi: int = 100) -> Path:
     fig.set_dpi(dpi)
     canvas = FigureCanvasAgg(fig)
     canvas.draw()
-    tight = fig.get_tightbbox(canvas.get_renderer()).padded(PAD_INCHES)
+    pixels = np.asarray(canvas.buffer_rgba())
+    background = np.array([round(255 * c) for c in to_rgba(fig.get_facecolor())], dtype=np.uint8)
+    ink = pixels.view(np.uint32)[..., 0] != background.view(np.uint32)[0]
+    rows, cols = np.flatnonzero(ink.any(axis=1)), np.flatnonzero(ink.any(axis=0))
     buffer = io.BytesIO()
-    if tight.x0 < 0 or tight.y0 < 0 or tight.x1 > grown_w or tight.y1 > grown_h:
+    if not len(rows) or rows[0] == 0 or cols[0] == 0 or rows[-1] == ink.shape[0] - 1 or cols[-1] == ink.shape[1] - 1:
         fig.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
     else:
-        pixels = np.asarray(canvas.buffer_rgba())
-        rows = pixels.shape[0]
-        x0, x1 = int(np.floor(tight.x0 * dpi)), int(np.ceil(tight.x1 * dpi))
-        y0, y1 = rows - int(np.ceil(tight.y1 * dpi)), rows - int(np.floor(tight.y0 * dpi))
-        Image.fromarray(pixels[y0:y1, x0:x1]).save(buffer, format="png")
+        pad = round(PAD_INCHES * dpi)
+        y0, y1 = max(rows[0] - pad, 0), min(rows[-1] + 1 + pad, ink.shape[0])
+        x0, x1 = max(cols[0] - pad, 0), min(cols[-1] + 1 + pad, ink.shape[1])
+        Image.fromarray(np.ascontiguousarray(pixels[y0:y1, x0:x1, :3])).save(buffer, format="png", compress_level=3)
     return atomic_write_bytes(path, buffer.getvalue())
 
 
@@ -905,10 +908,13 @@ def _trajectory_figure(figure: _TrajectoryFigure) -> Path | None:
     fig, ax = plt.subplots(figsize=(width, height if span_x >= span_y or to_scale else 8.0))
     ax.set_facecolor("#f3f6f0")
     _draw_road(ax, scenario_map(figure.spec), box)
-    for k, xy in enumerate(tracks.values()):
-        ax.plot(xy[:, 0], xy[:, 1], color=TRAFFIC_COLOUR, linewidth=1.0, alpha=0.8, zorder=2,
-                label=f"other road users ({len(tracks)}; square: last seen)" if k == 0 else None)  # fmt: skip
-        ax.plot(xy[-1:, 0], xy[-1:, 1], "s", color=TRAFFIC_COLOUR, markersize=3, zorder=2)
+    if tracks:  # one artist for all of them (a busy scene has dozens)
+        from matplotlib.collections import LineCollection
+
+        ax.add_collection(LineCollection(list(tracks.values()), colors=TRAFFIC_COLOUR, linewidths=1.0, alpha=0.8,
+                                         zorder=2, label=f"other road users ({len(tracks)}; square: last seen)"))  # fmt: skip
+        last = np.array([xy[-1] for xy in tracks.values()])
+        ax.plot(last[:, 0], last[:, 1], "s", color=TRAFFIC_COLOUR, markersize=3, zorder=2)
     for k, xy in enumerate(lead_tracks.values()):
         # Above the agents (who drive where it drove), dashed so their colours show between.
         ax.plot(xy[:, 0], xy[:, 1], color="black", linewidth=1.6, linestyle=(0, (5, 3)), zorder=6,
