@@ -28,7 +28,7 @@ def _benchmark(args: argparse.Namespace) -> int:
         start_worker_server()  # it imports what workers need while this process loads the agents
     from smarts.benchmark.agents import REFERENCE_AGENTS, agent_locator
     from smarts.benchmark.jobs import benchmark_folder, claim_folder, plan_jobs
-    from smarts.benchmark.report import FigureHelpers, LogPrefetch, write_report
+    from smarts.benchmark.report import FigureHelpers, ReportAhead, write_report
     from smarts.benchmark.runner import BenchmarkInterrupted, run_jobs
     from smarts.benchmark.suites import load_suite
 
@@ -47,22 +47,25 @@ def _benchmark(args: argparse.Namespace) -> int:
     print(f"{suite.name}: {len(suite.scenarios)} scenarios x {episodes} episodes x {len(shown)} agent(s) "
           f"({', '.join(shown)}; references always included) -> {out}")  # fmt: skip
     helpers = FigureHelpers.for_figures(len(suite.scenarios))  # they load matplotlib while episodes run
-    logs = LogPrefetch()  # reads the logs as they come, while this process waits for the workers
+    # Reads the logs and hands the helpers trajectory figures as the episodes finish.
+    ahead = ReportAhead(out, suite, agents, jobs, helpers)
     try:
         results = run_jobs(jobs, workers=args.workers, progress=not args.quiet, ray_address=args.ray_address,
                            resume=args.resume, episode_timeout=args.episode_timeout,
-                           batch=not args.per_episode, on_result=logs.offer)  # fmt: skip
+                           batch=not args.per_episode, on_result=ahead.offer)  # fmt: skip
     except BenchmarkInterrupted as stop:  # Ctrl-C: report what finished, no traceback
         helpers.close()  # Ctrl-C reached them too
-        write_report(out, suite, agents, stop.finished, not_run=stop.not_run, logs=logs)
+        ahead.cancel()
+        write_report(out, suite, agents, stop.finished, not_run=stop.not_run, ahead=ahead)
         print(f"interrupted: {len(stop.finished)} of {len(jobs)} episodes finished, reported in {out}; "
               f"the same command with --resume{'' if numbered else f' --out {out}'} runs the rest",
               file=sys.stderr)  # fmt: skip
         return exit_codes.INTERRUPTED
     except BaseException:
         helpers.close()
+        ahead.cancel()
         raise
-    report = write_report(out, suite, agents, results, helpers=helpers, logs=logs)
+    report = write_report(out, suite, agents, results, helpers=helpers, ahead=ahead)
     print(report.read_text())
     failed = [r for r in results if r.get("failure")]
     if failed:

@@ -458,7 +458,7 @@ def _evaluate(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int, 
     from PIL import Image
 
     from smarts.benchmark.jobs import plan_jobs
-    from smarts.benchmark.report import LogPrefetch, write_report
+    from smarts.benchmark.report import ReportAhead, write_report
     from smarts.benchmark.runner import run_jobs
     from smarts.benchmark.suites import load_suite
 
@@ -469,9 +469,9 @@ def _evaluate(checkpoint: Path, cfg: TrainConfig, out: Path, writer, step: int, 
     # The reference agents' episodes (same seeds every time) are run once per training run and reused.
     cache = out.parent / "reference_cache" if out.parent.name == "evals" else out.parent / "evals" / "reference_cache"
     jobs = plan_jobs([str(frozen)], suite, cfg.eval_episodes, out, seed=cfg.eval_seed, reference_cache=cache)
-    logs = LogPrefetch()  # read while the workers run the other episodes
-    results = run_jobs(jobs, workers=cfg.eval_workers, progress=progress, on_result=logs.offer)
-    write_report(out, suite, [str(frozen)], results, logs=logs)
+    ahead = ReportAhead(out, suite, [str(frozen)], jobs)  # logs read while the workers run the other episodes
+    results = run_jobs(jobs, workers=cfg.eval_workers, progress=progress, on_result=ahead.offer)
+    write_report(out, suite, [str(frozen)], results, ahead=ahead)
     scores = json.loads((out / "results.json").read_text())["agents"][str(frozen)]["scores"]
     overall = scores["overall"] if scores else {}
     for name, value in overall.items():

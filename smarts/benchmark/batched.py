@@ -1,9 +1,11 @@
-"""Benchmark episodes of one policy stepped together in one simulation of the batched core.
+"""Benchmark episodes stepped together in one simulation of the batched core.
 
 The per-episode runner (``smarts.benchmark.runner.run_episode``) builds an env per episode and
-steps it alone. Here the episodes of one agent (any scenarios of a suite, each with its own seed)
-are the B episodes of one ``smarts.env.driving.Driving``: one simulation step, one observation pass
-and, for a policy that allows it, one ``act`` call per step for all of them. Each episode is
+steps it alone. Here the episodes of agents that drive alike (the same action space, controller
+and observation interface: the reference agents, say; any scenarios of a suite, each with its
+own seed) are the B episodes of one ``smarts.env.driving.Driving``: one simulation step, one
+observation pass and, for each policy that allows it, one ``act`` call per step for all of its
+episodes. Each episode is
 recorded by its own ``EpisodeRecorder`` on ``sim.episode_sim(b)`` and follows the per-episode
 loop's rules exactly (it acts while it has agents and time; a following task ends when a lead
 leaves the map and otherwise runs on to its time limit after its agents are gone), so, as the core
@@ -91,8 +93,11 @@ class BatchEpisode:
     seed: int
     recorder: dict[str, Any]
     """``EpisodeRecorder`` keywords: scenario, task, episode, seed, time_limit, follow, info."""
-    policy: Policy | None = None
-    """Its own policy instance (``instances`` batching); None: the batch's shared one."""
+    policy: Policy
+    """The policy that acts in it: its agent's one instance (shared by that agent's episodes of
+    ``rows`` and ``episodes`` batching), or its own (``instances``)."""
+    mode: str
+    """The policy's batching (:data:`BATCHING`)."""
     leads: frozenset[str] = field(init=False)
 
     def __post_init__(self) -> None:
@@ -107,11 +112,11 @@ lead (following tasks); over."""
 class _Batch:
     """The loop over one simulation of B benchmark episodes (see the module's docstring)."""
 
-    def __init__(self, episodes: Sequence[BatchEpisode], policy: Policy, mode: str,
-                 observation: AgentInterface | None, lane_relative: LaneRelativeParams | None):  # fmt: skip
+    def __init__(self, episodes: Sequence[BatchEpisode], observation: AgentInterface | None,
+                 lane_relative: LaneRelativeParams | None):  # fmt: skip
         from smarts.env.driving import Driving
 
-        self.episodes, self.policy, self.mode = list(episodes), policy, mode
+        self.episodes = list(episodes)
         self.driving = Driving([e.spec for e in episodes], observation=observation, lane_relative=lane_relative)
         self.sim = self.driving.sim
         sim, learner = self.sim, self.driving.learner
@@ -152,9 +157,8 @@ class _Batch:
             agents = [ids[a] for a in self.learners[b].tolist()]
             try:
                 self.recorders[b] = EpisodeRecorder(self.views[b], agents, **episode.recorder)
-                policy = episode.policy or self.policy
-                if hasattr(policy, "check_space"):
-                    policy.check_space(self.driving.observation_space(int(self.learners[b][0])))
+                if hasattr(episode.policy, "check_space"):
+                    episode.policy.check_space(self.driving.observation_space(int(self.learners[b][0])))
             except Exception:  # noqa: BLE001 - alone, it is recorded as it always was
                 self.eject(b)
         kept = [b for b in range(len(self.episodes)) if self.phase[b] != DONE]
@@ -211,15 +215,18 @@ class _Batch:
         return np.flatnonzero(self.phase == ACT).tolist()
 
     def actions(self) -> dict[str, np.ndarray]:
-        """Every active learner's action by agent id: the policy's for the acting episodes, the
+        """Every active learner's action by agent id: the policies' for the acting episodes, the
         last one for the agents of episodes that are over."""
         sim = self.sim
         chosen: dict[int, np.ndarray] = {}
-        if self.mode == "rows" or (self.mode == "episodes" and hasattr(self.policy, "act_episodes")):
-            self._act_stacked(chosen)
-        else:
-            for b in self.acting():
+        stacked = []
+        for b in self.acting():
+            e = self.episodes[b]
+            if e.mode == "rows" or (e.mode == "episodes" and hasattr(e.policy, "act_episodes")):
+                stacked.append(b)
+            else:
                 self._act_one(b, chosen)
+        self._act_stacked(stacked, chosen)
         ids = sim.agent_ids
         out = {}
         for a in sim.active_agents[self.driving.learner[sim.active_agents]].tolist():
@@ -252,9 +259,8 @@ class _Batch:
     def _act_one(self, b: int, chosen: dict[int, np.ndarray]) -> None:
         """One call of episode ``b``'s policy for its live agents; anything odd sends it alone."""
         agents = self._live(b)
-        policy = self.episodes[b].policy or self.policy
         try:
-            actions = np.asarray(policy.act(self._rows(agents)))
+            actions = np.asarray(self.episodes[b].policy.act(self._rows(agents)))
             if actions.ndim != 2 or len(actions) != len(agents):
                 raise ValueError("malformed actions")
         except Exception:  # noqa: BLE001 - alone, it fails the way it always did
@@ -262,25 +268,25 @@ class _Batch:
             return
         chosen.update(zip(agents.tolist(), actions))
 
-    def _act_stacked(self, chosen: dict[int, np.ndarray]) -> None:
-        """One call for the live agents of every acting episode, per observation group (``act``
-        of ``rows`` batching, or ``act_episodes`` of a policy of ``episodes`` batching that has
-        it); a call that fails is made again episode by episode, so only the episodes at fault
-        leave."""
-        acting = self.acting()
+    def _act_stacked(self, acting: list[int], chosen: dict[int, np.ndarray]) -> None:
+        """One call per policy and observation group for the live agents of the ``acting``
+        episodes (``act`` of ``rows`` batching, or ``act_episodes`` of a policy of ``episodes``
+        batching that has it); a call that fails is made again episode by episode, so only the
+        episodes at fault leave."""
         if not acting:
             return
         live = {b: self._live(b) for b in acting}
-        by_group: dict[int, list[int]] = {}
+        by_group: dict[tuple[int, int], list[int]] = {}
         for b in acting:
-            by_group.setdefault(int(self.obs_group[live[b][0]]), []).append(b)
+            by_group.setdefault((id(self.episodes[b].policy), int(self.obs_group[live[b][0]])), []).append(b)
         for members in by_group.values():
             agents = np.concatenate([live[b] for b in members])
+            policy, mode = self.episodes[members[0]].policy, self.episodes[members[0]].mode
             try:
-                if self.mode == "rows":
-                    actions = np.asarray(self.policy.act(self._rows(agents)))
+                if mode == "rows":
+                    actions = np.asarray(policy.act(self._rows(agents)))
                 else:  # one call, each episode's rows apart where it matters (act_episodes)
-                    actions = np.asarray(self.policy.act_episodes(self._rows(agents), [len(live[b]) for b in members]))
+                    actions = np.asarray(policy.act_episodes(self._rows(agents), [len(live[b]) for b in members]))
                 if actions.ndim != 2 or len(actions) != len(agents):
                     raise ValueError("malformed actions")
             except Exception:  # noqa: BLE001
@@ -331,19 +337,19 @@ def _learner_batches(batches: list, learner: np.ndarray) -> list:
 
 def run_batch(
     episodes: Sequence[BatchEpisode],
-    policy: Policy,
-    mode: str,
     observation: AgentInterface | None,
     lane_relative: LaneRelativeParams | None,
     finished: Callable[[int, EpisodeLog], None],
 ) -> list[int]:
-    """Step ``episodes`` (each :func:`solo_reason`-free) as one simulation, calling
-    ``finished(i, log)`` as episode ``i`` ends; returns the episodes to run alone instead (they
-    left the batch untouched, or the batch could not be built)."""
-    if mode not in BATCHING:
-        raise ValueError(f"batching {mode!r}: expected one of {', '.join(BATCHING)}")
+    """Step ``episodes`` (each :func:`solo_reason`-free, their policies all driving with
+    ``observation`` and ``lane_relative``) as one simulation, calling ``finished(i, log)`` as
+    episode ``i`` ends; returns the episodes to run alone instead (they left the batch untouched,
+    or the batch could not be built)."""
+    for e in episodes:
+        if e.mode not in BATCHING:
+            raise ValueError(f"batching {e.mode!r}: expected one of {', '.join(BATCHING)}")
     try:
-        batch = _Batch(episodes, policy, mode, observation, lane_relative)
+        batch = _Batch(episodes, observation, lane_relative)
     except Exception:  # noqa: BLE001 - alone, each episode reports what is wrong with it
         return list(range(len(episodes)))
     try:

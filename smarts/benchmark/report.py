@@ -47,7 +47,7 @@ from smarts.files import atomic_write_bytes, atomic_write_text
 _log = logging.getLogger(__name__)
 
 PREFETCH_BYTES = 128 * 2**20
-"""Log files a :class:`LogPrefetch` keeps read ahead at most (about four thousand episodes)."""
+"""Log files a :class:`ReportAhead` keeps read ahead at most (about four thousand episodes)."""
 ZERO_WIDTH = 1e-12
 """An interval narrower than this has no spread behind it and is shown as n/a."""
 NA_REASON = (
@@ -112,7 +112,7 @@ def write_report(
     ci_seed: int = CI_SEED,
     not_run: int = 0,
     helpers: FigureHelpers | None = None,
-    logs: LogPrefetch | None = None,
+    ahead: ReportAhead | None = None,
 ) -> Path:
     """Score each agent's logs and write ``results.json``, ``results.csv``, ``report.md``,
     ``plots/`` and TensorBoard events under ``out``; returns the report path.
@@ -122,23 +122,22 @@ def write_report(
     with ``ci_level``, ``resamples`` and ``ci_seed``. ``not_run``: planned episodes that did not
     run (an interrupted run); the report says so and ``results.json`` has ``complete: false``.
     ``helpers``: figure helpers started ahead (:class:`FigureHelpers`), else they start here.
-    ``logs``: the logs read ahead while the episodes ran (:class:`LogPrefetch`), else read here."""
-    from smarts.benchmark.agents import REFERENCE_AGENTS, agent_label, agent_name
+    ``ahead``: the report as prepared while the episodes ran (:class:`ReportAhead`: logs read,
+    trajectory figures handed to its helpers); the figures it did not draw are drawn here."""
+    from smarts.benchmark.agents import agent_label
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     agents = list(dict.fromkeys(agents))
-
-    def label(agent: str) -> str:
-        return f"{agent_name(agent)} (reference)" if agent in REFERENCE_AGENTS else agent_name(agent)
-
+    label = _label
     plots = out / "plots"
     plots.mkdir(parents=True, exist_ok=True)
     # Drawn beside the scoring (from the logs alone, so they can start first); the metric figures
     # join them once the scores are known.
-    drawing = _trajectory_plots(plots, suite, _shown(agents, results)[0], results, label, helpers)
+    figures = _trajectory_figures(plots, suite, _shown(agents, results)[0], results)
+    drawing = ahead.drawing_for(figures, helpers) if ahead is not None else _Drawing(figures, helpers)
     try:
-        scored = _score(suite, agents, results, ci_level, resamples, ci_seed, logs.read if logs else read_episode)
+        scored = _score(suite, agents, results, ci_level, resamples, ci_seed, ahead.read if ahead else read_episode)
         atomic_write_text(
             out / "results.json",
             json.dumps(_results_doc(suite, scored, not_run, ci_level, resamples, ci_seed), indent=2, default=float),
@@ -161,34 +160,87 @@ def write_report(
     return report
 
 
-class LogPrefetch:
-    """Episode logs read in a thread of the caller's process while the workers run the other
-    episodes, and matplotlib imported there first: during the episodes that process only waits,
-    and a report otherwise starts by reading back every log (about 5 ms each) and importing
-    pyplot (half a second). Give :meth:`offer` to ``run_jobs`` (its ``on_result``) and this to
-    :func:`write_report`; the report reads through :meth:`read`, which takes what the thread read
-    and reads the rest itself, so it scores the files on disk exactly as without it. At most
-    :attr:`budget` bytes of log files are kept ahead (about twice that in memory); later logs are
-    read when the report needs them."""
+BACKGROUND_NICE = 10
+"""How much lower than the run's the priority of the work done beside its episodes is (reading
+logs ahead, drawing figures): on a machine whose cores the workers fill, it waits for them instead
+of slowing the slowest one, and it takes the cores they leave as they finish."""
 
-    def __init__(self, budget: int = PREFETCH_BYTES):
+
+def _lower_priority() -> None:
+    """Lower the calling thread's priority by :data:`BACKGROUND_NICE` (Linux: per thread), where allowed."""
+    import os
+
+    with contextlib.suppress(AttributeError, OSError):
+        os.nice(BACKGROUND_NICE)
+
+
+def _label(agent: str) -> str:
+    """How the report names an agent: its name, and "(reference)" for the reference agents."""
+    from smarts.benchmark.agents import REFERENCE_AGENTS, agent_name
+
+    return f"{agent_name(agent)} (reference)" if agent in REFERENCE_AGENTS else agent_name(agent)
+
+
+class ReportAhead:
+    """A benchmark report prepared while its episodes run, in the process that only waits for its
+    workers meanwhile: the logs are read as their episodes finish (a report otherwise starts by
+    reading back every log, about 5 ms each, and importing pyplot, half a second), and a
+    scenario's trajectory figure goes to the figure helpers as soon as every agent's episode 0 of
+    it has finished, so they draw it on a core the last episodes leave free.
+
+    Give :meth:`offer` to ``run_jobs`` (its ``on_result``) and this to :func:`write_report`.
+    The report reads the logs through :meth:`read`, which takes what was read ahead and reads the
+    rest itself, so it scores the files on disk exactly as without it; it builds its figures as it
+    always does and draws only those not handed out already (a figure handed out that differs
+    from the report's is drawn again after). At most ``budget`` bytes of log files are kept
+    ahead (about twice that in memory); later logs are read when the report needs them."""
+
+    def __init__(self, out: str | Path, suite: Suite, agents: list[str], jobs: list, helpers: FigureHelpers | None = None,
+                 budget: int = PREFETCH_BYTES):  # fmt: skip
         import queue
         import threading
+
+        from smarts.benchmark.agents import REFERENCE_AGENTS
 
         self.budget = budget
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._logs: dict[str, Any] = {}
-        self._thread = threading.Thread(target=self._run, name="log-prefetch", daemon=True)
+        self._thread = threading.Thread(target=self._read_ahead, name="report-ahead", daemon=True)
         self._thread.start()
+        agents = list(dict.fromkeys(agents))
+        planned = {job.agent for job in jobs}
+        self.shown = agents + [a for a in REFERENCE_AGENTS if a not in agents and a in planned]
+        self.plots, self.suite = Path(out) / "plots", suite
+        names = [entry.name for entry in suite.scenarios]
+        self._waiting = {name: {j.agent for j in jobs if j.episode == 0 and names[j.scenario_index] == name}
+                         for name in names}  # fmt: skip
+        self._first: dict[str, list[dict]] = {name: [] for name in names}
+        self.handed: list[_TrajectoryFigure] = []
+        self.drawing = _Drawing([], helpers) if helpers is not None and helpers.processes else None
 
     def offer(self, summary: dict) -> None:
-        """A finished episode's summary (``run_jobs``'s ``on_result``): its log is read ahead."""
+        """A finished episode's summary (``run_jobs``'s ``on_result``)."""
         if summary.get("log") and self.budget > 0:
             self._queue.put(str(summary["log"]))
+        scenario = summary.get("scenario")
+        if self.drawing is None or summary.get("episode") != 0 or scenario not in self._waiting:
+            return
+        waiting = self._waiting[scenario]
+        waiting.discard(summary.get("agent"))
+        self._first[scenario].append(summary)
+        if not waiting:
+            del self._waiting[scenario]
+            entry = next(e for e in self.suite.scenarios if e.name == scenario)
+            figure = _trajectory_figure_job(self.plots, self.suite.name, entry, self.shown, self._first[scenario])
+            if figure is not None:
+                self.plots.mkdir(parents=True, exist_ok=True)
+                self.drawing.add([figure])
+                self.handed.append(figure)
 
-    def _run(self) -> None:
+    def _read_ahead(self) -> None:
         import os
 
+        _lower_priority()  # this thread only: the workers' episodes come first
         with contextlib.suppress(Exception):  # the report imports it again and says what is wrong
             _pyplot()
         while (path := self._queue.get()) is not None:
@@ -208,6 +260,22 @@ class LogPrefetch:
             self._thread.join()
         log = self._logs.pop(str(path), None)
         return log if log is not None else read_episode(path)
+
+    def drawing_for(self, figures: list[_TrajectoryFigure], helpers: FigureHelpers | None = None) -> _Drawing:
+        """The drawing of a report's trajectory figures: those handed out already and the rest
+        (with ``helpers`` when none were handed out)."""
+        if self.drawing is None:
+            return _Drawing(figures, helpers)
+        keys = [h.key for h in self.handed]
+        self.drawing.add([f for f in figures if f.key not in keys])
+        self.drawing.redraw = [f for f in figures if f.key in keys and f not in self.handed]
+        return self.drawing
+
+    def cancel(self) -> None:
+        """Stop the helpers (the run failed or was interrupted; the report draws its figures itself)."""
+        if self.drawing is not None:
+            self.drawing.cancel()
+            self.drawing = None
 
 
 def _shown(agents: list[str], results: list[dict]) -> tuple[list[str], list[str]]:
@@ -691,26 +759,32 @@ class _TrajectoryFigure:
         return self.scenario
 
 
-def _trajectory_plots(
-    plots: Path, suite: Suite, agents: list[str], results: list[dict], label, helpers: FigureHelpers | None = None
-) -> _Drawing:
+def _trajectory_figures(plots: Path, suite: Suite, agents: list[str], results: list[dict]) -> list[_TrajectoryFigure]:
     """Per scenario: the road around the episode, each agent's path in episode 0 (start o, end x),
-    and from the first agent's log the lead's path and the other road users'. Drawn beside the
-    caller: :meth:`_Drawing.result` gives scenario -> file."""
-    colours = _colours(agents)
+    and from the first agent's log the lead's path and the other road users' (as jobs for
+    :class:`_Drawing`)."""
     figures = []
     for entry in suite.scenarios:
-        logs = []
-        for agent in agents:
-            first = next((r for r in results if r["agent"] == agent and r.get("scenario") == entry.name
-                          and r.get("episode") == 0 and r.get("log")), None)  # fmt: skip
-            if first is not None:
-                logs.append((agent, str(first["log"])))
-        if logs:
-            figures.append(_TrajectoryFigure(plots, suite.name, entry.name, entry.spec, tuple(logs),
-                                             tuple((a, label(a)) for a, _ in logs),
-                                             tuple((a, colours[a]) for a, _ in logs)))  # fmt: skip
-    return _Drawing(figures, helpers)
+        mine = [r for r in results if r.get("scenario") == entry.name and r.get("episode") == 0]
+        figure = _trajectory_figure_job(plots, suite.name, entry, agents, mine)
+        if figure is not None:
+            figures.append(figure)
+    return figures
+
+
+def _trajectory_figure_job(plots: Path, suite_name: str, entry, agents: list[str], first: list[dict]):
+    """Scenario ``entry``'s trajectory figure from ``first``, the results of its episode 0 (each
+    shown agent's first one with a log, in the order of ``agents``); None without any."""
+    colours = _colours(agents)
+    logs = []
+    for agent in agents:
+        found = next((r for r in first if r["agent"] == agent and r.get("log")), None)
+        if found is not None:
+            logs.append((agent, str(found["log"])))
+    if not logs:
+        return None
+    return _TrajectoryFigure(plots, suite_name, entry.name, entry.spec, tuple(logs),
+                             tuple((a, _label(a)) for a, _ in logs), tuple((a, colours[a]) for a, _ in logs))  # fmt: skip
 
 
 class FigureHelpers:
@@ -756,6 +830,9 @@ class _Drawing:
         self.folder = Path(tempfile.mkdtemp(prefix="smarts-figures-"))
         (self.folder / "figures.pickle").write_bytes(pickle.dumps(self.figures))
         self.helpers, helpers.processes = helpers.processes, []
+        self.redraw: list = []
+        """Figures to draw again here after the others (one handed out early that differs from
+        the report's own: the report's wins)."""
         self._tell(f"{self.folder}")
 
     def _tell(self, line: str) -> None:
@@ -807,7 +884,12 @@ class _Drawing:
             for k, figure in enumerate(self.figures):
                 if k not in drawn and (path := _draw(figure)) is not None:
                     drawn[k] = path
-        return {f.key: drawn[k] for k, f in enumerate(self.figures) if k in drawn}
+        out = {f.key: drawn[k] for k, f in enumerate(self.figures) if k in drawn}
+        for figure in self.redraw:
+            out.pop(figure.key, None)
+            if (path := _draw(figure)) is not None:
+                out[figure.key] = path
+        return out
 
 
 def _draw(figure) -> Path | None:
@@ -853,10 +935,12 @@ def _helper_main() -> None:
     """A figure helper: imports what drawing takes, then reads from stdin the folder of its
     parent's pickled figures (nothing: it is not needed after all) and draws those it claims
     first; each further line names a pickle of more figures (their first index, the figures),
-    until stdin closes. Writes index -> file as JSON."""
+    until stdin closes. Writes index -> file as JSON. It runs at a low priority
+    (:data:`BACKGROUND_NICE`): while episodes run it takes only the CPU they leave."""
     import pickle
     import sys
 
+    _lower_priority()
     _pyplot()
     import smarts.env.assembly  # noqa: F401 - the maps, for the roads
     import smarts.replay.render  # noqa: F401
@@ -880,7 +964,7 @@ def _helper_main() -> None:
 
 
 def _trajectory_figure(figure: _TrajectoryFigure) -> Path | None:
-    """One scenario's trajectory figure (see :func:`_trajectory_plots`); None without agent paths."""
+    """One scenario's trajectory figure (see :func:`_trajectory_figures`); None without agent paths."""
     plt = _pyplot()
     from smarts.env.assembly import scenario_map
 

@@ -178,7 +178,7 @@ def run_jobs(
     episodes it finished and runs the others again, each alone.
 
     ``on_result(summary)`` is called as each episode's result is known (a reused log's too), in
-    this process (``smarts.benchmark.report.LogPrefetch.offer`` reads the logs ahead)."""
+    this process (``smarts.benchmark.report.ReportAhead.offer`` prepares the report meanwhile)."""
     if episode_timeout is not None and not episode_timeout > 0:
         raise ValueError(f"episode_timeout: expected a positive number of seconds, got {episode_timeout!r}")
     if episode_timeout is not None and ray_address:
@@ -303,45 +303,53 @@ def _run_several(jobs: list[Job], policy_resolver: PolicyResolver | None, report
 
 def _run_batched(jobs: list[Job], todo: list[int], policy_resolver: PolicyResolver | None,
                  report: Callable[[int, dict], None]) -> list[int]:  # fmt: skip
-    """Run ``jobs[todo]`` (one agent) in simulations of many episodes (one per step length);
-    returns those that must run alone."""
+    """Run ``jobs[todo]`` in simulations of many episodes, one per step length and way of
+    driving (the agents whose policies have the same action space, controller and observation
+    interface share one, each episode acted in by its own agent's policy); returns those that
+    must run alone."""
     from smarts.benchmark.batched import BatchEpisode, batching_mode, run_batch, solo_reason
 
-    first = jobs[todo[0]]
-    try:
-        suite = load_suite(first.suite_source)
-        policy = load_policy(first.agent, first.seed, policy_resolver)
-        setup = policy_setup(policy, first.agent)
-        check_hosted(first.agent, setup, suite)
-        mode = batching_mode(policy)
-    except Exception:  # noqa: BLE001 - alone, each episode records why
-        return todo
-    if mode is None:
-        return todo
-    alone, by_step = [], {}
+    agents: dict[tuple[str, str], tuple | None] = {}  # (agent, suite) -> suite, policy, setup, batching
+    alone, groups = [], {}
     for i in todo:
         job = jobs[i]
+        key = (job.agent, job.suite_source)
+        if key not in agents:
+            agents[key] = None
+            try:
+                suite = load_suite(job.suite_source)
+                policy = load_policy(job.agent, job.seed, policy_resolver)
+                setup = policy_setup(policy, job.agent)
+                check_hosted(job.agent, setup, suite)
+                agents[key] = (suite, policy, setup, batching_mode(policy))
+            except Exception:  # noqa: BLE001 - alone, each episode records why
+                pass
+        if agents[key] is None or agents[key][3] is None:
+            alone.append(i)
+            continue
+        suite, policy, setup, mode = agents[key]
         entry = suite.scenarios[job.scenario_index]
         spec = scenario_for(entry.spec, setup)
         if solo_reason(spec, setup.interface) is not None:
             alone.append(i)
             continue
         try:
-            own = load_policy(job.agent, job.seed, policy_resolver) if mode == "instances" else None
+            own = load_policy(job.agent, job.seed, policy_resolver) if mode == "instances" else policy
         except Exception:  # noqa: BLE001
             alone.append(i)
             continue
         meta = dict(scenario=entry.name, task=suite.task, episode=job.episode, seed=job.seed,
                     time_limit=entry.time_limit, follow=entry.follow, info={**_episode_info(job, suite), **setup.to_dict()})  # fmt: skip
-        by_step.setdefault(spec.step_length, []).append((i, BatchEpisode(spec, job.seed, meta, own)))
-    for members in by_step.values():
+        group = groups.setdefault((spec.step_length, repr(setup)), (setup, []))
+        group[1].append((i, BatchEpisode(spec, job.seed, meta, own, mode)))
+    for setup, members in groups.values():
         index = [i for i, _ in members]
 
         def finished(b: int, log, index=index) -> None:
             report(index[b], _write_batched(jobs[index[b]], log))
 
-        alone += [index[b] for b in run_batch([e for _, e in members], policy, mode, setup.interface,
-                                              setup.lane_relative, finished)]  # fmt: skip
+        alone += [index[b] for b in run_batch([e for _, e in members], setup.interface, setup.lane_relative,
+                                              finished)]  # fmt: skip
     return sorted(alone)
 
 

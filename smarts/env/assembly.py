@@ -94,10 +94,11 @@ def build_simulation(
     stack = stack_maps(maps)
     vehicles: list[AgentVehicle] = []
     episodes: list[EpisodeSetup] = []
+    resolved: dict = {}  # the missions resolved so far: episodes of one scenario share them
     for b, spec in enumerate(specs):
         m = map_number[_map_key(spec)]
         episode_map = stack.windows[m]  # the scenario's map in the simulation's lane indices
-        setup, agents = _episode(spec, episode_map, check_seed(seeds[b], f"{spec.source}: seed"), limits)
+        setup, agents = _episode(spec, episode_map, check_seed(seeds[b], f"{spec.source}: seed"), limits, resolved)
         setup.map_index = m
         episodes.append(setup)
         vehicles += agents
@@ -115,19 +116,25 @@ def _map_key(spec: ScenarioSpec) -> tuple:
 
 
 def _episode(
-    spec: ScenarioSpec, road_map: RoadMap, seed: int, limits: ReachLimits
+    spec: ScenarioSpec, road_map: RoadMap, seed: int, limits: ReachLimits, resolved: dict | None = None
 ) -> tuple[EpisodeSetup, list[AgentVehicle]]:
     """One episode of ``spec`` on ``road_map`` (its window of the simulation's maps): its
-    missions, own providers, rules and signals, and its agents' vehicles."""
+    missions, own providers, rules and signals, and its agents' vehicles. ``resolved``: missions
+    resolved for earlier episodes of the same simulation, reused for the same mission on the same
+    map (a mission does not depend on the seed; its arrays are read-only)."""
     replay = _replay_plan(spec)
     taken = {t.agent_id: t for t in replay.take_overs} if replay is not None else {}
-    missions = [
-        resolve_mission(
-            road_map, agent.id, _replay_mission(road_map, taken, agent, f"{spec.source}: replay.take_over.{agent.id}"),
-            f"{spec.source}: agents[{i}].mission", spec.traffic,
-        )
-        for i, agent in enumerate(spec.agents)
-    ]  # fmt: skip
+    resolved = {} if resolved is None else resolved
+    missions = []
+    for i, agent in enumerate(spec.agents):
+        mission = _replay_mission(road_map, taken, agent, f"{spec.source}: replay.take_over.{agent.id}")
+        where = f"{spec.source}: agents[{i}].mission"
+        key = (id(road_map), id(mission), id(spec.traffic), agent.id, where)
+        kept = resolved.get(key)
+        if kept is None or kept[0] is not mission or kept[1] is not spec.traffic:  # (the same objects)
+            kept = resolved[key] = (mission, spec.traffic, _read_only(resolve_mission(road_map, agent.id, mission,
+                                                                                      where, spec.traffic)))  # fmt: skip
+        missions.append(kept[2])
     vehicles = []
     for agent in spec.agents:
         dims = agent.vehicle.dimensions()
@@ -172,6 +179,14 @@ def _replay_plan(spec: ScenarioSpec):
     plan = plan_replay(spec.replay, spec.base_dir, spec.source)
     check_capacity(plan, spec.vehicle_capacity, len(spec.agents), spec.source)
     return plan
+
+
+def _read_only(mission):
+    """``mission`` with its arrays made read-only (it may be shared by several episodes)."""
+    for value in vars(mission).values():
+        if isinstance(value, np.ndarray):
+            value.flags.writeable = False
+    return mission
 
 
 def _replay_mission(road_map: RoadMap, taken: dict, agent, where: str):

@@ -86,12 +86,15 @@ def _assert_identical(out) -> None:
 def test_a_suite_gives_the_same_logs_and_results_batched_as_one_env_per_episode(tmp_path, suite_file):
     """Every kind of policy batching (``rows``: keep-lane and stand-still; ``instances``: random;
     ``episodes`` with ``act_episodes``: a PPO checkpoint), agents that crash early (the episode
-    runs on for the lead), a lead leaving the map (the episode ends)."""
+    runs on for the lead), a lead leaving the map (the episode ends); the three reference agents
+    (who drive alike) in one simulation, each episode acted in by its own agent's policy."""
     agents = ["zoo:platoon-rtp"]
     suite = load_suite(suite_file)
     jobs = plan_jobs(agents, suite, 2, tmp_path / "plan")
     units = plan_units(jobs, list(range(len(jobs))))
-    assert sorted(map(len, units)) == [2 * len(suite.scenarios)] * 4  # one simulation per agent
+    n = 2 * len(suite.scenarios)
+    assert sorted(map(len, units)) == [n, 3 * n]  # PPO's own simulation; the references' together
+    assert {jobs[k].agent for k in max(units, key=len)} == {"zoo:keep-lane", "zoo:random", "zoo:stand-still"}
     out = _run_both(tmp_path, suite_file, agents, 2)
     _assert_identical(out)
     results = out[True][0]

@@ -123,7 +123,7 @@ def test_figures_drawn_by_a_helper_process_are_the_figures_drawn_here(adaptive_r
     from dataclasses import replace
 
     from smarts.benchmark.metrics import read_episode
-    from smarts.benchmark.report import FigureHelpers, _draw, _Drawing, _metric_figures, _score, _trajectory_plots
+    from smarts.benchmark.report import FigureHelpers, _draw, _Drawing, _metric_figures, _score, _trajectory_figures
 
     suite = load_suite(adaptive_report / "two.yaml")
     results = []
@@ -131,7 +131,7 @@ def test_figures_drawn_by_a_helper_process_are_the_figures_drawn_here(adaptive_r
         log = read_episode(path)
         results.append({"agent": log.info["agent"], "scenario": log.scenario, "episode": log.episode, "log": str(path)})
     agents = ["zoo:keep-lane", "zoo:random"]
-    figures = _trajectory_plots(tmp_path, suite, agents, results, str).figures
+    figures = _trajectory_figures(tmp_path, suite, agents, results)
     scored = _score(suite, agents, results, 0.95, 200, 0)
     metrics = _metric_figures(tmp_path, suite, scored.scores, scored.names, str)
     assert len(figures) == 2 and len(metrics) == len(scored.names) >= 4
@@ -169,15 +169,16 @@ def test_figures_drawn_by_a_helper_process_are_the_figures_drawn_here(adaptive_r
     assert {name: p.read_bytes() for name, p in again.items()} == {name: p.read_bytes() for name, p in expected.items()}
 
 
-def test_logs_read_ahead_score_as_the_files_on_disk(adaptive_report, tmp_path):
-    """``LogPrefetch`` reads the logs offered while episodes run; the report built from it is the
-    report built from the files, a log rewritten after it was offered is read as it is now, one
-    that does not read back raises what ``read_episode`` raises, and a budget too small for a
-    log leaves it to be read when asked for."""
+def test_a_report_prepared_while_episodes_run_is_the_report(adaptive_report, tmp_path):
+    """``ReportAhead`` reads the logs offered while the episodes run and hands a scenario's
+    trajectory figure to the helpers once every agent's episode 0 of it is in; the report built
+    with it is the report built from the files (results, report.md, every figure byte for byte).
+    A log rewritten after it was offered is read as it is now, one that does not read back raises
+    what ``read_episode`` raises, and a budget too small for a log leaves it to the report."""
     import shutil
 
     from smarts.benchmark.metrics import LogError, read_episode
-    from smarts.benchmark.report import LogPrefetch
+    from smarts.benchmark.report import FigureHelpers, ReportAhead
 
     paths = sorted((adaptive_report / "logs").rglob("*.npz"))
     results = []
@@ -186,19 +187,30 @@ def test_logs_read_ahead_score_as_the_files_on_disk(adaptive_report, tmp_path):
         results.append({"agent": log.info["agent"], "scenario": log.scenario, "episode": log.episode,
                         "seed": log.seed, "log": str(path)})  # fmt: skip
     suite = load_suite(adaptive_report / "two.yaml")
-    ahead = LogPrefetch()
-    for r in results:
-        ahead.offer(r)
-    ahead.offer({"agent": "zoo:random", "log": None})  # an episode without a log: nothing to read
+    jobs = plan_jobs([], suite, 1, tmp_path / "plan")
     out = tmp_path / "ahead"
-    write_report(out, suite, [], results, logs=ahead)
+    ahead = ReportAhead(out, suite, [], jobs, FigureHelpers(1))
+    for k, r in enumerate(results):
+        ahead.offer(r)
+        if k == 0:
+            assert ahead.handed == []  # the other agents' episode 0 of that scenario is still to come
+    ahead.offer({"agent": "zoo:random", "log": None})  # an episode without a log: nothing to read
+    assert [f.scenario for f in ahead.handed] == ["a01_straight_free", "a09_lead_turns_right_at_signal_medium"]
+    write_report(out, suite, [], results, ahead=ahead)
     assert (out / "results.json").read_text() == (adaptive_report / "results.json").read_text()
+    assert (out / "report.md").read_text().replace(str(out), "<run>") == (
+        adaptive_report / "report.md"
+    ).read_text().replace(str(adaptive_report), "<run>")
+    drawn = sorted(p.name for p in (out / "plots").glob("*.png"))
+    assert drawn == sorted(p.name for p in (adaptive_report / "plots").glob("*.png"))
+    for name in drawn:
+        assert (out / "plots" / name).read_bytes() == (adaptive_report / "plots" / name).read_bytes(), name
     assert not ahead._thread.is_alive() and ahead._logs == {}  # every log was taken by the report
 
     first, second = tmp_path / "first.npz", tmp_path / "second.npz"
     shutil.copy(paths[0], first)
     second.write_bytes(b"not a log")
-    ahead = LogPrefetch()
+    ahead = ReportAhead(tmp_path / "more", suite, [], jobs)
     ahead.offer({"log": str(first)})
     ahead.offer({"log": str(second)})
     first.write_bytes(paths[1].read_bytes())  # its episode ran again (a dead worker): offered again
@@ -208,6 +220,33 @@ def test_logs_read_ahead_score_as_the_files_on_disk(adaptive_report, tmp_path):
     with pytest.raises(LogError, match="not a readable .npz episode log"):
         ahead.read(second)
 
-    small = LogPrefetch(budget=paths[0].stat().st_size - 1)
+    small = ReportAhead(tmp_path / "small", suite, [], jobs, budget=paths[0].stat().st_size - 1)
     small.offer({"log": str(paths[0])})
     assert small.read(paths[0]).scenario == read_episode(paths[0]).scenario and small._logs == {}
+
+
+def test_a_figure_handed_out_early_that_differs_from_the_reports_is_drawn_again(adaptive_report, tmp_path):
+    """Should a figure handed to the helpers early not be the one the report builds (its
+    results changed after), the report's own is drawn over it."""
+    from smarts.benchmark.metrics import read_episode
+    from smarts.benchmark.report import FigureHelpers, ReportAhead
+
+    results = []
+    for path in sorted((adaptive_report / "logs").rglob("*.npz")):
+        log = read_episode(path)
+        results.append({"agent": log.info["agent"], "scenario": log.scenario, "episode": log.episode,
+                        "seed": log.seed, "log": str(path)})  # fmt: skip
+    suite = load_suite(adaptive_report / "two.yaml")
+    out = tmp_path / "out"
+    ahead = ReportAhead(out, suite, [], plan_jobs([], suite, 1, tmp_path / "plan"), FigureHelpers(1))
+    wrong = next(r for r in results if r["scenario"] == "a09_lead_turns_right_at_signal_medium")
+    a01 = next(r for r in results if r["scenario"] == "a01_straight_free" and r["agent"] == wrong["agent"])
+    for r in results:
+        ahead.offer(replace_log(r, a01["log"]) if r is wrong else r)  # a09's figure gets an a01 path
+    write_report(out, suite, [], results, ahead=ahead)
+    name = "trajectories_a09_lead_turns_right_at_signal_medium.png"
+    assert (out / "plots" / name).read_bytes() == (adaptive_report / "plots" / name).read_bytes()
+
+
+def replace_log(result: dict, log: str) -> dict:
+    return {**result, "log": log}

@@ -235,8 +235,10 @@ def _as_from_a_terminal() -> None:
 
 def test_ctrl_c_writes_what_finished_and_resume_finishes_the_run(tmp_path):
     out = tmp_path / "run"
+    # One episode per unit, so episodes end one by one: in batches, the reference agents' episodes
+    # (one simulation per worker) end almost together, and the run may be over by the Ctrl-C.
     command = [sys.executable, "-m", "train", "benchmark", "--suite", TINY, "--agent", "zoo:keep-lane",
-               "--episodes", "12", "--workers", "2", "--out", str(out)]  # fmt: skip
+               "--episodes", "12", "--workers", "2", "--per-episode", "--out", str(out)]  # fmt: skip
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(command, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True, preexec_fn=_as_from_a_terminal)  # fmt: skip
