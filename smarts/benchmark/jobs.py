@@ -303,7 +303,7 @@ def plan_units(
     policies drive alike: the same action space, controller and observation interface; and of one
     step length), in job order, at most :data:`MAX_BATCH` each, split further until there are
     ``workers`` units to run at once; every other episode a unit of its own."""
-    from smarts.benchmark.batched import batching_mode, solo_reason
+    from smarts.benchmark.batching import batching_mode, solo_reason
 
     groups: dict[tuple, list[int]] = {}
     units: list[list[int]] = []

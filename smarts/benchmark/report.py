@@ -241,8 +241,10 @@ class ReportAhead:
         import os
 
         _lower_priority()  # this thread only: the workers' episodes come first
-        with contextlib.suppress(Exception):  # the report imports it again and says what is wrong
+        with contextlib.suppress(Exception):  # the report imports them again and says what is wrong
             _pyplot()
+            import smarts.env.assembly  # noqa: F401 - the maps, for the trajectory figures drawn here
+            import smarts.replay.render  # noqa: F401
         while (path := self._queue.get()) is not None:
             try:
                 size = os.path.getsize(path)

@@ -41,7 +41,7 @@ class Policy(Protocol):
     ``source`` (the checkpoint file it was loaded from: errors name it, and the benchmark's resume
     keys its episodes by that file's contents), ``batching`` (how the benchmark may share it
     between episodes stepped together: ``rows``, ``episodes`` or ``instances``, see
-    ``smarts.benchmark.batched.BATCHING``; absent: each of its episodes runs alone) and, with
+    ``smarts.benchmark.batching.BATCHING``; absent: each of its episodes runs alone) and, with
     ``episodes``, ``act_episodes(obs, counts)`` (``act`` of several episodes' stacked rows in one
     call, equal bit for bit to one ``act`` per episode)."""
 
