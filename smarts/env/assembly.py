@@ -94,11 +94,11 @@ def build_simulation(
     stack = stack_maps(maps)
     vehicles: list[AgentVehicle] = []
     episodes: list[EpisodeSetup] = []
-    resolved: dict = {}  # the missions resolved so far: episodes of one scenario share them
+    built: dict = {}  # missions and traffic compiled so far: later episodes of a scenario reuse them
     for b, spec in enumerate(specs):
         m = map_number[_map_key(spec)]
         episode_map = stack.windows[m]  # the scenario's map in the simulation's lane indices
-        setup, agents = _episode(spec, episode_map, check_seed(seeds[b], f"{spec.source}: seed"), limits, resolved)
+        setup, agents = _episode(spec, episode_map, check_seed(seeds[b], f"{spec.source}: seed"), limits, built)
         setup.map_index = m
         episodes.append(setup)
         vehicles += agents
@@ -116,24 +116,25 @@ def _map_key(spec: ScenarioSpec) -> tuple:
 
 
 def _episode(
-    spec: ScenarioSpec, road_map: RoadMap, seed: int, limits: ReachLimits, resolved: dict | None = None
+    spec: ScenarioSpec, road_map: RoadMap, seed: int, limits: ReachLimits, built: dict | None = None
 ) -> tuple[EpisodeSetup, list[AgentVehicle]]:
     """One episode of ``spec`` on ``road_map`` (its window of the simulation's maps): its
-    missions, own providers, rules and signals, and its agents' vehicles. ``resolved``: missions
-    resolved for earlier episodes of the same simulation, reused for the same mission on the same
-    map (a mission does not depend on the seed; its arrays are read-only)."""
+    missions, own providers, rules and signals, and its agents' vehicles. ``built``: what earlier
+    episodes of the same simulation built, reused for the same mission or traffic on the same map
+    (neither depends on the seed): resolved missions (their arrays read-only) and compiled
+    built-in traffic."""
     replay = _replay_plan(spec)
     taken = {t.agent_id: t for t in replay.take_overs} if replay is not None else {}
-    resolved = {} if resolved is None else resolved
+    built = {} if built is None else built
     missions = []
     for i, agent in enumerate(spec.agents):
         mission = _replay_mission(road_map, taken, agent, f"{spec.source}: replay.take_over.{agent.id}")
         where = f"{spec.source}: agents[{i}].mission"
-        key = (id(road_map), id(mission), id(spec.traffic), agent.id, where)
-        kept = resolved.get(key)
+        key = ("mission", id(road_map), id(mission), id(spec.traffic), agent.id, where)
+        kept = built.get(key)
         if kept is None or kept[0] is not mission or kept[1] is not spec.traffic:  # (the same objects)
-            kept = resolved[key] = (mission, spec.traffic, _read_only(resolve_mission(road_map, agent.id, mission,
-                                                                                      where, spec.traffic)))  # fmt: skip
+            kept = built[key] = (mission, spec.traffic, _read_only(resolve_mission(road_map, agent.id, mission,
+                                                                                   where, spec.traffic)))  # fmt: skip
         missions.append(kept[2])
     vehicles = []
     for agent in spec.agents:
@@ -161,7 +162,7 @@ def _episode(
         not_moving_distance=spec.events.not_moving_distance,
     )
     signals = SignalState(road_map) if road_map.tls_ids else None
-    providers = traffic_providers(spec, road_map, signals)
+    providers = traffic_providers(spec, road_map, signals, built)
     if replay is not None:
         providers.insert(0, _replay_provider(spec, replay, road_map, providers, signals))
     setup = EpisodeSetup(
@@ -218,20 +219,23 @@ def _replay_provider(spec: ScenarioSpec, replay, road_map: RoadMap, providers: l
     )  # fmt: skip
 
 
-def traffic_providers(spec: ScenarioSpec, road_map: RoadMap, signals: SignalState | None) -> list:
+def traffic_providers(
+    spec: ScenarioSpec, road_map: RoadMap, signals: SignalState | None, built: dict | None = None
+) -> list:
     """The providers that move everything but the agents, in stepping order (after the agents).
 
     SUMO drives its own signals; without SUMO the map's fixed-time programs run (also when the
-    scenario has no traffic, so observations and metrics still see the lights change).
+    scenario has no traffic, so observations and metrics still see the lights change). ``built``:
+    see :func:`_episode` (the built-in traffic compiled for an earlier episode is reused).
     """
     try:
-        return _traffic_providers(spec, road_map, signals)
+        return _traffic_providers(spec, road_map, signals, built)
     except ScenarioError as err:  # name the scenario file, as every spec error does
         message = str(err)
         raise ScenarioError(message if message.startswith(spec.source) else f"{spec.source}: {message}") from None
 
 
-def _traffic_providers(spec: ScenarioSpec, road_map: RoadMap, signals: SignalState | None) -> list:
+def _traffic_providers(spec: ScenarioSpec, road_map: RoadMap, signals: SignalState | None, built: dict | None) -> list:
     traffic = spec.traffic
     if traffic is not None and traffic.engine == "sumo":
         from smarts.maps import sumo_net_path
@@ -243,5 +247,5 @@ def _traffic_providers(spec: ScenarioSpec, road_map: RoadMap, signals: SignalSta
     if traffic is not None:
         from smarts.traffic.builtin import BuiltinTrafficProvider
 
-        providers.append(BuiltinTrafficProvider(traffic, road_map, spec.step_length, signals))
+        providers.append(BuiltinTrafficProvider(traffic, road_map, spec.step_length, signals, compiled=built))
     return providers

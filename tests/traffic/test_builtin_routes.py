@@ -70,3 +70,31 @@ def test_the_road_tables_of_a_map_are_built_once_per_map_and_each_window_has_its
             own = road - int(stack.road_base[k])
             assert first._road_lanes[road] == [lane + base for lane in alone._road_lanes[own]]
             assert first._road_length[road] == alone._road_length[own]
+
+
+def test_the_episodes_of_a_batch_share_compiled_traffic_but_each_adds_its_own_routes():
+    """A simulation of several episodes of one scenario compiles its built-in traffic once: the
+    providers share the sources and start from copies of one route table, so a route one of
+    them adds (a hand-over) is its own; their missions are resolved once and read-only."""
+    from smarts.env.assembly import build_simulation
+    from smarts.traffic.builtin import BuiltinTrafficProvider
+    from tests.builders import agent, make_spec
+
+    spec = make_spec(
+        [agent(start_road="west_in", goal={"road": "east_out"})],
+        map_name="intersection_4way_2lane",
+        traffic=TrafficSpec(flows=_all_od_flows()),
+    )
+    sim = build_simulation([spec, spec, spec], seeds=[1, 2, 3])
+    providers = [p for own in sim.episode_providers for p in own if isinstance(p, BuiltinTrafficProvider)]
+    assert len(providers) == 3 and all(p.sources is providers[0].sources for p in providers)
+    assert len({id(p.routes) for p in providers}) == 3 and len({id(p.routes._lane) for p in providers}) == 3
+    before = [len(p.routes.routes) for p in providers]
+    lane = int(providers[1].map.lane_index_of[providers[1].map.lane_ids[0]])
+    providers[1].routes.add_from_lane(lane)
+    after = [len(p.routes.routes) for p in providers]
+    assert after[1] > before[1] and (after[0], after[2]) == (before[0], before[2])
+    alone = BuiltinTrafficProvider(spec.traffic, providers[0].map, 0.1)
+    np.testing.assert_array_equal(providers[2].routes.slot_int, alone.routes.slot_int)
+    missions = [m for m in sim.missions]
+    assert all(m.path_xy is missions[0].path_xy for m in missions) and not missions[0].path_xy.flags.writeable

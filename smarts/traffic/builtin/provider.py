@@ -97,6 +97,7 @@ class BuiltinTrafficProvider(ProviderBase):
         road_map: RoadMap,
         dt: float,
         signals: SignalState | None = None,
+        compiled: dict | None = None,
     ):
         self.traffic = traffic
         self.map = road_map
@@ -104,9 +105,19 @@ class BuiltinTrafficProvider(ProviderBase):
         self.signals = signals
         if traffic.pedestrians:
             raise ScenarioError("traffic.pedestrians: the builtin engine has no pedestrians; use engine: sumo")
-        self.routes = RouteTable(road_map)
         self.junctions = junction_table(road_map)
-        self.sources = self._compile_sources(traffic)
+        # ``compiled``: the routes and sources of this traffic on this map compiled for an earlier
+        # provider (a batch's episodes of one scenario): sources never change once compiled, and
+        # each provider adds its own routes (hand-overs) to a copy of the table.
+        key = ("builtin traffic", id(traffic), id(road_map))
+        kept = compiled.get(key) if compiled is not None else None
+        if kept is not None and kept[0] is traffic and kept[1] is road_map:
+            self.routes, self.sources = kept[2].copy(), kept[3]
+        else:
+            self.routes = RouteTable(road_map)
+            self.sources = self._compile_sources(traffic)
+            if compiled is not None:
+                compiled[key] = (traffic, road_map, self.routes.copy(), self.sources)
         m = road_map
         self.lanes = K.LaneGraph(
             lane_f=np.ascontiguousarray(

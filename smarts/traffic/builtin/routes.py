@@ -10,6 +10,7 @@ ahead are array lookups. Slots of all routes live in one set of flat arrays.
 
 from __future__ import annotations
 
+import copy
 import heapq
 import itertools
 import math
@@ -50,6 +51,15 @@ class RouteTable:
         self._cost: list[float] = []
         self.pack_count = 0  # how often the flat arrays were built (once per batch of routes)
         self._packed: tuple[np.ndarray, np.ndarray] | None = None
+
+    def copy(self) -> RouteTable:
+        """A table with these routes that adds its own: routes are only ever appended and a built
+        route's slots never change, so the copy's lists start as copies and the rest is shared."""
+        new = copy.copy(self)
+        for name in ("routes", "slot_of", "_lane", "_next", "_left", "_right", "_dir", "_cost"):
+            setattr(new, name, list(getattr(self, name)))
+        new._key = dict(self._key)
+        return new
 
     # ------------------------------------------------------------------ arrays
     @property
