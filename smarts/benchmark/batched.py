@@ -15,7 +15,7 @@ Only the normal flow runs here. An episode that meets anything else (its policy 
 a malformed action, its observation space does not suit the policy, its recorder fails) leaves the
 batch at once, untouched, and is returned to the caller to run alone, where the per-episode loop
 records exactly what it always did. Episodes that cannot share a simulation at all
-(:func:`solo_reason`: SUMO traffic, social agents whose policies cannot be shared) are never
+(``smarts.benchmark.batching.solo_reason``: SUMO traffic, social agents whose policies cannot be shared) are never
 given here.
 
 How a policy may be shared is its own declaration, ``policy.batching`` (:data:`BATCHING`); a
@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from smarts.benchmark.batching import BATCHING, batching_mode, solo_reason
+from smarts.benchmark.batching import BATCHING
 from smarts.benchmark.metrics.log import EpisodeLog
 from smarts.benchmark.recorder import EpisodeRecorder, EpisodeRecorders
 from smarts.core.errors import ActionError
@@ -39,8 +39,6 @@ from smarts.core.policies import Policy
 from smarts.dynamics.lane_relative import LaneRelativeParams
 from smarts.scenario import ScenarioSpec
 from smarts.sensors.interface import AgentInterface
-
-__all__ = ["BATCHING", "BatchEpisode", "batching_mode", "run_batch", "solo_reason"]
 
 
 @dataclass
@@ -300,7 +298,7 @@ def run_batch(
     lane_relative: LaneRelativeParams | None,
     finished: Callable[[int, EpisodeLog], None],
 ) -> list[int]:
-    """Step ``episodes`` (each :func:`solo_reason`-free, their policies all driving with
+    """Step ``episodes`` (each ``solo_reason``-free, their policies all driving with
     ``observation`` and ``lane_relative``) as one simulation, calling ``finished(i, log)`` as
     episode ``i`` ends; returns the episodes to run alone instead (they left the batch untouched,
     or the batch could not be built)."""

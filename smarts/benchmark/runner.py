@@ -307,7 +307,8 @@ def _run_batched(jobs: list[Job], todo: list[int], policy_resolver: PolicyResolv
     driving (the agents whose policies have the same action space, controller and observation
     interface share one, each episode acted in by its own agent's policy); returns those that
     must run alone."""
-    from smarts.benchmark.batched import BatchEpisode, batching_mode, run_batch, solo_reason
+    from smarts.benchmark.batched import BatchEpisode, run_batch
+    from smarts.benchmark.batching import batching_mode, solo_reason
 
     agents: dict[tuple[str, str], tuple | None] = {}  # (agent, suite) -> suite, policy, setup, batching
     alone, groups = [], {}
