@@ -200,16 +200,13 @@ class ReportAhead:
         import queue
         import threading
 
-        from smarts.benchmark.agents import REFERENCE_AGENTS
-
         self.budget = budget
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._logs: dict[str, Any] = {}
         self._thread = threading.Thread(target=self._read_ahead, name="report-ahead", daemon=True)
         self._thread.start()
-        agents = list(dict.fromkeys(agents))
-        planned = {job.agent for job in jobs}
-        self.shown = agents + [a for a in REFERENCE_AGENTS if a not in agents and a in planned]
+        # The report's rule, over the planned episodes: by the end each has a result.
+        self.shown = _shown(list(dict.fromkeys(agents)), [{"agent": job.agent} for job in jobs])[0]
         self.plots, self.suite = Path(out) / "plots", suite
         names = [entry.name for entry in suite.scenarios]
         self._waiting = {name: {j.agent for j in jobs if j.episode == 0 and names[j.scenario_index] == name}
