@@ -68,3 +68,26 @@ def test_broken_files_are_errors(tmp_path):
         zf.writestr("x.npy", b"hello")
     with pytest.raises(ValueError, match="not a numpy array"):
         read_npz(not_array)
+
+
+def test_the_same_arrays_give_the_same_bytes_and_zipfile_checks_them():
+    first, second = io.BytesIO(), io.BytesIO()
+    write_npz(first, ARRAYS)
+    write_npz(second, {k: v.copy(order="K") for k, v in ARRAYS.items()})
+    assert first.getvalue() == second.getvalue()  # no clock in the archive
+    with zipfile.ZipFile(first) as zf:
+        assert zf.testzip() is None  # every member's CRC-32 as recorded
+        assert [i.filename for i in zf.infolist()] == [f"{k}.npy" for k in ARRAYS]
+
+
+def test_a_damaged_member_is_an_error_not_wrong_arrays(tmp_path):
+    good = io.BytesIO()
+    write_npz(good, {"x": np.arange(1000.0), "y": np.ones(50)})
+    data = bytearray(good.getvalue())
+    for at in (60, 200, 400):  # inside the first member's compressed data
+        damaged = tmp_path / f"damaged_{at}.npz"
+        data_at = bytearray(data)
+        data_at[at] ^= 0xFF
+        damaged.write_bytes(bytes(data_at))
+        with pytest.raises((zipfile.BadZipFile, ValueError)):
+            read_npz(damaged)
