@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from smarts.benchmark.metrics import load_params, read_episode, score_suite
+from smarts.benchmark.metrics import load_params, read_episode, score_episode, score_suite
 from smarts.benchmark.metrics.scores import CI_LEVEL, CI_RESAMPLES, CI_SEED, ci_method, metric_names
 from smarts.benchmark.suites import Suite
 from smarts.files import atomic_write_bytes, atomic_write_text
@@ -137,7 +137,7 @@ def write_report(
     figures = _trajectory_figures(plots, suite, _shown(agents, results)[0], results)
     drawing = ahead.drawing_for(figures, helpers) if ahead is not None else _Drawing(figures, helpers)
     try:
-        scored = _score(suite, agents, results, ci_level, resamples, ci_seed, ahead.read if ahead else read_episode)
+        scored = _score(suite, agents, results, ci_level, resamples, ci_seed, ahead or _Reading())
         atomic_write_text(
             out / "results.json",
             json.dumps(_results_doc(suite, scored, not_run, ci_level, resamples, ci_seed), indent=2, default=float),
@@ -181,16 +181,28 @@ def _label(agent: str) -> str:
     return f"{agent_name(agent)} (reference)" if agent in REFERENCE_AGENTS else agent_name(agent)
 
 
-class ReportAhead:
+class _Reading:
+    """How a report reads and scores its logs: from the files, as it goes (:class:`ReportAhead`
+    does it ahead)."""
+
+    def read(self, path: str | Path):
+        return read_episode(path)
+
+    def score(self, log, params) -> dict[str, float]:
+        return score_episode(log, params)
+
+
+class ReportAhead(_Reading):
     """A benchmark report prepared while its episodes run, in the process that only waits for its
-    workers meanwhile: the logs are read as their episodes finish (a report otherwise starts by
-    reading back every log, about 5 ms each, and importing pyplot, half a second), and a
+    workers meanwhile: the logs are read and scored as their episodes finish (a report otherwise
+    starts by reading back and scoring every log, about 5 ms each, and importing pyplot, half a second), and a
     scenario's trajectory figure goes to the figure helpers as soon as every agent's episode 0 of
     it has finished, so they draw it on a core the last episodes leave free.
 
     Give :meth:`offer` to ``run_jobs`` (its ``on_result``) and this to :func:`write_report`.
-    The report reads the logs through :meth:`read`, which takes what was read ahead and reads the
-    rest itself, so it scores the files on disk exactly as without it; it builds its figures as it
+    The report reads and scores the logs through :meth:`read` and :meth:`score`, which take what
+    was done ahead and do the rest then, so it scores the files on disk exactly as without it
+    (with the shipped metric parameters; others are scored then); it builds its figures as it
     always does and draws only those not handed out already (a figure handed out that differs
     from the report's is drawn again after). At most ``budget`` bytes of log files are kept
     ahead (about twice that in memory); later logs are read when the report needs them."""
@@ -203,6 +215,7 @@ class ReportAhead:
         self.budget = budget
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._logs: dict[str, Any] = {}
+        self._scores: dict[int, tuple[Any, Any, dict[str, float]]] = {}  # id(log) -> (log, params, scores)
         self._thread = threading.Thread(target=self._read_ahead, name="report-ahead", daemon=True)
         self._thread.start()
         # The report's rule, over the planned episodes: by the end each has a result.
@@ -242,13 +255,16 @@ class ReportAhead:
             _pyplot()
             import smarts.env.assembly  # noqa: F401 - the maps, for the trajectory figures drawn here
             import smarts.replay.render  # noqa: F401
+        params = None
         while (path := self._queue.get()) is not None:
             try:
                 size = os.path.getsize(path)
                 if size > self.budget:
                     continue
-                self._logs[path] = read_episode(path)  # a path offered again (a re-run) is read again
+                self._logs[path] = log = read_episode(path)  # a path offered again (a re-run) is read again
                 self.budget -= size
+                params = load_params() if params is None else params
+                self._scores[id(log)] = (log, params, score_episode(log, params))
             except Exception:  # noqa: BLE001 - the report reads it again and says what is wrong
                 self._logs.pop(path, None)
 
@@ -259,6 +275,13 @@ class ReportAhead:
             self._thread.join()
         log = self._logs.pop(str(path), None)
         return log if log is not None else read_episode(path)
+
+    def score(self, log, params) -> dict[str, float]:
+        """``score_episode(log, params)``: as computed ahead for a log :meth:`read` gave, else now."""
+        ahead = self._scores.pop(id(log), None)
+        if ahead is not None and ahead[0] is log and ahead[1] == params:
+            return ahead[2]
+        return score_episode(log, params)
 
     def drawing_for(self, figures: list[_TrajectoryFigure], helpers: FigureHelpers | None = None) -> _Drawing:
         """The drawing of a report's trajectory figures: those handed out already and the rest
@@ -293,22 +316,25 @@ def _score(
     ci_level: float,
     resamples: int,
     ci_seed: int,
-    read=read_episode,
+    reading: _Reading | None = None,
 ) -> _Scored:
-    """Each agent's logs read and scored; seeds, failures and re-runs gathered from the results."""
-    params = load_params()
+    """Each agent's logs read and scored (by ``reading``); seeds, failures and re-runs gathered from
+    the results."""
+    params, reading = load_params(), reading or _Reading()
     shown, references = _shown(agents, results)
     scores, crashed, setup = {}, {}, {}
     seeds: dict[str, dict[int, Any]] = {}  # scenario -> episode -> seed, over every job
     for agent in shown:
         mine = [r for r in results if r["agent"] == agent]
-        logs = [read(r["log"]) for r in mine if r.get("log")]
+        logs = [reading.read(r["log"]) for r in mine if r.get("log")]
         crashed[agent] = [r for r in mine if not r.get("log")]
         if logs and params.failed_episodes == "exclude" and all(log.failed for log in logs):
             crashed[agent] = [r for r in mine if r.get("failure")]  # nothing to score: list them all
             logs = []
         scores[agent] = (
-            score_suite(logs, params, ci_level=ci_level, resamples=resamples, ci_seed=ci_seed) if logs else None
+            score_suite(logs, params, ci_level=ci_level, resamples=resamples, ci_seed=ci_seed, score=reading.score)
+            if logs
+            else None
         )
         info = next((log.info for log in logs if log.info.get("action_space")), {})
         first = next((r for r in mine if r.get("action_space")), {})

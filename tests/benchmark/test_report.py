@@ -169,16 +169,26 @@ def test_figures_drawn_by_a_helper_process_are_the_figures_drawn_here(adaptive_r
     assert {name: p.read_bytes() for name, p in again.items()} == {name: p.read_bytes() for name, p in expected.items()}
 
 
-def test_a_report_prepared_while_episodes_run_is_the_report(adaptive_report, tmp_path):
-    """``ReportAhead`` reads the logs offered while the episodes run and hands a scenario's
+def test_a_report_prepared_while_episodes_run_is_the_report(adaptive_report, tmp_path, monkeypatch):
+    """``ReportAhead`` reads and scores the logs offered while the episodes run and hands a scenario's
     trajectory figure to the helpers once every agent's episode 0 of it is in; the report built
     with it is the report built from the files (results, report.md, every figure byte for byte).
     A log rewritten after it was offered is read as it is now, one that does not read back raises
     what ``read_episode`` raises, and a budget too small for a log leaves it to the report."""
     import shutil
+    import threading
 
-    from smarts.benchmark.metrics import LogError, read_episode
+    import smarts.benchmark.report as report_module
+    from smarts.benchmark.metrics import LogError, read_episode, score_episode
     from smarts.benchmark.report import FigureHelpers, ReportAhead
+
+    scored_in = []
+
+    def counted(log, params):
+        scored_in.append(threading.current_thread().name)
+        return score_episode(log, params)
+
+    monkeypatch.setattr(report_module, "score_episode", counted)
 
     paths = sorted((adaptive_report / "logs").rglob("*.npz"))
     results = []
@@ -206,6 +216,7 @@ def test_a_report_prepared_while_episodes_run_is_the_report(adaptive_report, tmp
     for name in drawn:
         assert (out / "plots" / name).read_bytes() == (adaptive_report / "plots" / name).read_bytes(), name
     assert not ahead._thread.is_alive() and ahead._logs == {}  # every log was taken by the report
+    assert scored_in == ["report-ahead"] * len(paths) and ahead._scores == {}  # each scored once, ahead
 
     first, second = tmp_path / "first.npz", tmp_path / "second.npz"
     shutil.copy(paths[0], first)

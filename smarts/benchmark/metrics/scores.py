@@ -69,7 +69,7 @@ always returns the worst values for a failed episode; the policy is applied by
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -503,10 +503,12 @@ def score_suite(
     ci_level: float = CI_LEVEL,
     resamples: int = CI_RESAMPLES,
     ci_seed: int = CI_SEED,
+    score: Callable[[EpisodeLog, MetricParams], dict[str, float]] = score_episode,
 ) -> SuiteScores:
     """Score a suite: episodes are averaged per scenario first, then scenarios equally; every
     mean gets a confidence interval (:func:`bootstrap_ci`, ``ci_level``, ``resamples``,
-    ``ci_seed``).
+    ``ci_seed``). ``score``: how one episode is scored, :func:`score_episode` or a caller's lookup
+    of what it computed with it already (a benchmark scores each log as its episode finishes).
 
     All logs must share one task (S_bench's fourth metric differs between tasks: score each task
     separately). The same (scenario, episode index) twice is an error, as is a scenario whose
@@ -515,7 +517,7 @@ def score_suite(
     params = load_params() if params is None else params
     task = _suite_task(logs)
     names = metric_names(task)
-    per_scenario, failed, seeds, episode_scores = _score_episodes(logs, params, names)
+    per_scenario, failed, seeds, episode_scores = _score_episodes(logs, params, names, score)
     if not per_scenario:
         raise ValueError("score_suite: every episode failed and failed episodes are excluded; nothing to score")
 
@@ -562,7 +564,7 @@ def _suite_task(logs: Sequence[EpisodeLog]) -> str:
     return tasks[0]
 
 
-def _score_episodes(logs: Sequence[EpisodeLog], params: MetricParams, names: tuple[str, ...]) -> tuple:
+def _score_episodes(logs: Sequence[EpisodeLog], params: MetricParams, names: tuple[str, ...], score) -> tuple:
     """Score every episode once; returns the scores kept per scenario (failed ones dropped when the
     policy excludes them), the failed episodes, the seeds and every episode's row for the report."""
     seen: dict[tuple[str, int], str | None] = {}
@@ -572,7 +574,7 @@ def _score_episodes(logs: Sequence[EpisodeLog], params: MetricParams, names: tup
     episode_scores: dict[str, list[dict[str, Any]]] = {}
     exclude = params.failed_episodes == "exclude"
     for log in logs:
-        scores = score_episode(log, params)
+        scores = score(log, params)
         key = (log.scenario, int(log.episode))
         if key in seen:
             raise LogError(
