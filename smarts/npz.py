@@ -17,6 +17,7 @@ bytes. An archive that is not laid out that simply (another writer's, a damaged 
 from __future__ import annotations
 
 import io
+import math
 import re
 import struct
 import zipfile
@@ -47,6 +48,8 @@ _UTF8_NAME = 0x800
 _LIMIT = 0xFFFFFFFF  # sizes and offsets at or past this need zip64: zipfile writes those
 _HEADERS: dict[tuple, bytes] = {}
 """numpy's .npy header by (dtype, Fortran order, shape): a log's arrays share a few shapes."""
+_PARSED: dict[bytes, tuple] = {}
+"""The other way: a plain header -> (dtype, shape, count, order)."""
 
 
 def write_npz(fh: BinaryIO, arrays: Mapping[str, np.ndarray]) -> None:
@@ -174,17 +177,24 @@ def _array(data: bytes) -> np.ndarray:
     size_bytes = 2 if major == 1 else 4
     start = 8 + size_bytes
     header_len = int.from_bytes(data[8:start], "little")
-    match = _PLAIN_HEADER.fullmatch(data[start : start + header_len].decode("latin1").strip())
-    if match is None or major not in (1, 2):  # structured dtypes, unicode headers: numpy's reader
-        return np.lib.format.read_array(io.BytesIO(data), allow_pickle=False)
-    descr, fortran, dims = match.groups()
-    dtype = np.dtype(descr)
-    if dtype.hasobject:
-        raise ValueError("Object arrays cannot be loaded when allow_pickle=False")
-    shape = tuple(int(d) for d in dims.replace(" ", "").split(",") if d)
-    count = int(np.prod(shape, dtype=np.int64)) if shape else 1
+    header = data[start : start + header_len]
+    plain = _PARSED.get(header) if major in (1, 2) else None
+    if plain is None:
+        match = _PLAIN_HEADER.fullmatch(header.decode("latin1").strip())
+        if match is None or major not in (1, 2):  # structured dtypes, unicode headers: numpy's reader
+            return np.lib.format.read_array(io.BytesIO(data), allow_pickle=False)
+        descr, fortran, dims = match.groups()
+        dtype = np.dtype(descr)
+        if dtype.hasobject:
+            raise ValueError("Object arrays cannot be loaded when allow_pickle=False")
+        shape = tuple(int(d) for d in dims.replace(" ", "").split(",") if d)
+        plain = (dtype, shape, math.prod(shape), "F" if fortran == "True" else "C")
+        if len(_PARSED) > 1024:
+            _PARSED.clear()
+        _PARSED[header] = plain
+    dtype, shape, count, order = plain
     body = memoryview(data)[start + header_len :]
     if len(body) != count * dtype.itemsize:
         raise ValueError(f"a member holds {len(body)} bytes of data, its header says {count * dtype.itemsize}")
     array = np.frombuffer(bytearray(body), dtype=dtype, count=count)
-    return array.reshape(shape, order="F" if fortran == "True" else "C")
+    return array.reshape(shape, order=order)

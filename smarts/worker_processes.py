@@ -51,11 +51,22 @@ def worker_context():
     return ctx
 
 
+_server_started = False
+
+
 def start_worker_server() -> None:
     """Start the fork server now (it imports :data:`WORKER_PRELOAD` while the caller goes on, say
     loading agents), so the workers later start at once. Nothing to do without a fork server."""
+    global _server_started
     if worker_context().get_start_method() == "forkserver":
         from multiprocessing import forkserver
 
         with sigint_deferred():  # the server, and so every worker it forks, is born with Ctrl-C blocked
             forkserver.ensure_running()
+        _server_started = True
+
+
+def worker_server_started() -> bool:
+    """Whether this process started the fork server (:func:`start_worker_server`): then other
+    helpers can come from it too, with the simulator's modules already imported."""
+    return _server_started

@@ -814,15 +814,16 @@ def _trajectory_figure_job(plots: Path, suite_name: str, entry, agents: list[str
 
 class FigureHelpers:
     """Helper processes for a report's trajectory figures, started ahead of it: a helper first
-    spends a second or two importing matplotlib and the map code, which a caller can overlap with
-    running the episodes (``train benchmark`` starts them beside its workers), then waits for
-    :func:`write_report` to give it figures. Fresh interpreters (``python -c``), never a fork or a
-    re-run of the caller's script. One per spare core, at most three, none on one core or for a few
-    figures (:meth:`for_figures`). Unused helpers end when told (:meth:`close`) or when this process
-    ends."""
+    imports matplotlib (and, in a fresh interpreter, the map code: a second or two), which a caller
+    can overlap with running the episodes (``train benchmark`` starts them beside its workers),
+    then waits for :func:`write_report` to give it figures. Children of the fork server where this
+    process started one (:func:`~smarts.worker_processes.start_worker_server`: the maps are
+    imported there already), else fresh interpreters (``python -c``); never a fork or a re-run of
+    the caller's script. One per spare core, at most three, none on one core or for a few figures
+    (:meth:`for_figures`). Unused helpers end when told (:meth:`close`) or when this process ends."""
 
     def __init__(self, count: int):
-        self.processes = [_start_helper() for _ in range(max(count, 0))]
+        self.processes = [_Helper() for _ in range(max(count, 0))]
 
     @classmethod
     def for_figures(cls, figures: int) -> FigureHelpers:
@@ -833,6 +834,76 @@ class FigureHelpers:
     def close(self) -> None:
         _stop(self.processes)
         self.processes = []
+
+
+class _Helper:
+    """One figure helper (:func:`_helper_loop`) and the line-by-line channel to it: a pipe to a child
+    of the fork server, or the stdin and stdout of a fresh interpreter."""
+
+    def __init__(self):
+        from smarts.worker_processes import sigint_deferred, worker_context, worker_server_started
+
+        self.process: Any = None
+        self.channel: Any = None
+        if worker_server_started():
+            context = worker_context()
+            self.channel, theirs = context.Pipe()
+            with sigint_deferred():  # born with Ctrl-C blocked, as the workers: this process stops it
+                self.process = context.Process(target=_helper_in_fork, args=(theirs,), daemon=True)
+                self.process.start()
+            theirs.close()
+            return
+        import os
+        import subprocess
+        import sys
+
+        import smarts
+
+        env = dict(os.environ)  # the helper imports this process's smarts, wherever it came from
+        root = str(Path(smarts.__file__).resolve().parents[1])
+        env["PYTHONPATH"] = os.pathsep.join([root, *filter(None, [env.get("PYTHONPATH")])])
+        self.process = subprocess.Popen(
+            [sys.executable, "-c", "from smarts.benchmark.report import _helper_main; _helper_main()"],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+        )  # fmt: skip
+
+    def tell(self, line: str) -> None:
+        """Send one line (a figures folder, a pickle of more figures); a helper that died is left
+        to :meth:`finish` to report."""
+        with contextlib.suppress(OSError, ValueError):
+            if self.channel is not None:
+                self.channel.send(line)
+            else:
+                self.process.stdin.write(f"{line}\n".encode())
+                self.process.stdin.flush()
+
+    def finish(self) -> tuple[dict[int, Path], str | None]:
+        """Tell it there is nothing more, wait for it: (figure index -> file it drew, why it failed or None)."""
+        if self.channel is None:
+            out, err, code = (*self.process.communicate(), self.process.returncode)
+            if code == 0:
+                return {int(k): Path(path) for k, path in json.loads(out or "{}").items()}, None
+            why = err.decode(errors="replace").strip().splitlines()[-1:] or [f"exit status {code}"]
+            return {}, why[0]
+        try:
+            self.channel.send(None)
+            drawn, why = self.channel.recv()
+        except (EOFError, OSError) as err:
+            drawn, why = {}, f"it ended early ({type(err).__name__})"
+        finally:
+            self.channel.close()
+            self.process.join()
+        if why is None and self.process.exitcode != 0:
+            why = f"exit status {self.process.exitcode}"
+        return ({int(k): Path(path) for k, path in drawn.items()}, why) if why is None else ({}, why)
+
+    def kill(self) -> None:
+        self.process.kill()
+        if self.channel is None:
+            self.process.communicate()
+        else:
+            self.channel.close()
+            self.process.join()
 
 
 class _Drawing:
@@ -861,10 +932,8 @@ class _Drawing:
         self._tell(f"{self.folder}")
 
     def _tell(self, line: str) -> None:
-        for process in self.helpers:
-            with contextlib.suppress(OSError):  # one that died: its exit status says so in result()
-                process.stdin.write(f"{line}\n".encode())
-                process.stdin.flush()  # (closed by communicate())
+        for helper in self.helpers:
+            helper.tell(line)
 
     def add(self, figures: list) -> None:
         """More figures for the helpers (they take them up after the first ones)."""
@@ -895,16 +964,14 @@ class _Drawing:
                 if _claim(self.folder, k) and (path := _draw(self.figures[k])) is not None:
                     drawn[k] = path
         finally:  # the helpers are waited for (and the scratch folder removed) whatever happens here
-            finished = [(*process.communicate(), process.returncode) for process in self.helpers]
+            finished = [helper.finish() for helper in self.helpers]
             shutil.rmtree(self.folder, ignore_errors=True)
         failed = False
-        for out, err, code in finished:
-            if code == 0:
-                drawn.update({int(k): Path(path) for k, path in json.loads(out or "{}").items()})
-            else:
+        for theirs, why in finished:
+            drawn.update(theirs)
+            if why is not None:
                 failed = True
-                why = err.decode(errors="replace").strip().splitlines()[-1:] or [f"exit status {code}"]
-                _log.warning("a figure helper failed (%s); drawing its figures here", why[0])
+                _log.warning("a figure helper failed (%s); drawing its figures here", why)
         if failed:
             for k, figure in enumerate(self.figures):
                 if k not in drawn and (path := _draw(figure)) is not None:
@@ -922,10 +989,9 @@ def _draw(figure) -> Path | None:
     return _metric_figure(figure) if isinstance(figure, _MetricFigure) else _trajectory_figure(figure)
 
 
-def _stop(processes: list) -> None:
-    for process in processes:
-        process.kill()
-        process.communicate()
+def _stop(helpers: list[_Helper]) -> None:
+    for helper in helpers:
+        helper.kill()
 
 
 def _claim(folder: Path, k: int) -> bool:
@@ -939,53 +1005,53 @@ def _claim(folder: Path, k: int) -> bool:
     return True
 
 
-def _start_helper():
-    """A helper process (:func:`_helper_main`), its figures' folder still to be written to its stdin."""
-    import os
-    import subprocess
-    import sys
-
-    import smarts
-
-    env = dict(os.environ)  # the helper imports this process's smarts, wherever it came from
-    root = str(Path(smarts.__file__).resolve().parents[1])
-    env["PYTHONPATH"] = os.pathsep.join([root, *filter(None, [env.get("PYTHONPATH")])])
-    return subprocess.Popen(
-        [sys.executable, "-c", "from smarts.benchmark.report import _helper_main; _helper_main()"],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
-    )  # fmt: skip
-
-
 def _helper_main() -> None:
-    """A figure helper: imports what drawing takes, then reads from stdin the folder of its
-    parent's pickled figures (nothing: it is not needed after all) and draws those it claims
-    first; each further line names a pickle of more figures (their first index, the figures),
-    until stdin closes. Writes index -> file as JSON. It runs at a low priority
-    (:data:`BACKGROUND_NICE`): while episodes run it takes only the CPU they leave."""
-    import pickle
+    """A figure helper in a fresh interpreter: lines on stdin, index -> file as JSON on stdout."""
     import sys
+
+    lines = (line.strip() for line in sys.stdin)
+    sys.stdout.write(json.dumps({k: str(path) for k, path in _helper_loop(lines).items()}))
+
+
+def _helper_in_fork(channel) -> None:
+    """A figure helper forked from the fork server: lines through ``channel`` (None ends them),
+    then (index -> file, None) back, or ({}, why it failed)."""
+    try:
+        drawn, why = _helper_loop(iter(channel.recv, None)), None
+    except Exception as err:  # noqa: BLE001 - the parent draws them itself and says why
+        drawn, why = {}, f"{type(err).__name__}: {err}"
+    channel.send(({k: str(path) for k, path in drawn.items()}, why))
+
+
+def _helper_loop(lines) -> dict[int, Path]:
+    """What a figure helper does: imports what drawing takes, then reads the folder of its
+    parent's pickled figures from ``lines`` (nothing: it is not needed after all) and draws those
+    it claims first; each further line names a pickle of more figures (their first index, the
+    figures), until the lines end. It runs at a low priority (:data:`BACKGROUND_NICE`): while
+    episodes run it takes only the CPU they leave."""
+    import pickle
 
     _lower_priority()
     _pyplot()
     import smarts.env.assembly  # noqa: F401 - the maps, for the roads
     import smarts.replay.render  # noqa: F401
 
-    line = sys.stdin.readline().strip()
+    line = next(lines, "")
     if not line:
-        return
+        return {}
     folder = Path(line)
-    drawn = {}
+    drawn: dict[int, Path] = {}
 
     def draw(first: int, figures: list) -> None:
         for k, figure in enumerate(figures, start=first):
             if _claim(folder, k) and (path := _draw(figure)) is not None:
-                drawn[k] = str(path)
+                drawn[k] = path
 
     draw(0, pickle.loads((folder / "figures.pickle").read_bytes()))
-    for line in sys.stdin:
-        if line.strip():
-            draw(*pickle.loads((folder / line.strip()).read_bytes()))
-    sys.stdout.write(json.dumps(drawn))
+    for line in lines:
+        if line:
+            draw(*pickle.loads((folder / line).read_bytes()))
+    return drawn
 
 
 def _trajectory_figure(figure: _TrajectoryFigure) -> Path | None:

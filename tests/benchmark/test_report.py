@@ -122,9 +122,13 @@ def test_figures_drawn_by_a_helper_process_are_the_figures_drawn_here(adaptive_r
     and a helper that fails leaves its share to it."""
     from dataclasses import replace
 
+    import smarts.worker_processes as worker_processes
     from smarts.benchmark.metrics import read_episode
     from smarts.benchmark.report import FigureHelpers, _draw, _Drawing, _metric_figures, _score, _trajectory_figures
 
+    monkeypatch.setattr(
+        worker_processes, "_server_started", False
+    )  # fresh interpreters first (another test may have started it)
     suite = load_suite(adaptive_report / "two.yaml")
     results = []
     for path in sorted((adaptive_report / "logs").rglob("*.npz")):
@@ -167,6 +171,18 @@ def test_figures_drawn_by_a_helper_process_are_the_figures_drawn_here(adaptive_r
         again = draw(1)
     assert "a figure helper failed" in caplog.text
     assert {name: p.read_bytes() for name, p in again.items()} == {name: p.read_bytes() for name, p in expected.items()}
+
+    monkeypatch.delenv("PYTHONHOME")
+    worker_processes.start_worker_server()  # as train benchmark does: the helpers come from its fork server
+    forked = FigureHelpers(2)
+    assert all(h.channel is not None for h in forked.processes)
+    for path in again.values():
+        path.unlink()
+    drawn = draw(forked)
+    assert {name: p.read_bytes() for name, p in drawn.items()} == {name: p.read_bytes() for name, p in expected.items()}
+    unused = FigureHelpers(1)
+    unused.close()
+    assert unused.processes == []
 
 
 def test_a_report_prepared_while_episodes_run_is_the_report(adaptive_report, tmp_path, monkeypatch):
