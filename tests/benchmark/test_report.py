@@ -126,9 +126,8 @@ def test_figures_drawn_by_a_helper_process_are_the_figures_drawn_here(adaptive_r
     from smarts.benchmark.metrics import read_episode
     from smarts.benchmark.report import FigureHelpers, _draw, _Drawing, _metric_figures, _score, _trajectory_figures
 
-    monkeypatch.setattr(
-        worker_processes, "_server_started", False
-    )  # fresh interpreters first (another test may have started it)
+    # Fresh interpreters first (another test in this process may have started the fork server).
+    monkeypatch.setattr(worker_processes, "_server_started", False)
     suite = load_suite(adaptive_report / "two.yaml")
     results = []
     for path in sorted((adaptive_report / "logs").rglob("*.npz")):
