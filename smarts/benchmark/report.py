@@ -217,7 +217,6 @@ class ReportAhead(_Reading):
         self._logs: dict[str, Any] = {}
         self._scores: dict[int, tuple[Any, Any, dict[str, float]]] = {}  # id(log) -> (log, params, scores)
         self._thread = threading.Thread(target=self._read_ahead, name="report-ahead", daemon=True)
-        self._thread.start()
         # The report's rule, over the planned episodes: by the end each has a result.
         self.shown = _shown(list(dict.fromkeys(agents)), [{"agent": job.agent} for job in jobs])[0]
         self.plots, self.suite = Path(out) / "plots", suite
@@ -227,6 +226,7 @@ class ReportAhead(_Reading):
         self._first: dict[str, list[dict]] = {name: [] for name in names}
         self.handed: list[_TrajectoryFigure] = []
         self.drawing = _Drawing([], helpers) if helpers is not None and helpers.processes else None
+        self._thread.start()
 
     def offer(self, summary: dict) -> None:
         """A finished episode's summary (``run_jobs``'s ``on_result``)."""
@@ -251,10 +251,11 @@ class ReportAhead(_Reading):
         import os
 
         _lower_priority()  # this thread only: the workers' episodes come first
-        with contextlib.suppress(Exception):  # the report imports them again and says what is wrong
-            _pyplot()
-            import smarts.env.assembly  # noqa: F401 - the maps, for the trajectory figures drawn here
-            import smarts.replay.render  # noqa: F401
+        if self.drawing is None or self.drawing.caller_draws:
+            with contextlib.suppress(Exception):  # the report imports them again and says what is wrong
+                _pyplot()
+                import smarts.env.assembly  # noqa: F401 - the maps, for the trajectory figures drawn here
+                import smarts.replay.render  # noqa: F401
         params = None
         while (path := self._queue.get()) is not None:
             try:
@@ -819,17 +820,28 @@ class FigureHelpers:
     then waits for :func:`write_report` to give it figures. Children of the fork server where this
     process started one (:func:`~smarts.worker_processes.start_worker_server`: the maps are
     imported there already), else fresh interpreters (``python -c``); never a fork or a re-run of
-    the caller's script. One per spare core, at most three, none on one core or for a few figures
-    (:meth:`for_figures`). Unused helpers end when told (:meth:`close`) or when this process ends."""
+    the caller's script. :meth:`for_figures`: none on one core or for a few figures, else one per
+    core, at most three, when they come from the fork server (the caller then draws none: its
+    share would first cost it the imports a helper has), one per spare core when they are fresh
+    interpreters. Unused helpers end when told (:meth:`close`) or when this process ends."""
 
-    def __init__(self, count: int):
+    def __init__(self, count: int, caller_draws: bool = True):
         self.processes = [_Helper() for _ in range(max(count, 0))]
+        self.caller_draws = caller_draws or not self.processes
+        """Whether the caller draws its share too (else only what a failed helper left)."""
 
     @classmethod
     def for_figures(cls, figures: int) -> FigureHelpers:
         import os
 
-        return cls(min((os.cpu_count() or 1) - 1, 3, figures // 3))
+        from smarts.worker_processes import worker_server_started
+
+        cores = os.cpu_count() or 1
+        if cores < 2 or figures < 3:
+            return cls(0)
+        if worker_server_started():
+            return cls(min(cores, 3, figures // 3), caller_draws=False)
+        return cls(min(cores - 1, 3, figures // 3))
 
     def close(self) -> None:
         _stop(self.processes)
@@ -877,12 +889,13 @@ class _Helper:
                 self.process.stdin.write(f"{line}\n".encode())
                 self.process.stdin.flush()
 
-    def finish(self) -> tuple[dict[int, Path], str | None]:
-        """Tell it there is nothing more, wait for it: (figure index -> file it drew, why it failed or None)."""
+    def finish(self) -> tuple[dict[int, Path | None], str | None]:
+        """Tell it there is nothing more, wait for it: (figure index -> file it drew or None when
+        there was nothing to draw, why it failed or None)."""
         if self.channel is None:
             out, err, code = (*self.process.communicate(), self.process.returncode)
             if code == 0:
-                return {int(k): Path(path) for k, path in json.loads(out or "{}").items()}, None
+                return _paths(json.loads(out or "{}")), None
             why = err.decode(errors="replace").strip().splitlines()[-1:] or [f"exit status {code}"]
             return {}, why[0]
         try:
@@ -895,7 +908,7 @@ class _Helper:
             self.process.join()
         if why is None and self.process.exitcode != 0:
             why = f"exit status {self.process.exitcode}"
-        return ({int(k): Path(path) for k, path in drawn.items()}, why) if why is None else ({}, why)
+        return (_paths(drawn), why) if why is None else ({}, why)
 
     def kill(self) -> None:
         self.process.kill()
@@ -926,6 +939,7 @@ class _Drawing:
         self.folder = Path(tempfile.mkdtemp(prefix="smarts-figures-"))
         (self.folder / "figures.pickle").write_bytes(pickle.dumps(self.figures))
         self.helpers, helpers.processes = helpers.processes, []
+        self.caller_draws = helpers.caller_draws or not self.helpers
         self.redraw: list = []
         """Figures to draw again here after the others (one handed out early that differs from
         the report's own: the report's wins)."""
@@ -960,9 +974,9 @@ class _Drawing:
 
         try:
             drawn = {}
-            for k in reversed(range(len(self.figures))):
-                if _claim(self.folder, k) and (path := _draw(self.figures[k])) is not None:
-                    drawn[k] = path
+            for k in reversed(range(len(self.figures)) if self.caller_draws else []):
+                if _claim(self.folder, k):
+                    drawn[k] = _draw(self.figures[k])
         finally:  # the helpers are waited for (and the scratch folder removed) whatever happens here
             finished = [helper.finish() for helper in self.helpers]
             shutil.rmtree(self.folder, ignore_errors=True)
@@ -972,11 +986,11 @@ class _Drawing:
             if why is not None:
                 failed = True
                 _log.warning("a figure helper failed (%s); drawing its figures here", why)
-        if failed:
+        if failed or not self.caller_draws:  # what a failed helper left (claimed, not drawn)
             for k, figure in enumerate(self.figures):
-                if k not in drawn and (path := _draw(figure)) is not None:
-                    drawn[k] = path
-        out = {f.key: drawn[k] for k, f in enumerate(self.figures) if k in drawn}
+                if k not in drawn:
+                    drawn[k] = _draw(figure)
+        out = {f.key: drawn[k] for k, f in enumerate(self.figures) if drawn.get(k) is not None}
         for figure in self.redraw:
             out.pop(figure.key, None)
             if (path := _draw(figure)) is not None:
@@ -1005,12 +1019,16 @@ def _claim(folder: Path, k: int) -> bool:
     return True
 
 
+def _paths(drawn: dict) -> dict[int, Path | None]:
+    return {int(k): None if path is None else Path(path) for k, path in drawn.items()}
+
+
 def _helper_main() -> None:
     """A figure helper in a fresh interpreter: lines on stdin, index -> file as JSON on stdout."""
     import sys
 
     lines = (line.strip() for line in sys.stdin)
-    sys.stdout.write(json.dumps({k: str(path) for k, path in _helper_loop(lines).items()}))
+    sys.stdout.write(json.dumps({k: path and str(path) for k, path in _helper_loop(lines).items()}))
 
 
 def _helper_in_fork(channel) -> None:
@@ -1020,10 +1038,10 @@ def _helper_in_fork(channel) -> None:
         drawn, why = _helper_loop(iter(channel.recv, None)), None
     except Exception as err:  # noqa: BLE001 - the parent draws them itself and says why
         drawn, why = {}, f"{type(err).__name__}: {err}"
-    channel.send(({k: str(path) for k, path in drawn.items()}, why))
+    channel.send(({k: path and str(path) for k, path in drawn.items()}, why))
 
 
-def _helper_loop(lines) -> dict[int, Path]:
+def _helper_loop(lines) -> dict[int, Path | None]:
     """What a figure helper does: imports what drawing takes, then reads the folder of its
     parent's pickled figures from ``lines`` (nothing: it is not needed after all) and draws those
     it claims first; each further line names a pickle of more figures (their first index, the
@@ -1040,12 +1058,12 @@ def _helper_loop(lines) -> dict[int, Path]:
     if not line:
         return {}
     folder = Path(line)
-    drawn: dict[int, Path] = {}
+    drawn: dict[int, Path | None] = {}
 
     def draw(first: int, figures: list) -> None:
         for k, figure in enumerate(figures, start=first):
-            if _claim(folder, k) and (path := _draw(figure)) is not None:
-                drawn[k] = path
+            if _claim(folder, k):
+                drawn[k] = _draw(figure)  # None: nothing to draw
 
     draw(0, pickle.loads((folder / "figures.pickle").read_bytes()))
     for line in lines:

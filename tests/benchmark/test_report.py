@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import re
 from pathlib import Path
 
@@ -178,6 +179,12 @@ def test_figures_drawn_by_a_helper_process_are_the_figures_drawn_here(adaptive_r
     for path in again.values():
         path.unlink()
     drawn = draw(forked)
+    assert {name: p.read_bytes() for name, p in drawn.items()} == {name: p.read_bytes() for name, p in expected.items()}
+    for path in drawn.values():
+        path.unlink()
+    alone = FigureHelpers.for_figures(6)  # one per core from the fork server, the caller drawing none
+    assert not alone.caller_draws and len(alone.processes) == min(os.cpu_count(), 2)
+    drawn = draw(alone)
     assert {name: p.read_bytes() for name, p in drawn.items()} == {name: p.read_bytes() for name, p in expected.items()}
     unused = FigureHelpers(1)
     unused.close()
