@@ -38,6 +38,9 @@ WORKER_PRELOAD = ("smarts.worker_preload",)
 """What the fork server imports once for every worker (named, not imported, here): starting a
 worker from a fresh interpreter costs 2-4 s of imports and set-up, paid again by each worker and
 each replacement (see :mod:`smarts.worker_preload`)."""
+TORCH_PRELOAD = ("torch",)
+"""Imported by the fork server after :data:`WORKER_PRELOAD` (the policies' networks), unless the
+server was started without it (:func:`start_worker_server`)."""
 
 
 def worker_context():
@@ -47,20 +50,26 @@ def worker_context():
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return multiprocessing.get_context("spawn")
     ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(list(WORKER_PRELOAD))  # no effect once this process's server runs
+    ctx.set_forkserver_preload([*WORKER_PRELOAD, *TORCH_PRELOAD])  # no effect once this process's server runs
     return ctx
 
 
 _server_started = False
 
 
-def start_worker_server() -> None:
+def start_worker_server(torch: bool = True) -> None:
     """Start the fork server now (it imports :data:`WORKER_PRELOAD` while the caller goes on, say
-    loading agents), so the workers later start at once. Nothing to do without a fork server."""
+    loading agents), so the workers later start at once. Nothing to do without a fork server.
+    ``torch=False``: without :data:`TORCH_PRELOAD`, for a caller whose workers mostly run policies
+    of code alone (the benchmark's reference agents): the server is ready 2 s sooner, and a worker
+    whose policy is a network imports torch itself."""
     global _server_started
-    if worker_context().get_start_method() == "forkserver":
+    context = worker_context()
+    if context.get_start_method() == "forkserver":
         from multiprocessing import forkserver
 
+        if not torch:
+            context.set_forkserver_preload(list(WORKER_PRELOAD))
         with sigint_deferred():  # the server, and so every worker it forks, is born with Ctrl-C blocked
             forkserver.ensure_running()
         _server_started = True

@@ -25,7 +25,9 @@ def _benchmark(args: argparse.Namespace) -> int:
     from smarts.worker_processes import start_worker_server
 
     if (args.workers > 1 or args.episode_timeout is not None) and not args.ray_address:
-        start_worker_server()  # it imports what workers need while this process loads the agents
+        # It imports what workers need while this process loads the agents; not torch: the reference
+        # agents, most of the episodes, need none, and a worker whose policy is a network imports it.
+        start_worker_server(torch=False)
     from smarts.benchmark.agents import REFERENCE_AGENTS, agent_locator
     from smarts.benchmark.jobs import benchmark_folder, claim_folder, plan_jobs
     from smarts.benchmark.report import FigureHelpers, ReportAhead, write_report

@@ -20,6 +20,8 @@ episodes that finished.
 from __future__ import annotations
 
 import contextlib
+import os
+import sys
 import traceback
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -266,9 +268,21 @@ def _one_torch_thread() -> Iterator[None]:
     """Policies' networks on one thread while episodes run: their batches are a few rows, where
     more threads only wait for each other (on a busy machine a call took 30 times as long), and
     the benchmark's parallelism is its worker processes. (The results are the same: measured
-    bit for bit on the whole adaptive suite.)"""
-    import torch
-
+    bit for bit on the whole adaptive suite.) Where torch is not imported yet (a worker whose
+    policies need none: 2 s saved), it is not imported for this: a policy that imports it
+    meanwhile starts with one thread (``OMP_NUM_THREADS``, read once as torch loads)."""
+    torch = sys.modules.get("torch")
+    if torch is None:
+        before_env = os.environ.get("OMP_NUM_THREADS")
+        os.environ["OMP_NUM_THREADS"] = "1"
+        try:
+            yield
+        finally:
+            if before_env is None:
+                os.environ.pop("OMP_NUM_THREADS", None)
+            else:
+                os.environ["OMP_NUM_THREADS"] = before_env
+        return
     before = torch.get_num_threads()
     torch.set_num_threads(1)
     try:

@@ -93,6 +93,12 @@ def test_runner_writes_logs_results_report_plots_and_tensorboard(tmp_path, capsy
     assert (out / "plots" / "metric_S_bench.png").stat().st_size > 1000
     assert (out / "plots" / "trajectories_t1_left.png").stat().st_size > 1000
     assert list((out / "tensorboard").rglob("events.out.tfevents.*"))
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    (folder,) = [p for p in (out / "tensorboard").iterdir() if "keep-lane" in p.name]
+    board = EventAccumulator(str(folder)).Reload()
+    (tag,) = [t for t in board.Tags()["scalars"] if t.endswith("/S_bench")]
+    assert board.Scalars(tag)[0].value == pytest.approx(keep["S_bench"], rel=1e-6)  # float32 in the event
     # Same seed, same results.
     assert _run(tmp_path / "b", "--agent", "zoo:keep-lane", "--agent", "zoo:random") == 0
     again = json.loads((tmp_path / "b" / "results.json").read_text())
