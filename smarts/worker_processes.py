@@ -57,19 +57,19 @@ def worker_context():
 _server_started = False
 
 
-def start_worker_server(torch: bool = True) -> None:
+def start_worker_server(torch: bool = True, also: tuple[str, ...] = ()) -> None:
     """Start the fork server now (it imports :data:`WORKER_PRELOAD` while the caller goes on, say
     loading agents), so the workers later start at once. Nothing to do without a fork server.
     ``torch=False``: without :data:`TORCH_PRELOAD`, for a caller whose workers mostly run policies
     of code alone (the benchmark's reference agents): the server is ready 2 s sooner, and a worker
-    whose policy is a network imports torch itself."""
+    whose policy is a network imports torch itself. ``also``: more modules for it to import (the
+    benchmark's figure helpers come from it too)."""
     global _server_started
     context = worker_context()
     if context.get_start_method() == "forkserver":
         from multiprocessing import forkserver
 
-        if not torch:
-            context.set_forkserver_preload(list(WORKER_PRELOAD))
+        context.set_forkserver_preload([*WORKER_PRELOAD, *(TORCH_PRELOAD if torch else ()), *also])
         with sigint_deferred():  # the server, and so every worker it forks, is born with Ctrl-C blocked
             forkserver.ensure_running()
         _server_started = True

@@ -27,7 +27,8 @@ def _benchmark(args: argparse.Namespace) -> int:
     if (args.workers > 1 or args.episode_timeout is not None) and not args.ray_address:
         # It imports what workers need while this process loads the agents; not torch: the reference
         # agents, most of the episodes, need none, and a worker whose policy is a network imports it.
-        start_worker_server(torch=False)
+        # And pyplot, for the figure helpers forked from it (it has the time: loading the agents is longer).
+        start_worker_server(torch=False, also=("smarts.benchmark.figure_preload",))
     from smarts.benchmark.agents import REFERENCE_AGENTS, agent_locator
     from smarts.benchmark.jobs import benchmark_folder, claim_folder, plan_jobs
     from smarts.benchmark.report import FigureHelpers, ReportAhead, write_report

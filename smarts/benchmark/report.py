@@ -253,9 +253,7 @@ class ReportAhead(_Reading):
         _lower_priority()  # this thread only: the workers' episodes come first
         if self.drawing is None or self.drawing.caller_draws:
             with contextlib.suppress(Exception):  # the report imports them again and says what is wrong
-                _pyplot()
-                import smarts.env.assembly  # noqa: F401 - the maps, for the trajectory figures drawn here
-                import smarts.replay.render  # noqa: F401
+                prepare_drawing()  # for the trajectory figures drawn here
         params = None
         while (path := self._queue.get()) is not None:
             try:
@@ -630,6 +628,13 @@ def _pyplot():
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def prepare_drawing() -> None:
+    """Import what drawing a report's figures takes (about a second): pyplot, the maps, the renderer."""
+    _pyplot()
+    import smarts.env.assembly  # noqa: F401 - the maps, for the roads
+    import smarts.replay.render  # noqa: F401
 
 
 @dataclass(frozen=True)
@@ -1050,10 +1055,7 @@ def _helper_loop(lines) -> dict[int, Path | None]:
     import pickle
 
     _lower_priority()
-    _pyplot()
-    import smarts.env.assembly  # noqa: F401 - the maps, for the roads
-    import smarts.replay.render  # noqa: F401
-
+    prepare_drawing()  # (nothing left to import in a child of a fork server that imported it)
     line = next(lines, "")
     if not line:
         return {}
