@@ -216,6 +216,7 @@ class ReportAhead(_Reading):
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._logs: dict[str, Any] = {}
         self._scores: dict[int, tuple[Any, Any, dict[str, float]]] = {}  # id(log) -> (log, params, scores)
+        self._enough = False  # set when the report starts: the thread stops after the log in hand
         self._thread = threading.Thread(target=self._read_ahead, name="report-ahead", daemon=True)
         # The report's rule, over the planned episodes: by the end each has a result.
         self.shown = _shown(list(dict.fromkeys(agents)), [{"agent": job.agent} for job in jobs])[0]
@@ -255,7 +256,7 @@ class ReportAhead(_Reading):
             with contextlib.suppress(Exception):  # the report imports them again and says what is wrong
                 prepare_drawing()  # for the trajectory figures drawn here
         params = None
-        while (path := self._queue.get()) is not None:
+        while (path := self._queue.get()) is not None and not self._enough:
             try:
                 size = os.path.getsize(path)
                 if size > self.budget:
@@ -268,8 +269,11 @@ class ReportAhead(_Reading):
                 self._logs.pop(path, None)
 
     def read(self, path: str | Path):
-        """The episode log at ``path``: read ahead, else read now (raising what ``read_episode`` raises)."""
+        """The episode log at ``path``: read ahead, else read now (raising what ``read_episode`` raises).
+        The first call stops the reading ahead after the log in hand: what is left is read here, at
+        the report's priority, not by the low-priority thread while the report waits for it."""
         if self._thread.is_alive():
+            self._enough = True
             self._queue.put(None)
             self._thread.join()
         log = self._logs.pop(str(path), None)

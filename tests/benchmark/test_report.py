@@ -199,6 +199,7 @@ def test_a_report_prepared_while_episodes_run_is_the_report(adaptive_report, tmp
     what ``read_episode`` raises, and a budget too small for a log leaves it to the report."""
     import shutil
     import threading
+    import time
 
     import smarts.benchmark.report as report_module
     from smarts.benchmark.metrics import LogError, read_episode, score_episode
@@ -228,6 +229,9 @@ def test_a_report_prepared_while_episodes_run_is_the_report(adaptive_report, tmp
             assert ahead.handed == []  # the other agents' episode 0 of that scenario is still to come
     ahead.offer({"agent": "zoo:random", "log": None})  # an episode without a log: nothing to read
     assert [f.scenario for f in ahead.handed] == ["a01_straight_free", "a09_lead_turns_right_at_signal_medium"]
+    deadline = time.monotonic() + 60
+    while len(ahead._scores) < len(paths) and time.monotonic() < deadline:  # as while the episodes run
+        time.sleep(0.05)
     write_report(out, suite, [], results, ahead=ahead)
     assert (out / "results.json").read_text() == (adaptive_report / "results.json").read_text()
     assert (out / "report.md").read_text().replace(str(out), "<run>") == (
@@ -239,6 +243,12 @@ def test_a_report_prepared_while_episodes_run_is_the_report(adaptive_report, tmp
         assert (out / "plots" / name).read_bytes() == (adaptive_report / "plots" / name).read_bytes(), name
     assert not ahead._thread.is_alive() and ahead._logs == {}  # every log was taken by the report
     assert scored_in == ["report-ahead"] * len(paths) and ahead._scores == {}  # each scored once, ahead
+    hurried = ReportAhead(tmp_path / "hurried", suite, [], jobs)  # the report starts at once: it does the rest
+    for r in results:
+        hurried.offer(r)
+    write_report(tmp_path / "hurried", suite, [], results, ahead=hurried)
+    assert (tmp_path / "hurried" / "results.json").read_text() == (adaptive_report / "results.json").read_text()
+    assert not hurried._thread.is_alive() and hurried._logs == {}
 
     first, second = tmp_path / "first.npz", tmp_path / "second.npz"
     shutil.copy(paths[0], first)
