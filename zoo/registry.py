@@ -86,8 +86,8 @@ def make_policy(locator: str, **kwargs: Any):
 
 
 def _load_file(path: Path, kwargs: dict[str, Any]):
-    from agents.loader import load_policy_file
+    from agents.checked import load_checkpoint_policy
 
     if kwargs:
         raise TypeError(f"{path}: a checkpoint policy takes no options, got {', '.join(sorted(kwargs))}")
-    return load_policy_file(path)
+    return load_checkpoint_policy(path)  # its settings without torch when the file was checked before
