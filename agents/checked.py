@@ -11,7 +11,8 @@ cache folder (``$SMARTS_CACHE_DIR/checked-checkpoints``); a later load of those 
 as always) the first time anything else is asked of it: acting, checking an observation space.
 
 A file that changed, a newer loader or torch, or an entry that does not read back are misses: the
-file is loaded and checked in full, and a refused file is never remembered.
+file is loaded and checked in full, and a refused file is never remembered. Entries are a few
+hundred bytes; one unused for :data:`KEEP_DAYS` is removed when another is written.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import contextlib
 import hashlib
 import json
 import os
+import time
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -27,6 +29,7 @@ from typing import Any
 SETTINGS = ("action_space", "controller", "interface", "lane_relative", "comms", "batching")
 """The attributes a checked policy answers without loading (plain data, as the loaded policy has them)."""
 ENTRY_VERSION = 1
+KEEP_DAYS = 30
 _CHECKING_CODE = ("checked.py", "checkpoint.py", "loader.py", "ppo.py", "sb3_policy.py")
 _code_version: str | None = None
 
@@ -106,6 +109,7 @@ def _recall(file: Path) -> dict | None:
         settings, names = entry["settings"], entry["names"]
         if set(settings) != set(SETTINGS) or not all(isinstance(n, str) for n in names):
             return None
+        os.utime(file)  # used: kept (:data:`KEEP_DAYS`)
         return {"settings": settings, "names": names}
     except (OSError, ValueError, KeyError, TypeError):
         return None
@@ -121,6 +125,11 @@ def _remember(folder: Path, key: str, policy: Any) -> None:
         folder.mkdir(parents=True, exist_ok=True)
         part.write_text(data)
         os.replace(part, folder / f"{key}.json")
+        old = time.time() - KEEP_DAYS * 86400
+        for entry in folder.iterdir():
+            with contextlib.suppress(OSError):
+                if entry.stat().st_mtime < old:
+                    entry.unlink()
     except (OSError, TypeError, ValueError):
         with contextlib.suppress(OSError):
             part.unlink(missing_ok=True)

@@ -76,3 +76,17 @@ def test_a_changed_file_or_a_damaged_entry_is_checked_in_full(cache, tmp_path):
     assert not isinstance(load_checkpoint_policy(good), CheckedPolicy)
     with pytest.raises(CheckpointError):
         load_checkpoint_policy(tmp_path / "missing.pt")
+
+
+def test_entries_unused_for_a_month_are_removed_as_others_are_written(cache, tmp_path):
+    import os
+    import time
+
+    load_checkpoint_policy(SHIPPED / "platoon-rtp.pt")
+    (kept,) = cache.glob("*.json")
+    long_ago = time.time() - 40 * 86400
+    os.utime(kept, (long_ago, long_ago))
+    assert isinstance(load_checkpoint_policy(SHIPPED / "platoon-rtp.pt"), CheckedPolicy)  # used: kept
+    os.utime(kept, (long_ago, long_ago))
+    load_checkpoint_policy(SHIPPED / "drive.pt")  # another entry written: the unused one goes
+    assert not kept.exists() and len(list(cache.glob("*.json"))) == 1
