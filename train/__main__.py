@@ -27,7 +27,7 @@ def _benchmark(args: argparse.Namespace) -> int:
     if (args.workers > 1 or args.episode_timeout is not None) and not args.ray_address:
         # It imports what workers need while this process loads the agents; not torch: the reference
         # agents, most of the episodes, need none, and a worker whose policy is a network imports it.
-        # And pyplot, for the figure helpers forked from it (it has the time: loading the agents is longer).
+        # And pyplot, for the figure helpers forked from it: they can draw as soon as they start.
         start_worker_server(torch=False, also=("smarts.benchmark.figure_preload",))
     from smarts.benchmark.agents import REFERENCE_AGENTS, agent_locator
     from smarts.benchmark.jobs import benchmark_folder, claim_folder, plan_jobs
