@@ -86,9 +86,10 @@ def _cache_home() -> Path:
 def _key(path: Path) -> str | None:
     try:
         content = hashlib.sha256(path.read_bytes()).hexdigest()
-    except OSError:
-        return None  # the loader says what is wrong with it
-    return hashlib.sha256(f"{content}:{_checking_code()}".encode()).hexdigest()[:32]
+        code = _checking_code()
+    except (OSError, metadata.PackageNotFoundError):
+        return None  # a file the loader says what is wrong with; or no way to name the checks: no entry
+    return hashlib.sha256(f"{content}:{code}".encode()).hexdigest()[:32]
 
 
 def _checking_code() -> str:
