@@ -118,19 +118,17 @@ def _recall(file: Path) -> dict | None:
 
 def _remember(folder: Path, key: str, policy: Any) -> None:
     """Write the entry (best effort: a cache that cannot be written only means loading again)."""
-    part = folder / f".{key}.{os.getpid()}.part"  # renamed over the entry whole: never read half written
+    from agents.checkpoint import write_file_atomically  # (torch is loaded: the policy was just read)
+
     try:
         settings = {name: getattr(policy, name, None) for name in SETTINGS}
         names = sorted(n for n in dir(policy) if not n.startswith("_"))
         data = json.dumps({"version": ENTRY_VERSION, "settings": settings, "names": names}, sort_keys=True)
-        folder.mkdir(parents=True, exist_ok=True)
-        part.write_text(data)
-        os.replace(part, folder / f"{key}.json")
+        write_file_atomically(folder / f"{key}.json", data.encode(), "checked-checkpoint entry")
         old = time.time() - KEEP_DAYS * 86400
         for entry in folder.iterdir():
             with contextlib.suppress(OSError):
                 if entry.stat().st_mtime < old:
                     entry.unlink()
-    except (OSError, TypeError, ValueError):
-        with contextlib.suppress(OSError):
-            part.unlink(missing_ok=True)
+    except (OSError, TypeError, ValueError):  # (a write that fails is a CheckpointWriteError, a ValueError)
+        pass
