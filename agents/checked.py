@@ -47,7 +47,10 @@ class CheckedPolicy:
     def __getattr__(self, name: str) -> Any:  # only for what the instance itself lacks
         if name.startswith("_") or name not in self.__dict__.get("_names", ()):
             raise AttributeError(name)
-        return getattr(self.loaded(), name)
+        value = getattr(self.loaded(), name)
+        if callable(value):  # a bound method: kept, so the next call (every step) finds it directly
+            self.__dict__[name] = value
+        return value
 
     def loaded(self) -> Any:
         """The policy itself (the file read and checked now, the first time)."""

@@ -39,7 +39,7 @@ def test_a_checked_file_gives_the_same_settings_and_actions(cache, name):
     space = {k: np.zeros(shape, np.float32) for k, shape in zip(first.layout.keys, first.layout.shapes)}
     obs = {k: np.random.default_rng(0).normal(size=(3, *v.shape)).astype(np.float32) for k, v in space.items()}
     assert np.array_equal(again.act(obs), first.act(obs))  # loaded (and checked) on first use
-    assert again._policy is not None
+    assert again._policy is not None and "act" in vars(again)  # the bound method kept for the next call
     assert isinstance(pickle.loads(pickle.dumps(again)), CheckedPolicy)
 
 
