@@ -55,6 +55,9 @@ _PARSED: dict[bytes, tuple] = {}
 def write_npz(fh: BinaryIO, arrays: Mapping[str, np.ndarray]) -> None:
     """``arrays`` as a compressed .npz into the open binary file ``fh`` (no pickled objects),
     written at once."""
+    if len(arrays) >= 0xFFFF:  # more members than the end record counts: zipfile's zip64 records
+        _write_with_zipfile(fh, arrays)
+        return
     out, central = bytearray(), bytearray()
     for name, value in arrays.items():
         plain = _npy(np.asanyarray(value))
@@ -73,9 +76,6 @@ def write_npz(fh: BinaryIO, arrays: Mapping[str, np.ndarray]) -> None:
         central += _CENTRAL.pack(_CENTRAL_SIG, _MADE_BY, _VERSION, flags, _DEFLATED, 0, _DOS_DATE, crc, len(packed),
                                  len(plain), len(encoded), 0, 0, 0, 0, _FILE_MODE, where)  # fmt: skip
         central += encoded
-    if len(arrays) >= 0xFFFF:
-        _write_with_zipfile(fh, arrays)
-        return
     start = len(out)
     out += central
     out += _END.pack(_END_SIG, 0, 0, len(arrays), len(arrays), len(central), start, 0)
