@@ -152,6 +152,10 @@ def _scan_one(
     px, py, h = data[_X, r], data[_Y, r], data[_H, r]
     dist[:] = max_range
     hit[:] = HIT_NONE
+    ray_c, ray_s = np.empty(n_rays), np.empty(n_rays)
+    for k in range(n_rays):
+        a = k * step + h
+        ray_c[k], ray_s[k] = math.cos(a), math.sin(a)
     for j in alive:
         if j == r:
             continue
@@ -165,17 +169,46 @@ def _scan_one(
         kind = HIT_PEDESTRIAN if role[j] == _PEDESTRIAN else HIT_VEHICLE
         bc, bs = math.cos(bh), math.sin(bh)
         for k in range(int(math.ceil(lo / step)), int(math.floor(hi / step)) + 1):
-            a = k * step + h
-            t = ray_box(px, py, math.cos(a), math.sin(a), bx, by, bc, bs, hl, hw)
             kk = k % n_rays
+            if k == kk:
+                t = ray_box(px, py, ray_c[k], ray_s[k], bx, by, bc, bs, hl, hw)
+            else:  # a ray past -pi or pi, numbered as the box's extent numbers it
+                a = k * step + h
+                t = ray_box(px, py, math.cos(a), math.sin(a), bx, by, bc, bs, hl, hw)
             if t < dist[kk]:
                 dist[kk] = t
                 hit[kk] = kind
+    # Road edges: first each ray's stretch where it leaves the road, then all those stretches
+    # bisected together (independent chains of lookups, so their latencies overlap).
+    lo, hi = np.empty(n_rays), np.empty(n_rays)
+    crossing = np.empty(n_rays, dtype=np.int64)
+    m = 0
+    if _clearance_at(px, py, origin, inv_res, cell_max, width, clearance) == 0:
+        for k in range(n_rays):
+            if 0.0 < dist[k]:
+                dist[k] = 0.0
+                hit[k] = HIT_ROAD_EDGE
+        return
     for k in range(n_rays):
-        a = k * step + h
-        t = _edge_distance(px, py, math.cos(a), math.sin(a), dist[k], origin, inv_res, cell_max, width, clearance)
-        if t < dist[k]:
-            dist[k] = t
+        t_road, t_off = _edge_stretch(px, py, ray_c[k], ray_s[k], dist[k], origin, inv_res, cell_max, width, clearance)
+        if t_off >= 0.0:
+            lo[m], hi[m], crossing[m] = t_road, t_off, k
+            m += 1
+    for _ in range(_BISECTIONS):
+        for q in range(m):
+            k = crossing[q]
+            mid = 0.5 * (lo[q] + hi[q])
+            if (
+                _clearance_at(px + mid * ray_c[k], py + mid * ray_s[k], origin, inv_res, cell_max, width, clearance)
+                == 0
+            ):
+                hi[q] = mid
+            else:
+                lo[q] = mid
+    for q in range(m):
+        k = crossing[q]
+        if hi[q] < dist[k]:
+            dist[k] = hi[q]
             hit[k] = HIT_ROAD_EDGE
 
 
@@ -186,28 +219,24 @@ def _clearance_at(x, y, origin, inv_res, cell_max, width, clearance):  # pragma:
     return clearance[int(cy) * width + int(cx)]
 
 
-@numba.njit(cache=True, nogil=True)
-def _edge_distance(px, py, dx, dy, limit, origin, inv_res, cell_max, width, clearance):  # pragma: no cover - compiled
-    """Distance along the ray to where it first leaves the road, or inf within ``limit``."""
+@numba.njit(cache=True, nogil=True, inline="always")
+def _edge_stretch(px, py, dx, dy, limit, origin, inv_res, cell_max, width, clearance):  # pragma: no cover - compiled
+    """Along a ray that starts on the road: the last distance known on the road and the first
+    sampled off it, where it leaves within ``limit`` (else -1 for the latter). Jumps by the road
+    clearance: any point of an off-road cell lies at least (clearance - sqrt(2)) cells away."""
     res = 1.0 / inv_res
-    if _clearance_at(px, py, origin, inv_res, cell_max, width, clearance) == 0:
-        return 0.0
-    t_road = 0.0  # last distance known to be on the road
+    c = _clearance_at(px, py, origin, inv_res, cell_max, width, clearance)
+    t_road = 0.0
     while t_road < limit:
-        c = _clearance_at(px + t_road * dx, py + t_road * dy, origin, inv_res, cell_max, width, clearance)
-        # Any point of an off-road cell lies at least (clearance - sqrt(2)) cells away.
         t = min(t_road + max(c - 1.5, 0.5) * res, limit)
-        if _clearance_at(px + t * dx, py + t * dy, origin, inv_res, cell_max, width, clearance) == 0:
-            lo, hi = t_road, t
-            for _ in range(10):
-                mid = 0.5 * (lo + hi)
-                if _clearance_at(px + mid * dx, py + mid * dy, origin, inv_res, cell_max, width, clearance) == 0:
-                    hi = mid
-                else:
-                    lo = mid
-            return hi
+        c = _clearance_at(px + t * dx, py + t * dy, origin, inv_res, cell_max, width, clearance)
+        if c == 0:
+            return t_road, t
         t_road = t
-    return math.inf
+    return t_road, -1.0
+
+
+_BISECTIONS = 10  # halvings of the stretch where a ray leaves the road: 1/1024 of its length
 
 
 _PEDESTRIAN = int(Role.PEDESTRIAN)

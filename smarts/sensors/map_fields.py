@@ -42,6 +42,23 @@ def map_fields(road_map: RoadMap) -> MapFields:
     return cached
 
 
+ON_ROAD, ON_LANE_LINE = 1, 2
+
+
+def raster_codes(road_map: RoadMap, lane_cells: float) -> np.ndarray:
+    """uint8[H * W] per map cell: ``ON_ROAD`` on the road, plus ``ON_LANE_LINE`` where it lies
+    within ``lane_cells`` of a lane centre line; made once per map and line width, so a raster
+    pixel costs one lookup instead of two."""
+    codes = road_map.__dict__.setdefault("_raster_codes", {})
+    found = codes.get(lane_cells)
+    if found is None:
+        f = map_fields(road_map)
+        on_road = f.drivable.astype(np.uint8)
+        found = on_road * ON_ROAD | (on_road & (f.lane_distance <= lane_cells)).astype(np.uint8) * ON_LANE_LINE
+        codes[lane_cells] = found
+    return found
+
+
 def _build(road_map: RoadMap) -> MapFields:
     from scipy.ndimage import (
         distance_transform_edt,  # only maps used by 2D sensors need it

@@ -107,9 +107,9 @@ def _cast_one(data, alive, base, r, sensor_range, depth, owner, visible):  # pra
     px, py, h = data[_X, r], data[_Y, r], data[_H, r]
     depth[:] = math.inf
     owner[:] = -1
+    visible[:] = 0.0  # (rows of the episode that are not alive stay 0)
     m = 0
     for j in alive:
-        visible[j - base] = 0.0
         if j == r:
             continue
         bx, by, bh = data[_X, j], data[_Y, j], data[_H, j]

@@ -13,9 +13,9 @@ Layers (uint8 [L, size, size], in the interface's order):
 road users by role, the ego in red, and shades occluded and out-of-range ground.
 
 Every output pixel is sampled by inverse mapping to map coordinates (one lookup in the map's
-drivable raster and lane-distance field, one comparison with the occlusion depth buffer, whose
-per-pixel bin and distance are fixed in the ego frame and precomputed); boxes and the route are
-drawn forward into the few pixels they cover.
+``raster_codes``, which hold on-road and on-a-lane-line in one byte, and one comparison with the
+occlusion depth buffer, whose per-pixel bin and distance are fixed in the ego frame and
+precomputed); boxes and the route are drawn forward into the few pixels they cover.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ import numpy as np
 from smarts.core.simulation import Scope, Simulation
 from smarts.core.vehicle_table import COLUMN
 from smarts.sensors.interface import RASTER_LAYERS, RasterInterface
-from smarts.sensors.map_fields import map_fields
+from smarts.sensors.map_fields import ON_ROAD, map_fields, raster_codes
 from smarts.sensors.occlusion import SHADOW_BINS, Shadows
 from smarts.sensors.rays import parallel_worth_it
 
@@ -131,9 +131,7 @@ class RasterSensor:
         ma = sim.mission_arrays
         # A pixel is on a lane line within half a pixel of it (at least one map cell).
         lane_cells = max(0.5 * cfg.resolution * f.inv_res, 1.0)
-        grid = MapGrid(
-            f.origin, float(f.inv_res), f.cell_max, int(f.width), f.drivable, f.lane_distance, float(lane_cells)
-        )
+        grid = MapGrid(f.origin, float(f.inv_res), f.cell_max, int(f.width), raster_codes(road_map, lane_cells))
         paths = RoutePaths(ma.flat_paths, ma.flat_valid, int(ma.stride), ma.path_len, sim.route_index)
         sh = ShadowView(
             shadows.depth[part] if shadows is not None else self._no_shadow,
@@ -171,15 +169,14 @@ class RasterPixels(NamedTuple):
 
 
 class MapGrid(NamedTuple):
-    """A map's rasterised fields as the raster kernel reads them (``smarts.sensors.map_fields``)."""
+    """A map's rasterised fields as the raster kernel reads them: one byte per map cell
+    (``raster_codes``: bit 0 on the road, bit 1 on a lane line), so a pixel is one lookup."""
 
     origin: np.ndarray
     inv_res: float
     cell_max: np.ndarray
     width: int
-    drivable: np.ndarray
-    lane_distance: np.ndarray
-    lane_cells: float
+    code: np.ndarray
 
 
 class RoutePaths(NamedTuple):
@@ -209,13 +206,11 @@ def draw_rasters(
 ):  # pragma: no cover - compiled
     """Draw the layers (and the RGB view) of each agent ``agents[i]`` (row ``rows[i]``) among its
     episode's road users (``scope``, a ``smarts.core.simulation.Scope``)."""
-    n_px = pix.size * pix.size
-    occupant, route, cell = np.empty(n_px, np.int32), np.empty(n_px, np.uint8), np.empty(n_px, np.int64)
-    on_road, on_lane, shade = np.empty(n_px, np.uint8), np.empty(n_px, np.uint8), np.empty(n_px, np.uint8)
+    scratch = _new_scratch(pix.size * pix.size)
     for i in range(rows.shape[0]):
         _draw_one(data, role, scope.alive[scope.lo[i]:scope.hi[i]], scope.base[i], agents[i], rows[i], pix, grid, paths,
-                  sh, _agent_part(sh.depth, i), _agent_part(sh.visible, i), occupant, route, cell, on_road, on_lane,
-                  shade, layers[i], want_rgb, _agent_part(rgb, i), shaded)  # fmt: skip
+                  sh, _agent_part(sh.depth, i), _agent_part(sh.visible, i), scratch, layers[i], want_rgb,
+                  _agent_part(rgb, i), shaded)  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
@@ -223,13 +218,29 @@ def draw_rasters_parallel(
     data, role, scope, agents, rows, pix, grid, paths, sh, layers, want_rgb, rgb, shaded
 ):  # pragma: no cover - compiled
     """``draw_rasters`` with the agents spread over threads (each its own scratch buffers)."""
-    n_px = pix.size * pix.size
     for i in numba.prange(rows.shape[0]):
-        occupant, route, cell = np.empty(n_px, np.int32), np.empty(n_px, np.uint8), np.empty(n_px, np.int64)
-        on_road, on_lane, shade = np.empty(n_px, np.uint8), np.empty(n_px, np.uint8), np.empty(n_px, np.uint8)
         _draw_one(data, role, scope.alive[scope.lo[i]:scope.hi[i]], scope.base[i], agents[i], rows[i], pix, grid, paths,
-                  sh, _agent_part(sh.depth, i), _agent_part(sh.visible, i), occupant, route, cell, on_road, on_lane,
-                  shade, layers[i], want_rgb, _agent_part(rgb, i), shaded)  # fmt: skip
+                  sh, _agent_part(sh.depth, i), _agent_part(sh.visible, i), _new_scratch(pix.size * pix.size), layers[i],
+                  want_rgb, _agent_part(rgb, i), shaded)  # fmt: skip
+
+
+class _Scratch(NamedTuple):
+    """One agent's per-pixel working planes: who covers the pixel (``_draw_boxes``), the route,
+    the map cell, its ``raster_codes`` byte and the occlusion level."""
+
+    occupant: np.ndarray
+    route: np.ndarray
+    cell: np.ndarray
+    code: np.ndarray
+    shade: np.ndarray
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _new_scratch(n_px):  # pragma: no cover - compiled
+    return _Scratch(
+        np.empty(n_px, np.int32), np.empty(n_px, np.uint8), np.empty(n_px, np.int32), np.empty(n_px, np.uint8),
+        np.empty(n_px, np.uint8),
+    )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -240,41 +251,21 @@ def _agent_part(a, i):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, nogil=True)
 def _draw_one(
-    data,
-    role,
-    alive,
-    row_base,
-    a,
-    r,
-    pix,
-    grid,
-    paths,
-    sh,
-    depth,
-    visible,
-    occupant,
-    route,
-    cell,
-    on_road,
-    on_lane,
-    shade,
-    layers,
-    want_rgb,
-    rgb,
-    shaded,
+    data, role, alive, row_base, a, r, pix, grid, paths, sh, depth, visible, scratch, layers, want_rgb, rgb, shaded
 ):  # pragma: no cover - compiled
-    """One agent's rasters (its own scratch buffers and output planes)."""
+    """One agent's rasters (its own scratch planes and output planes)."""
     size, res = pix.size, pix.res
     half = 0.5 * size * res
     view = half * math.sqrt(2.0)  # farthest pixel corner from the ego
     x, y, h = data[_X, r], data[_Y, r], data[_H, r]
     c, s = math.cos(h), math.sin(h)
+    occupant, route = scratch.occupant, scratch.route
     _draw_boxes(data, alive, row_base, r, x, y, h, c, s, half, pix, sh, visible, occupant)
-    _draw_route(paths, a, x, y, c, s, view, pix, route)
-    _read_map(grid, pix, sh, depth, x, y, c, s, cell, on_road, on_lane, shade)
-    _fill_layers(pix, layers, on_road, on_lane, route, occupant, shade)
+    _draw_route(paths, a, x, y, c, s, half, view, pix, route)
+    _read_map(grid, pix, sh, depth, x, y, c, s, scratch.cell, scratch.code, scratch.shade)
+    _fill_layers(pix, layers, scratch.code, route, occupant, scratch.shade)
     if want_rgb:
-        _compose_rgb(size * size, role, occupant, route, on_lane, on_road, shade, shaded, rgb)
+        _compose_rgb(size * size, role, occupant, route, scratch.code, scratch.shade, shaded, rgb)
 
 
 # The layers of ``_draw_one``, one loop nest each, inlined into it by numba.
@@ -311,8 +302,10 @@ def _draw_boxes(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _draw_route(paths, a, x, y, c, s, view, pix, route):  # pragma: no cover - compiled
-    """Route: agent ``a``'s path polyline sampled every half pixel, from where it enters the view."""
+def _draw_route(paths, a, x, y, c, s, half, view, pix, route):  # pragma: no cover - compiled
+    """Route: agent ``a``'s path polyline sampled every half pixel, from where it enters the view;
+    a segment with both ends a pixel beyond the same side of the image (``half`` metres from the
+    centre) has no sample in it and is skipped."""
     size, res = pix.size, pix.res
     flat_paths, flat_valid, stride, path_len, route_index = (
         paths.flat_paths,
@@ -338,7 +331,12 @@ def _draw_route(paths, a, x, y, c, s, view, pix, route):  # pragma: no cover - c
         p = flat_paths[base + k, 0]
         dx, dy = p[0] - x, p[1] - y
         ex, ey = c * dx + s * dy, -s * dx + c * dy
-        if k > k0:
+        edge = half + res
+        beyond = (
+            (ex > edge and px_prev > edge) or (ex < -edge and px_prev < -edge)
+            or (ey > edge and py_prev > edge) or (ey < -edge and py_prev < -edge)
+        )  # fmt: skip
+        if k > k0 and not beyond:
             seg = math.hypot(ex - px_prev, ey - py_prev)
             n_sub = max(int(math.ceil(seg / (0.5 * res))), 1)
             for u in range(n_sub + 1):
@@ -356,45 +354,43 @@ def _draw_route(paths, a, x, y, c, s, view, pix, route):  # pragma: no cover - c
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _read_map(grid, pix, sh, depth, x, y, c, s, cell, on_road, on_lane, shade):  # pragma: no cover - compiled
-    """Every pixel: its map cell, on road / on a lane line, and its shadow level. Simple loops over
-    the flat pixel index, so the compiler can vectorise them."""
+def _read_map(grid, pix, sh, depth, x, y, c, s, cell, code, shade):  # pragma: no cover - compiled
+    """Every pixel: its map cell, that cell's code, and the pixel's shadow level. Simple loops
+    over the flat pixel index with 32-bit cell numbers, so the compiler vectorises them."""
     px_ex, px_ey, px_bin, px_dist = pix.ex, pix.ey, pix.bin, pix.dist
-    origin, inv_res, cell_max, width = grid.origin, grid.inv_res, grid.cell_max, grid.width
-    drivable, lane_distance, lane_cells = grid.drivable, grid.lane_distance, grid.lane_cells
+    ox, oy, inv_res = grid.origin[0], grid.origin[1], grid.inv_res
+    mx, my, width, codes = grid.cell_max[0], grid.cell_max[1], np.int32(grid.width), grid.code
     n_px = pix.size * pix.size
     for q in range(n_px):
         ex, ey = px_ex[q], px_ey[q]
-        cx = min(max((x + c * ex - s * ey - origin[0]) * inv_res, 0.0), cell_max[0])
-        cy = min(max((y + s * ex + c * ey - origin[1]) * inv_res, 0.0), cell_max[1])
-        cell[q] = int(cy) * width + int(cx)
+        cx = min(max((x + c * ex - s * ey - ox) * inv_res, 0.0), mx)
+        cy = min(max((y + s * ex + c * ey - oy) * inv_res, 0.0), my)
+        cell[q] = np.int32(cy) * width + np.int32(cx)
     for q in range(n_px):
-        on_road[q] = drivable[cell[q]]
-        on_lane[q] = on_road[q] and lane_distance[cell[q]] <= lane_cells
+        code[q] = codes[cell[q]]
     if sh.have_shadows:
+        # out of range 0, else occluded 1 or visible 2 (OCCLUSION_*)
+        sensor_range = sh.sensor_range
         for q in range(n_px):
             d = px_dist[q]
-            shade[q] = (
-                OCCLUSION_OUT_OF_RANGE if d > sh.sensor_range
-                else OCCLUSION_OCCLUDED if d > depth[px_bin[q]] else OCCLUSION_VISIBLE
-            )  # fmt: skip
+            shade[q] = np.uint8(d <= sensor_range) * (np.uint8(1) + np.uint8(d <= depth[px_bin[q]]))
     else:
         shade[:] = OCCLUSION_VISIBLE
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _fill_layers(pix, layers, on_road, on_lane, route, occupant, shade):  # pragma: no cover - compiled
-    """Copy each asked-for layer into its plane (``pix.slot``: the plane of each layer, -1: not drawn)."""
+def _fill_layers(pix, layers, code, route, occupant, shade):  # pragma: no cover - compiled
+    """Write each asked-for layer into its plane (``pix.slot``: the plane of each layer, -1: not drawn)."""
     n_px = pix.size * pix.size
     slot = pix.slot
     s_drv, s_lane, s_route, s_occ, s_occl = slot[0], slot[1], slot[2], slot[3], slot[4]
     flat = layers.reshape(layers.shape[0], n_px)
     if s_drv >= 0:
         for q in range(n_px):
-            flat[s_drv, q] = on_road[q]
+            flat[s_drv, q] = code[q] & ON_ROAD
     if s_lane >= 0:
         for q in range(n_px):
-            flat[s_lane, q] = on_lane[q]
+            flat[s_lane, q] = code[q] >> 1  # ON_LANE_LINE
     if s_route >= 0:
         flat[s_route, :] = route
     if s_occ >= 0:
@@ -405,7 +401,7 @@ def _fill_layers(pix, layers, on_road, on_lane, route, occupant, shade):  # prag
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _compose_rgb(n_px, role, occupant, route, on_lane, on_road, shade, shaded, rgb):  # pragma: no cover - compiled
+def _compose_rgb(n_px, role, occupant, route, code, shade, shaded, rgb):  # pragma: no cover - compiled
     """The RGB view: road users over route over lane lines over road, each pixel shaded by its level."""
     image = rgb.reshape(n_px, 3)
     for q in range(n_px):
@@ -414,11 +410,16 @@ def _compose_rgb(n_px, role, occupant, route, on_lane, on_road, shade, shaded, r
             colour = EGO if occ < 0 else ROLE_BASE + role[occ - 1]
             level = OCCLUSION_VISIBLE
         else:
-            colour = ROUTE if route[q] else LANE if on_lane[q] else ROAD if on_road[q] else BACKGROUND
+            colour = _GROUND[code[q] | (route[q] << 2)]
             level = shade[q]
         image[q, 0] = shaded[level, colour, 0]
         image[q, 1] = shaded[level, colour, 1]
         image[q, 2] = shaded[level, colour, 2]
+
+
+_GROUND = np.array([BACKGROUND, ROAD, LANE, LANE, ROUTE, ROUTE, ROUTE, ROUTE], dtype=np.int64)
+"""The ground's palette row by ``raster_codes`` byte plus 4 on the route (the route over lane
+lines over the road)."""
 
 
 class EgoViewRenderer:

@@ -75,6 +75,22 @@ def test_a_small_far_box_narrower_than_a_bin_is_still_seen():
     assert visible[1] == 1.0
 
 
+def test_rows_that_are_not_alive_read_zero_even_in_reused_buffers():
+    """``visible`` is 0 for every row that is not alive, also where a buffer held an earlier scan."""
+    table = VehicleTable(16)
+    for i, x in enumerate((0.0, 10.0, -10.0)):
+        table.add(f"v{i}", owner=0, role=Role.TRAFFIC, x=x, y=0.0, heading=0.0, length=4.6, width=1.9)
+    rows = np.array([0])
+    depth = np.empty((1, SHADOW_BINS))
+    owner = np.empty((1, SHADOW_BINS), dtype=np.int64)
+    visible = np.full((1, 16), 0.5, dtype=np.float32)  # stale values of an earlier scan
+    one = np.ones(1, dtype=np.int64)
+    for alive in (table.alive_rows, np.array([0, 2])):  # row 1 leaves between the scans
+        cast_shadows(table.data, alive, 0 * one, len(alive) * one, 0 * one, rows, 50.0, depth, owner, visible)
+    assert visible[0, 2] == 1.0
+    assert (visible[0, [0, 1]] == 0.0).all() and (visible[0, 3:] == 0.0).all()
+
+
 def test_hide_mode_drops_the_hidden_neighbour_and_flag_mode_reports_zero():
     for mode in ("hide", "flag"):
         env = scene_env(4, AgentInterface(occlusion=OcclusionInterface(enabled=True, mode=mode)))
