@@ -2,7 +2,7 @@
 
 numba's on-disk cache of a kernel holds the code of everything it calls but is checked only
 against the kernel's own file; a kernel calling a function of another module must say so with
-``smarts.core.records.cache_depends_on``, or an edit of that module goes on running old code from
+``smarts.records.cache_depends_on``, or an edit of that module goes on running old code from
 the cache (until the cache is cleared), which no test would notice."""
 
 from __future__ import annotations

@@ -29,6 +29,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -36,8 +37,8 @@ import numpy as np
 import smarts.core.geometry as _geometry
 from smarts.comms.config import CommsConfig
 from smarts.core.geometry import wrap_scalar
-from smarts.core.records import cache_depends_on
 from smarts.core.vehicle_table import COLUMN, Role, VehicleTable
+from smarts.records import cache_depends_on, declare, freeze_fields
 
 TRAFFIC_PAYLOAD_FIELDS: tuple[str, ...] = (
     "x",
@@ -88,6 +89,7 @@ class Received:
 
     @classmethod
     def empty(cls, n: int, max_messages: int, message_size: int) -> Received:
+        """Nothing received (``_deliver`` makes the same arrays in compiled code)."""
         return cls(
             sender_row=np.full((n, max_messages), -1, dtype=np.int64),
             sender_kind=np.zeros((n, max_messages), dtype=np.int8),
@@ -97,6 +99,80 @@ class Received:
             mask=np.zeros((n, max_messages), dtype=bool),
             count=np.zeros(n, dtype=np.int64),
         )
+
+
+class Delivered(NamedTuple):
+    """The arrays of one ``Received`` (its fields, in its order), made and filled by ``_deliver``:
+    arrays made in compiled code cost less per call than seven arrays passed in."""
+
+    sender_row: np.ndarray
+    sender_kind: np.ndarray
+    pose: np.ndarray
+    age: np.ndarray
+    payload: np.ndarray
+    mask: np.ndarray
+    count: np.ndarray
+
+
+if Delivered._fields != tuple(Received.__dataclass_fields__):  # ``Received(*delivered)`` relies on it
+    raise TypeError("Delivered must name Received's fields in Received's order")
+
+
+class Queue(NamedTuple):
+    """The message rings of every episode: slot s of episode e holds the messages sent at step
+    ``slot_step[e, s]``, the first ``count[e, s]`` along the message axis (C = capacity)."""
+
+    slot_step: np.ndarray  # int64[E, S] the send step a slot holds, -1 none
+    count: np.ndarray  # int64[E, S]
+    row: np.ndarray  # int64[E, S, C] the sender's row
+    kind: np.ndarray  # int8[E, S, C] a SenderKind
+    channel: np.ndarray  # int64[E, S, C] -1: every channel
+    pose: np.ndarray  # float64[E, S, C, 3] the sender's x, y, heading when it sent
+    payload: np.ndarray  # float32[E, S, C, message_size]
+
+
+class Rule(NamedTuple):
+    """The numbers of a ``CommsConfig`` that the kernels apply."""
+
+    capacity: int  # rows per episode, messages per slot
+    channels: int
+    payload_bound: float
+    traffic_channel: int
+    range2: float  # squared range
+    loss: float
+    latency: int
+    limit: int  # receive_limit
+    max_messages: int
+
+
+class NetworkState(NamedTuple):
+    """What the kernels of one ``V2VNetworks`` read besides a call's arguments: its own arrays,
+    built once and changed in place (frozen in ``__init__``)."""
+
+    rule: Rule
+    queue: Queue
+    seeds: np.ndarray  # uint64[E]
+    connected: np.ndarray  # bool[E, C] rows whose traffic vehicle broadcasts
+    traffic_columns: np.ndarray  # int64[fields] table columns of a traffic payload
+    broadcasts: np.ndarray  # bool[roles] roles that may be connected
+
+
+class Receiver(NamedTuple):
+    """One receiver in ``_deliver`` (compiled code only)."""
+
+    row: int
+    channel: int
+    x: float
+    y: float
+
+
+declare(NetworkState)
+
+
+@numba.njit(cache=True, nogil=True)
+def _freeze(fields):  # pragma: no cover - compiled
+    """The frozen record of this module's records (see ``smarts.records``)."""
+    return freeze_fields(fields)
 
 
 class V2VNetworks:
@@ -117,13 +193,15 @@ class V2VNetworks:
         self.episodes = n = len(seeds)
         self.slots = config.latency + 1
         size = config.message_size
-        self._slot_step = np.full((n, self.slots), -1, dtype=np.int64)  # the send step a slot holds
-        self._count = np.zeros((n, self.slots), dtype=np.int64)
-        self._row = np.zeros((n, self.slots, capacity), dtype=np.int64)
-        self._kind = np.zeros((n, self.slots, capacity), dtype=np.int8)
-        self._channel = np.zeros((n, self.slots, capacity), dtype=np.int64)
-        self._pose = np.zeros((n, self.slots, capacity, 3))
-        self._payload = np.zeros((n, self.slots, capacity, size), dtype=np.float32)
+        self._queue = Queue(
+            slot_step=np.full((n, self.slots), -1, dtype=np.int64),
+            count=np.zeros((n, self.slots), dtype=np.int64),
+            row=np.zeros((n, self.slots, capacity), dtype=np.int64),
+            kind=np.zeros((n, self.slots, capacity), dtype=np.int8),
+            channel=np.zeros((n, self.slots, capacity), dtype=np.int64),
+            pose=np.zeros((n, self.slots, capacity, 3)),
+            payload=np.zeros((n, self.slots, capacity, size), dtype=np.float32),
+        )
         self._traffic_fields = min(size, len(TRAFFIC_PAYLOAD_FIELDS))
         self._traffic_columns = np.array(
             [COLUMN[f] for f in TRAFFIC_PAYLOAD_FIELDS[: self._traffic_fields]], dtype=np.int64
@@ -133,6 +211,17 @@ class V2VNetworks:
         self._serial_seen = np.zeros((n, capacity), dtype=np.int64)
         self.seeds = np.zeros(n, dtype=np.uint64)
         self._seed_keys: list[bytes] = [b""] * n
+        # The arrays above are only ever changed in place, so the record stays theirs.
+        self._state = _freeze(NetworkState(
+            rule=Rule(
+                capacity=self.capacity, channels=int(config.channels), payload_bound=float(config.payload_bound),
+                traffic_channel=int(config.traffic_channel), range2=float(config.range * config.range),
+                loss=float(config.loss), latency=int(config.latency), limit=int(config.receive_limit),
+                max_messages=int(config.max_messages),
+            ),
+            queue=self._queue, seeds=self.seeds, connected=self._connected,
+            traffic_columns=self._traffic_columns, broadcasts=_BROADCASTS,
+        ))  # fmt: skip
         self.reset(np.arange(n), list(seeds))
 
     # ------------------------------------------------------------------ episode
@@ -144,8 +233,8 @@ class V2VNetworks:
                 seed = int(seeds[k])
                 self.seeds[e] = np.uint64(seed & _MASK64)
                 self._seed_keys[e] = (seed & _MASK64).to_bytes(8, "little")
-        self._slot_step[episodes] = -1
-        self._count[episodes] = 0
+        self._queue.slot_step[episodes] = -1
+        self._queue.count[episodes] = 0
         self._connected[episodes] = False
         self._serial_seen[episodes] = 0
 
@@ -172,11 +261,7 @@ class V2VNetworks:
                 f"V2V send: payloads have shape {payloads.shape}; expected ({rows.shape[0]}, {size}): one "
                 f"row of message_size floats per sender"
             )
-        bad = _enqueue_agents(
-            steps, episode, rows, channels, payloads, data, base, self.capacity, self.config.channels,
-            self.config.payload_bound, self._slot_step, self._count, self._row, self._kind, self._channel,
-            self._pose, self._payload,
-        )  # fmt: skip
+        bad = _enqueue_agents(self._state, steps, episode, rows, channels, payloads, data, base)
         if bad == -2:
             raise RuntimeError(self._overflow_message())
         return bad
@@ -195,11 +280,7 @@ class V2VNetworks:
         if self.config.penetration <= 0.0 or episodes.shape[0] == 0:
             return
         self._refresh_connected(tables, episodes)
-        if _enqueue_traffic(
-            steps, episodes, self._connected, whole.alive, whole.role, _BROADCASTS, whole.data, base,
-            self._traffic_columns, self.config.traffic_channel, self._slot_step, self._count, self._row,
-            self._kind, self._channel, self._pose, self._payload,
-        ) < 0:  # fmt: skip
+        if _enqueue_traffic(self._state, steps, episodes, whole.alive, whole.role, whole.data, base) < 0:
             raise RuntimeError(self._overflow_message())
 
     def is_connected(self, table: VehicleTable, episode: int = 0) -> np.ndarray:
@@ -245,20 +326,12 @@ class V2VNetworks:
     ) -> Received:
         """The messages sent ``latency`` steps ago that reach each receiver (episode
         ``episode[i]``, its row ``rows[i]``, tuned to ``channels[i]``) at its episode's step."""
-        config = self.config
-        n = rows.shape[0]
-        out = Received.empty(n, config.max_messages, config.message_size)
-        if n == 0:
-            return out
-        bad = _deliver(
-            steps, episode, rows, channels, data, base, self.capacity, self._slot_step, self._count, self._row,
-            self._kind, self._channel, self._pose, self._payload, config.range * config.range, config.loss,
-            self.seeds, config.latency, config.receive_limit, out.sender_row, out.sender_kind, out.pose, out.age,
-            out.payload, out.mask, out.count,
-        )  # fmt: skip
+        if rows.shape[0] == 0:
+            return Received.empty(0, self.config.max_messages, self.config.message_size)
+        bad, got = _deliver(self._state, steps, episode, rows, channels, data, base)
         if bad >= 0:
             raise ValueError(f"V2V deliver: receiver row {int(rows[bad])} is not a row of the vehicle table")
-        return out
+        return Received(*got)
 
 
 class V2VNetwork:
@@ -323,7 +396,8 @@ class V2VNetwork:
 
     def _queued(self, step: int) -> int:
         slot = step % self.net.slots
-        return int(self.net._count[0, slot]) if self.net._slot_step[0, slot] == step else 0
+        queue = self.net._queue
+        return int(queue.count[0, slot]) if queue.slot_step[0, slot] == step else 0
 
     def is_connected(self, table: VehicleTable) -> np.ndarray:
         """bool[capacity]: live rows whose vehicle broadcasts traffic state messages."""
@@ -373,52 +447,39 @@ def _loss_uniform(seed, sent_step, message, receiver_row):  # pragma: no cover -
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _open_slot(steps, e, slot_step, count, slots):  # pragma: no cover - compiled
+def _open_slot(queue, steps, e):  # pragma: no cover - compiled
     """Episode ``e``'s slot of its step (emptied if it held an older step)."""
+    slot_step = queue.slot_step
     step = steps[e]
-    slot = step % slots
+    slot = step % slot_step.shape[1]
     if slot_step[e, slot] != step:
         slot_step[e, slot] = step
-        count[e, slot] = 0
+        queue.count[e, slot] = 0
     return slot
 
 
 @numba.njit(cache=True, nogil=True)
-def _enqueue_agents(
-    steps,
-    episode,
-    rows,
-    channels,
-    payloads,
-    data,
-    base,
-    capacity,
-    n_channels,
-    bound,
-    slot_step,
-    count,
-    q_row,
-    q_kind,
-    q_channel,
-    q_pose,
-    q_payload,
-):  # pragma: no cover - compiled
+def _enqueue_agents(network, steps, episode, rows, channels, payloads, data, base):  # pragma: no cover - compiled
     """Write agents' messages into their episodes' slots; returns the index of the first bad
     message (row or channel out of range, non-finite payload) without writing anything, -2 when a
     slot overflows, else -1."""
+    rule, queue = network.rule, network.queue
+    capacity, bound = rule.capacity, rule.payload_bound
+    count, q_row, q_kind, q_channel, q_pose, q_payload = (
+        queue.count, queue.row, queue.kind, queue.channel, queue.pose, queue.payload
+    )  # fmt: skip
     n, size = payloads.shape
-    slots = slot_step.shape[1]
     for i in range(n):
         if rows[i] < 0 or rows[i] >= capacity:
             return i
-        if channels[i] < 0 or channels[i] >= n_channels:
+        if channels[i] < 0 or channels[i] >= rule.channels:
             return i
         for p in range(size):
             if not math.isfinite(payloads[i, p]):
                 return i
     for i in range(n):
         e, r = episode[i], rows[i]
-        slot = _open_slot(steps, e, slot_step, count, slots)
+        slot = _open_slot(queue, steps, e)
         k = count[e, slot]
         if k >= capacity:
             return -2
@@ -434,33 +495,20 @@ def _enqueue_agents(
 
 
 @numba.njit(cache=True, nogil=True)
-def _enqueue_traffic(
-    steps,
-    episodes,
-    connected,
-    alive,
-    role,
-    broadcasts,
-    data,
-    base,
-    columns,
-    channel,
-    slot_step,
-    count,
-    q_row,
-    q_kind,
-    q_channel,
-    q_pose,
-    q_payload,
-):  # pragma: no cover - compiled
+def _enqueue_traffic(network, steps, episodes, alive, role, data, base):  # pragma: no cover - compiled
     """Write the state message of every live connected traffic row of ``episodes``; returns -1
     when a slot overflows, else 0."""
-    capacity, size = q_payload.shape[2], q_payload.shape[3]
-    slots = slot_step.shape[1]
+    rule, queue = network.rule, network.queue
+    connected, columns, broadcasts = network.connected, network.traffic_columns, network.broadcasts
+    count, q_row, q_kind, q_channel, q_pose, q_payload = (
+        queue.count, queue.row, queue.kind, queue.channel, queue.pose, queue.payload
+    )  # fmt: skip
+    capacity, channel = rule.capacity, rule.traffic_channel
+    size = q_payload.shape[3]
     n_fields = columns.shape[0]
     for q in range(episodes.shape[0]):
         e = episodes[q]
-        slot = _open_slot(steps, e, slot_step, count, slots)
+        slot = _open_slot(queue, steps, e)
         k = count[e, slot]
         for r in range(capacity):
             g = base[e] + r
@@ -484,12 +532,13 @@ def _enqueue_traffic(
 
 # The two steps of ``_deliver`` per receiver, inlined into it by numba.
 @numba.njit(cache=True, nogil=True, inline="always")
-def _heard(
-    q_row, q_channel, q_pose, n_sent, r, channel, rx, ry, range2, loss, seed, sent, dist2, index
-):  # pragma: no cover - compiled
-    """Which of the ``n_sent`` messages of one slot receiver row ``r`` at (rx, ry) hears: not its own,
-    on its channel (or broadcast), within range and not lost. Writes their squared distances and
-    indices into ``dist2``/``index`` and returns how many."""
+def _heard(queue, e, slot, n_sent, sent, receiver, rule, seed, dist2, index):  # pragma: no cover - compiled
+    """Which of the ``n_sent`` messages of episode ``e``'s slot (sent at step ``sent``) the receiver
+    hears: not its own, on its channel (or broadcast), within range and not lost. Writes their
+    squared distances and indices into ``dist2``/``index`` and returns how many."""
+    q_row, q_channel, q_pose = queue.row[e, slot], queue.channel[e, slot], queue.pose[e, slot]
+    r, channel, rx, ry = receiver.row, receiver.channel, receiver.x, receiver.y
+    range2, loss = rule.range2, rule.loss
     m = 0
     for k in range(n_sent):
         if q_row[k] == r:
@@ -523,42 +572,32 @@ def _nearest_first(dist2, index, m, take):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, nogil=True)
 @cache_depends_on(_geometry)
-def _deliver(
-    steps,
-    episode,
-    receivers,
-    r_channels,
-    data,
-    base,
-    capacity,
-    slot_step,
-    count,
-    q_row,
-    q_kind,
-    q_channel,
-    q_pose,
-    q_payload,
-    range2,
-    loss,
-    seeds,
-    latency,
-    limit,
-    o_row,
-    o_kind,
-    o_pose,
-    o_age,
-    o_payload,
-    o_mask,
-    o_count,
-):  # pragma: no cover - compiled
-    for i in range(receivers.shape[0]):
+def _deliver(network, steps, episode, receivers, r_channels, data, base):  # pragma: no cover - compiled
+    """What each receiver (episode ``episode[i]``, row ``receivers[i]``, tuned to ``r_channels[i]``)
+    gets: (-1, a ``Delivered``), or (the index of the first receiver whose row is out of range,
+    nothing filled)."""
+    rule, queue, seeds = network.rule, network.queue, network.seeds
+    capacity, latency, limit = rule.capacity, rule.latency, rule.limit
+    slot_step, count, q_row, q_kind, q_pose, q_payload = (
+        queue.slot_step, queue.count, queue.row, queue.kind, queue.pose, queue.payload
+    )  # fmt: skip
+    n, width, size = receivers.shape[0], rule.max_messages, q_payload.shape[3]
+    out = Delivered(
+        sender_row=np.full((n, width), -1, dtype=np.int64), sender_kind=np.zeros((n, width), dtype=np.int8),
+        pose=np.zeros((n, width, 3)), age=np.zeros((n, width), dtype=np.int32),
+        payload=np.zeros((n, width, size), dtype=np.float32), mask=np.zeros((n, width), dtype=np.bool_),
+        count=np.zeros(n, dtype=np.int64),
+    )  # fmt: skip
+    o_row, o_kind, o_pose, o_age, o_payload, o_mask, o_count = (
+        out.sender_row, out.sender_kind, out.pose, out.age, out.payload, out.mask, out.count
+    )  # fmt: skip
+    for i in range(n):
         if receivers[i] < 0 or receivers[i] >= capacity:
-            return i
+            return i, out
     slots = slot_step.shape[1]
     dist2 = np.empty(capacity)
     index = np.empty(capacity, dtype=np.int64)
-    size = q_payload.shape[3]
-    for i in range(receivers.shape[0]):
+    for i in range(n):
         e, r = episode[i], receivers[i]
         sent = steps[e] - latency
         slot = sent % slots if sent >= 0 else 0
@@ -566,8 +605,8 @@ def _deliver(
         n_sent = count[e, slot] if sent >= 0 and slot_step[e, slot] == sent else 0
         g = base[e] + r
         rx, ry, rh = data[_X, g], data[_Y, g], data[_H, g]
-        m = _heard(q_row[e, slot], q_channel[e, slot], q_pose[e, slot], n_sent, r, r_channels[i], rx, ry,
-                   range2, loss, seeds[e], sent, dist2, index)  # fmt: skip
+        receiver = Receiver(row=r, channel=r_channels[i], x=rx, y=ry)
+        m = _heard(queue, e, slot, n_sent, sent, receiver, rule, seeds[e], dist2, index)
         take = min(m, limit)
         _nearest_first(dist2, index, m, take)
         c, s = math.cos(rh), math.sin(rh)
@@ -584,4 +623,4 @@ def _deliver(
                 o_payload[i, j, p] = q_payload[e, slot, k, p]
             o_mask[i, j] = True
         o_count[i] = take
-    return -1
+    return -1, out

@@ -14,9 +14,9 @@ import numba
 import numpy as np
 
 import smarts.maps.drivable as _drivable
-from smarts.core.records import cache_depends_on
 from smarts.core.vehicle_table import COLUMN
 from smarts.maps.drivable import on_road_at
+from smarts.records import cache_depends_on
 
 
 class Event(IntEnum):

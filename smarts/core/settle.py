@@ -21,9 +21,9 @@ import smarts.core.events as _events_module
 import smarts.maps.drivable as _drivable_module
 import smarts.maps.projection as _projection_module
 from smarts.core.events import episode_events, event_tables
-from smarts.core.records import cache_depends_on
 from smarts.core.vehicle_table import COLUMN
 from smarts.maps.projection import Grids, project_point
+from smarts.records import cache_depends_on
 
 ROUTE_WINDOW_BACK = 2  # route points searched behind the last match
 ROUTE_WINDOW_AHEAD = 10  # ... and ahead of it (more than the farthest one-step move at ~1 m spacing)

@@ -1,4 +1,4 @@
-"""A simulation's arrays as one kernel record (``smarts.core.records``): what its per-step kernels
+"""A simulation's arrays as one kernel record (``smarts.records``): what its per-step kernels
 (events, route progress, observations, the lead and the vehicle ahead, lane-relative control)
 read, named.
 
@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from smarts.core.records import declare, freeze_fields
+from smarts.records import declare, freeze_fields
 
 
 class Lanes(NamedTuple):
@@ -127,7 +127,7 @@ for _record in (Lanes, SimTables):
 
 @numba.njit(cache=True, nogil=True)
 def freeze(fields):  # pragma: no cover - compiled
-    """The frozen record of one of this module's records (see ``smarts.core.records``)."""
+    """The frozen record of one of this module's records (see ``smarts.records``)."""
     return freeze_fields(fields)
 
 

@@ -42,10 +42,10 @@ import numpy as np
 
 import smarts.core.geometry as _geometry
 from smarts.core.geometry import wrap_scalar
-from smarts.core.records import cache_depends_on, declare, freeze_fields, view
 from smarts.core.sim_records import lanes_record
 from smarts.core.spec.lane_relative import LaneRelativeParams
 from smarts.core.vehicle_table import COLUMN
+from smarts.records import cache_depends_on, declare, freeze_fields, view
 
 COMMAND_COMPONENTS = ("speed", "lane_change")
 DEFAULT_SPEED_LIMIT = 13.89
@@ -87,7 +87,7 @@ declare(ControllerState)
 
 @numba.njit(cache=True, nogil=True)
 def _freeze(fields):  # pragma: no cover - compiled
-    """The frozen record of this module's records (see ``smarts.core.records``)."""
+    """The frozen record of this module's records (see ``smarts.records``)."""
     return freeze_fields(fields)
 
 

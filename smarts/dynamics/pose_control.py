@@ -25,10 +25,10 @@ import numpy as np
 
 import smarts.core.geometry as _geometry
 from smarts.core.geometry import wrap_scalar
-from smarts.core.records import cache_depends_on
 from smarts.core.vehicle_table import COLUMN, VehicleTable
 from smarts.dynamics.action_spaces import ActionSpaceType, check_actions
 from smarts.dynamics.limits import ReachLimits
+from smarts.records import cache_depends_on
 
 
 def limit_relative_pose(

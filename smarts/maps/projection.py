@@ -14,6 +14,7 @@ import numba
 import numpy as np
 
 from smarts.maps.road_map import RoadMap
+from smarts.records import declare, freeze_fields, view
 
 ALIGNMENT_DISTANCE_WEIGHT = 0.02
 """Among lanes a point is on, each metre from the centre line costs as much as 1 - cos(11 deg) of
@@ -53,11 +54,23 @@ class Grids(NamedTuple):
     cell_max: np.ndarray  # float64[M, 2]
 
 
+declare(Grids)
+
+
+@numba.njit(cache=True, nogil=True)
+def freeze(fields):  # pragma: no cover - compiled
+    """The frozen record of this module's records (see ``smarts.records``): grids are built
+    once per map (or stack) and frozen once, so a projection types one argument, not eight."""
+    return freeze_fields(fields)
+
+
 _ONE_MAP = np.zeros(1, dtype=np.int64)  # every point on the grids' first (only) map
+_NO_HEADING = np.zeros(0)  # the kernel's heading when none is given (never written)
 
 
 class _Index:
-    """Arrays derived once per map for the projection (kept on the RoadMap instance)."""
+    """Arrays derived once per map for the projection (kept on the RoadMap instance): ``grids``
+    and its frozen form ``frozen`` (what ``project_on_grids`` takes)."""
 
     def __init__(self, m: RoadMap, table: np.ndarray | None = None) -> None:
         # The grid gains an empty border of cells so clamped outside (or NaN) points find nothing.
@@ -74,6 +87,15 @@ class _Index:
             inv_cell=np.array([1.0 / m.grid_cell]),
             cell_max=np.array([[nx + 1, ny + 1]], dtype=np.float64),
         )
+        self.frozen = freeze(self.grids)
+
+    def __getstate__(self) -> dict:
+        # A frozen record does not pickle; a map that was projected still does (it is made again).
+        return {k: v for k, v in self.__dict__.items() if k != "frozen"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self.frozen = freeze(self.grids)
 
     @staticmethod
     def _segment_table(m: RoadMap) -> np.ndarray:
@@ -126,45 +148,33 @@ def project(road_map: RoadMap, xy: np.ndarray, heading: np.ndarray | None = None
     and NaN positions or headings, get lane -1.
     """
     ix = road_map.__dict__.get("_projection_index") or projection_index(road_map)
-    return project_on_grids(ix.grids, xy, heading, _ONE_MAP)
+    return project_on_grids(ix.frozen, xy, heading, _ONE_MAP)
 
 
-def project_on_grids(grids: Grids, xy: np.ndarray, heading: np.ndarray | None, point_map: np.ndarray) -> LaneProjection:
+def project_on_grids(
+    grids: object, xy: np.ndarray, heading: np.ndarray | None, point_map: np.ndarray
+) -> LaneProjection:
     """``project`` with each point ``xy[p]`` searched on the grid of map ``point_map[p]`` of
-    ``grids`` (``point_map`` of one entry: that map for every point)."""
+    ``grids`` (a frozen ``Grids``, see ``freeze``; ``point_map`` of one entry: that map for every
+    point)."""
     xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
     n = xy.shape[0]
     out = LaneProjection(np.empty(n, dtype=np.int32), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
-    use_heading = heading is not None
-    h = np.ascontiguousarray(heading, dtype=np.float64).reshape(-1) if use_heading else xy[:, 0]
-    _project_kernel(*grids, point_map, xy, h, use_heading, *out)
+    h = _NO_HEADING if heading is None else np.ascontiguousarray(heading, dtype=np.float64).reshape(-1)
+    _project_kernel(grids, point_map, xy, h, *out)
     return out
 
 
 @numba.njit(cache=True, nogil=True)
 def _project_kernel(
-    table,
-    offsets,
-    grid_segs,
-    cell_base,
-    ny,
-    origin,
-    inv_cell,
-    cell_max,
-    point_map,
-    xy,
-    heading,
-    use_heading,
-    out_lane,
-    out_s,
-    out_t,
-    out_heading,
-    out_distance,
+    frozen_grids, point_map, xy, heading, out_lane, out_s, out_t, out_heading, out_distance
 ):  # pragma: no cover - compiled
-    """Point ``p`` searches the grid of map ``point_map[p]`` (``point_map[0]`` for every point
-    when it has one entry): per map, its first cell in ``offsets``, its cells per column, origin,
-    inverse cell size and largest cell index."""
-    grids = Grids(table, offsets, grid_segs, cell_base, ny, origin, inv_cell, cell_max)
+    """Point ``p`` searches the grid of map ``point_map[p]`` of ``frozen_grids`` (a frozen
+    ``Grids``; ``point_map[0]`` for every point when it has one entry), aligned with ``heading[p]``
+    unless ``heading`` has no entries. The outputs are this call's own arrays, so they stay plain
+    arguments: each call types one record and eight arrays."""
+    grids = view(frozen_grids)
+    use_heading = heading.shape[0] != 0
     last_map = point_map.shape[0] - 1
     for p in range(xy.shape[0]):
         h = heading[p] if use_heading else 0.0

@@ -27,7 +27,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from smarts.maps.drivable import raster_lookup
-from smarts.maps.projection import Grids, LaneProjection, _Index, project_on_grids, projection_index
+from smarts.maps.projection import Grids, LaneProjection, _Index, freeze, project_on_grids, projection_index
 from smarts.maps.road_map import RoadMap
 
 
@@ -180,6 +180,7 @@ class MapStack:
                 for name in ("ny", "origin", "inv_cell", "cell_max")
             },
         )
+        self.frozen_grids = freeze(self.grids)  # what project_on_grids takes
         rasters = [raster_lookup(m) for m in self.maps]
         self.raster_flat = np.concatenate([r[4] for r in rasters])
         self.raster_base = np.concatenate([[0], np.cumsum([len(r[4]) for r in rasters])]).astype(np.int64)
@@ -194,7 +195,7 @@ class MapStack:
         map_index = np.asarray(map_index, dtype=np.int64).reshape(-1)
         if map_index.shape[0] != n or (n and not (0 <= map_index.min() and map_index.max() < self.num_maps)):
             raise ValueError(f"map_index: expected {n} map numbers from 0 to {self.num_maps - 1}, got {map_index!r}")
-        return project_on_grids(self.grids, xy, heading, map_index)
+        return project_on_grids(self.frozen_grids, xy, heading, map_index)
 
 
 def _refuse_space(combined: RoadMap) -> None:

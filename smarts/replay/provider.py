@@ -15,7 +15,7 @@ Reactive hand-over goes through the simulation's ``hand_over`` to a provider the
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numba
 import numpy as np
@@ -23,8 +23,8 @@ import numpy as np
 import smarts.core.geometry as _geometry
 from smarts.core.geometry import wrap_scalar
 from smarts.core.provider import ProviderBase
-from smarts.core.records import cache_depends_on
 from smarts.core.vehicle_table import COLUMN, Role, VehicleType
+from smarts.records import cache_depends_on, declare, freeze_fields, view
 from smarts.replay.recording import FRAME_EPS, ObjectKind, Recording, interpolate
 
 if TYPE_CHECKING:
@@ -43,6 +43,32 @@ red is a stop and a flashing yellow a caution."""
 
 def table_id(vehicle_id: str) -> str:
     return f"{ID_PREFIX}{vehicle_id}"
+
+
+class Tracks(NamedTuple):
+    """What ``_advance_tracks`` reads and keeps of the window's tracks: the provider's own arrays
+    (not copies), built once with it, so each step types one record instead of eleven arrays."""
+
+    first: np.ndarray  # float64[K] each track's first frame
+    count: np.ndarray  # int64[K] its frames (cut at the window's end)
+    offsets: np.ndarray  # int64[K] its first sample in x, y, heading and speed
+    x: np.ndarray  # [samples] the recording's, every track's samples
+    y: np.ndarray
+    heading: np.ndarray
+    speed: np.ndarray
+    state: np.ndarray  # int8[K] PENDING, DRIVING or DONE (kept between steps)
+    row: np.ndarray  # int64[K] vehicle table row of a driven track, -1 none
+    enter: np.ndarray  # int64[K] scratch: tracks entering at this step
+    leave: np.ndarray  # int64[K] scratch: tracks leaving at this step
+
+
+declare(Tracks)
+
+
+@numba.njit(cache=True, nogil=True)
+def _freeze(fields):  # pragma: no cover - compiled
+    """The frozen record of this module's records (see ``smarts.records``)."""
+    return freeze_fields(fields)
 
 
 class ReplayProvider(ProviderBase):
@@ -92,6 +118,11 @@ class ReplayProvider(ProviderBase):
         self._signal_frame = -1
         self._enter = np.zeros(n, dtype=np.int64)  # scratch: vehicles entering / leaving this step
         self._leave = np.zeros(n, dtype=np.int64)
+        self._tracks = _freeze(Tracks(
+            first=self.first, count=self.count, offsets=self.offsets, x=recording.x, y=recording.y,
+            heading=recording.heading, speed=recording.speed, state=self.state, row=self.row, enter=self._enter,
+            leave=self._leave,
+        ))  # fmt: skip
         self.handed_over: list[str] = []
         """Table ids of the vehicles handed to the traffic model this episode, in order."""
 
@@ -163,10 +194,7 @@ class ReplayProvider(ProviderBase):
         rec = self.recording
         frame = self.frame_at(sim.time)
         table = sim.table
-        n_enter, n_leave = _advance_tracks(
-            frame, self.first, self.count, self.offsets, rec.x, rec.y, rec.heading, rec.speed,
-            self.state, self.row, table.data, dt, self._enter, self._leave,
-        )  # fmt: skip
+        n_enter, n_leave = _advance_tracks(self._tracks, frame, table.data, dt)
         if n_leave:
             leaving = self._leave[:n_leave]
             rows = self.row[leaving]
@@ -221,13 +249,15 @@ _ACC, _YAW, _LAT = COLUMN["accel"], COLUMN["yaw_rate"], COLUMN["lat_accel"]
 
 @numba.njit(cache=True, nogil=True)
 @cache_depends_on(_geometry)
-def _advance_tracks(
-    frame, first, count, offsets, xs, ys, hs, vs, state, row, data, dt, enter, leave
-):  # pragma: no cover - compiled
-    """One pass over the window's tracks at fractional ``frame``: driven vehicles get their
-    interpolated state (and the acceleration and yaw rate since the last step) written into their
-    table rows; vehicles due to enter or leave are listed in ``enter``/``leave`` (counts returned)
-    for the caller to add or remove; pending tracks already over are marked done."""
+def _advance_tracks(tracks, frame, data, dt):  # pragma: no cover - compiled
+    """One pass over the window's tracks (a frozen ``Tracks``) at fractional ``frame``: driven
+    vehicles get their interpolated state (and the acceleration and yaw rate since the last step)
+    written into their table rows of ``data``; vehicles due to enter or leave are listed in
+    ``enter``/``leave`` (counts returned) for the caller to add or remove; pending tracks already
+    over are marked done. The fields are read once, at the top: the loop writes arrays."""
+    tk = view(tracks)
+    first, count, offsets, xs, ys, hs, vs = tk.first, tk.count, tk.offsets, tk.x, tk.y, tk.heading, tk.speed
+    state, row, enter, leave = tk.state, tk.row, tk.enter, tk.leave
     n_enter, n_leave = 0, 0
     for k in range(first.shape[0]):
         s = state[k]

@@ -13,15 +13,16 @@ generator seeded with the scenario seed and reseeded at every episode start.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import gymnasium as gym
 import numba
 import numpy as np
 
 import smarts.sensors.rays as _rays
-from smarts.core.records import cache_depends_on
-from smarts.core.simulation import Simulation
+from smarts.core.simulation import Scope, Simulation
 from smarts.core.vehicle_table import COLUMN, Role
+from smarts.records import cache_depends_on
 from smarts.sensors.interface import LidarInterface
 from smarts.sensors.map_fields import map_fields
 from smarts.sensors.rays import box_interval, parallel_worth_it, ray_box
@@ -66,10 +67,9 @@ class LidarSensor:
                 else (np.empty((len(idx), cfg.rays), np.float32), np.empty((len(idx), cfg.rays), np.float32))
             )
             kernel = lidar_scan_parallel if parallel_worth_it(len(idx)) else lidar_scan
-            kernel(
-                sim.table.data, sim.table.role, scope.alive, scope.lo[idx], scope.hi[idx], rows[idx], cfg.range,
-                f.origin, f.inv_res, f.cell_max, f.width, f.road_clearance, d, h,
-            )  # fmt: skip
+            part = Scope(scope.alive, scope.lo[idx], scope.hi[idx], scope.base[idx])
+            grid = ClearanceGrid(f.origin, float(f.inv_res), f.cell_max, int(f.width), f.road_clearance)
+            kernel(sim.table.data, sim.table.role, part, rows[idx], cfg.range, grid, d, h)
             if len(idx) != n:
                 dist[idx], hit[idx] = d, h
         if cfg.noise > 0 and n:
@@ -94,59 +94,36 @@ class LidarSensor:
         return rng
 
 
+class ClearanceGrid(NamedTuple):
+    """A map's road clearance field as the lidar reads it (``smarts.sensors.map_fields``)."""
+
+    origin: np.ndarray
+    inv_res: float
+    cell_max: np.ndarray
+    width: int
+    clearance: np.ndarray
+
+
 @numba.njit(cache=True, nogil=True)
 @cache_depends_on(_rays)
-def lidar_scan(
-    data,
-    role,
-    alive,
-    alive_lo,
-    alive_hi,
-    rows,
-    max_range,
-    origin,
-    inv_res,
-    cell_max,
-    width,
-    clearance,
-    dist,
-    hit,
-):  # pragma: no cover - compiled
-    """Each agent's rays (``rows[i]`` among ``alive[alive_lo[i]:alive_hi[i]]``)."""
+def lidar_scan(data, role, scope, rows, max_range, grid, dist, hit):  # pragma: no cover - compiled
+    """Each agent's rays (``rows[i]`` among the live rows of its episode, ``scope``, a
+    ``smarts.core.simulation.Scope``)."""
     for i in range(rows.shape[0]):
-        _scan_one(data, role, alive[alive_lo[i]:alive_hi[i]], rows[i], max_range, origin, inv_res, cell_max, width,
-                  clearance, dist[i], hit[i])  # fmt: skip
+        _scan_one(data, role, scope.alive[scope.lo[i] : scope.hi[i]], rows[i], max_range, grid, dist[i], hit[i])
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 @cache_depends_on(_rays)
-def lidar_scan_parallel(
-    data,
-    role,
-    alive,
-    alive_lo,
-    alive_hi,
-    rows,
-    max_range,
-    origin,
-    inv_res,
-    cell_max,
-    width,
-    clearance,
-    dist,
-    hit,
-):  # pragma: no cover - compiled
+def lidar_scan_parallel(data, role, scope, rows, max_range, grid, dist, hit):  # pragma: no cover - compiled
     """``lidar_scan`` with the agents spread over threads (each agent's rays are its own)."""
     for i in numba.prange(rows.shape[0]):
-        _scan_one(data, role, alive[alive_lo[i]:alive_hi[i]], rows[i], max_range, origin, inv_res, cell_max, width,
-                  clearance, dist[i], hit[i])  # fmt: skip
+        _scan_one(data, role, scope.alive[scope.lo[i] : scope.hi[i]], rows[i], max_range, grid, dist[i], hit[i])
 
 
 @numba.njit(cache=True, nogil=True)
 @cache_depends_on(_rays)
-def _scan_one(
-    data, role, alive, r, max_range, origin, inv_res, cell_max, width, clearance, dist, hit
-):  # pragma: no cover - compiled
+def _scan_one(data, role, alive, r, max_range, grid, dist, hit):  # pragma: no cover - compiled
     n_rays = dist.shape[0]
     step = 2.0 * math.pi / n_rays
     px, py, h = data[_X, r], data[_Y, r], data[_H, r]
@@ -183,14 +160,14 @@ def _scan_one(
     lo, hi = np.empty(n_rays), np.empty(n_rays)
     crossing = np.empty(n_rays, dtype=np.int64)
     m = 0
-    if _clearance_at(px, py, origin, inv_res, cell_max, width, clearance) == 0:
+    if _clearance_at(px, py, grid) == 0:
         for k in range(n_rays):
             if 0.0 < dist[k]:
                 dist[k] = 0.0
                 hit[k] = HIT_ROAD_EDGE
         return
     for k in range(n_rays):
-        t_road, t_off = _edge_stretch(px, py, ray_c[k], ray_s[k], dist[k], origin, inv_res, cell_max, width, clearance)
+        t_road, t_off = _edge_stretch(px, py, ray_c[k], ray_s[k], dist[k], grid)
         if t_off >= 0.0:
             lo[m], hi[m], crossing[m] = t_road, t_off, k
             m += 1
@@ -198,10 +175,7 @@ def _scan_one(
         for q in range(m):
             k = crossing[q]
             mid = 0.5 * (lo[q] + hi[q])
-            if (
-                _clearance_at(px + mid * ray_c[k], py + mid * ray_s[k], origin, inv_res, cell_max, width, clearance)
-                == 0
-            ):
+            if _clearance_at(px + mid * ray_c[k], py + mid * ray_s[k], grid) == 0:
                 hi[q] = mid
             else:
                 lo[q] = mid
@@ -213,23 +187,23 @@ def _scan_one(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _clearance_at(x, y, origin, inv_res, cell_max, width, clearance):  # pragma: no cover - compiled
-    cx = min(max((x - origin[0]) * inv_res, 0.0), cell_max[0])
-    cy = min(max((y - origin[1]) * inv_res, 0.0), cell_max[1])
-    return clearance[int(cy) * width + int(cx)]
+def _clearance_at(x, y, grid):  # pragma: no cover - compiled
+    cx = min(max((x - grid.origin[0]) * grid.inv_res, 0.0), grid.cell_max[0])
+    cy = min(max((y - grid.origin[1]) * grid.inv_res, 0.0), grid.cell_max[1])
+    return grid.clearance[int(cy) * grid.width + int(cx)]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _edge_stretch(px, py, dx, dy, limit, origin, inv_res, cell_max, width, clearance):  # pragma: no cover - compiled
+def _edge_stretch(px, py, dx, dy, limit, grid):  # pragma: no cover - compiled
     """Along a ray that starts on the road: the last distance known on the road and the first
     sampled off it, where it leaves within ``limit`` (else -1 for the latter). Jumps by the road
     clearance: any point of an off-road cell lies at least (clearance - sqrt(2)) cells away."""
-    res = 1.0 / inv_res
-    c = _clearance_at(px, py, origin, inv_res, cell_max, width, clearance)
+    res = 1.0 / grid.inv_res
+    c = _clearance_at(px, py, grid)
     t_road = 0.0
     while t_road < limit:
         t = min(t_road + max(c - 1.5, 0.5) * res, limit)
-        c = _clearance_at(px + t * dx, py + t * dy, origin, inv_res, cell_max, width, clearance)
+        c = _clearance_at(px + t * dx, py + t * dy, grid)
         if c == 0:
             return t_road, t
         t_road = t

@@ -54,10 +54,10 @@ import smarts.core.geometry as _geometry
 from smarts.core.events import NUM_EVENTS
 from smarts.core.following import ahead_state, lead_state
 from smarts.core.geometry import wrap_scalar
-from smarts.core.records import cache_depends_on, declare, freeze_fields
 from smarts.core.sim_records import sim_tables
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import COLUMN, Role, VehicleType
+from smarts.records import cache_depends_on, declare, freeze_fields
 from smarts.sensors.interface import (
     AgentInterface,
     NeighboursInterface,
@@ -121,12 +121,53 @@ class BasicObservation(NamedTuple):
     events: np.ndarray
 
 
+# The records ``_observe`` builds for its per-agent blocks, so names travel with the arrays; built in
+# compiled code only (tuples, free to pass there), they are never frozen, so not declared.
+class RoadUsers(NamedTuple):
+    """What the neighbours block reads of every row and lane (built once per ``_observe`` call)."""
+
+    data: np.ndarray  # float64[columns, rows] the vehicle table
+    lane: np.ndarray  # int32[rows] projected lane, -1 off every lane
+    role: np.ndarray  # int8[rows]
+    vtype: np.ndarray  # int8[rows]
+    lane_index: np.ndarray  # int16[L] position on its road, 0 = rightmost
+    lane_road: np.ndarray  # int32[L]
+
+
+class NeighbourColumns(NamedTuple):
+    """The interface's switches of optional ``neighbours`` columns (built once per ``_observe`` call)."""
+
+    extended: bool  # the extended columns
+    vis_mode: int  # _VIS_OFF, _VIS_HIDE or _VIS_FLAG: _VIS_FLAG adds the visible fraction
+
+
+class RoutePaths(NamedTuple):
+    """The agents' paths along their routes, ``stride`` rows per agent (built once per ``_observe``
+    call)."""
+
+    flat_paths: np.ndarray  # float64[A * stride, 3, 3] x, y, heading of point i of agent a at row a * stride + i
+    flat_valid: np.ndarray  # bool[A * stride, 3]
+    stride: int
+
+
+class EgoPose(NamedTuple):
+    """The observing agent as its blocks see it (built per agent inside ``_observe``)."""
+
+    x: float
+    y: float
+    h: float  # heading
+    c: float  # cos h
+    s: float  # sin h
+    speed: float
+    lane: int  # -1: off every lane
+
+
 declare(ObserveSetup)
 
 
 @numba.njit(cache=True, nogil=True)
 def _freeze(fields):  # pragma: no cover - compiled
-    """The frozen record of this module's records (see ``smarts.core.records``)."""
+    """The frozen record of this module's records (see ``smarts.records``)."""
     return freeze_fields(fields)
 
 
@@ -318,24 +359,20 @@ def _observe(
     the episode, ``row - row_base[i]``), with its episode's signal colours and step: from
     ``tables`` (a frozen ``SimTables``) and ``setup`` (a frozen ``ObserveSetup``) into ``out``
     (a ``BasicObservation``)."""
-    t, c = tables, setup
-    data, lane, role, vtype = t.data, t.lane, t.role, t.vtype
-    lane_width, lane_speed_limit, lane_road, lane_index = t.lane_width, t.lane_speed_limit, t.lane_road, t.lane_index
-    flat_paths, flat_valid, stride, route_index = t.flat_paths, t.flat_valid, t.stride, t.route_index
+    t = tables
+    data, lane, lane_width, lane_speed_limit = t.data, t.lane, t.lane_width, t.lane_speed_limit
+    stride, route_index = t.stride, t.route_index
     goal_kind, goal_xy, route_length, route_progress = t.goal_kind, t.goal_xy, t.route_length, t.route_progress
     signal_via, signal_s, via_colours = t.signal_via, t.signal_s, t.via_colour
     agent_episode, events, episode_step, dt = t.agent_episode, t.agent_events, t.episode_step, t.dt
-    offsets, radius2, extended, vis_mode, ego_extended, yaw = (
-        c.offsets,
-        c.radius2,
-        c.extended,
-        c.vis_mode,
-        c.ego_extended,
-        c.yaw,
-    )
-    ego, neighbours, neighbour_mask, waypoints = out.ego, out.neighbours, out.neighbour_mask, out.waypoints
-    waypoint_mask, goal, signal, events_out = out.waypoint_mask, out.goal, out.signal, out.events
-    k_max = neighbours.shape[1]
+    users = RoadUsers(data=data, lane=lane, role=t.role, vtype=t.vtype, lane_index=t.lane_index, lane_road=t.lane_road)
+    paths = RoutePaths(flat_paths=t.flat_paths, flat_valid=t.flat_valid, stride=stride)
+    offsets, radius2, vis_mode, ego_extended, yaw = (
+        setup.offsets, setup.radius2, setup.vis_mode, setup.ego_extended, setup.yaw
+    )  # fmt: skip
+    columns = NeighbourColumns(extended=setup.extended, vis_mode=vis_mode)
+    ego, goal, signal, events_out = out.ego, out.goal, out.signal, out.events
+    k_max = out.neighbours.shape[1]
     near_d2 = np.empty(k_max)
     near_row = np.empty(k_max, dtype=np.int64)
     for i in range(agents.shape[0]):
@@ -349,6 +386,7 @@ def _observe(
         speed = data[_SPEED, r]
 
         ln = lane[r]
+        pose = EgoPose(x=x, y=y, h=h, c=c, s=s, speed=speed, lane=ln)
         _ego_features(data, r, ln, lane_width, lane_speed_limit, h, speed, ego, i)
         if ego_extended:
             # yaw[0]: yaw rate seen at step yaw[1]; yaw[2]: angular acceleration at that step.
@@ -359,12 +397,8 @@ def _observe(
 
         m = _nearest_rows(data, alive[alive_lo[i] : alive_hi[i]], r, x, y, radius2, vis_mode == _VIS_HIDE, visible, i,
                           base, near_d2, near_row)  # fmt: skip
-        _neighbour_features(data, lane, role, vtype, lane_index, lane_road, ln, near_row, m, x, y, h, c, s, speed,
-                            extended, vis_mode, visible, i, base, neighbours, neighbour_mask)  # fmt: skip
-
-        _waypoint_features(
-            flat_paths, flat_valid, stride, route_index[a], offsets, a, x, y, h, c, s, waypoints, waypoint_mask, i
-        )
+        _neighbour_features(users, pose, near_row, m, columns, visible, base, out, i)
+        _waypoint_features(paths, route_index[a], offsets, a, pose, out, i)
 
         if goal_kind[a] != 0:
             dx, dy = goal_xy[a, 0] - x, goal_xy[a, 1] - y
@@ -385,8 +419,9 @@ def _observe(
             events_out[i, e] = events[a, e]
 
 
-# The blocks of ``_observe`` per agent, inlined into it by numba; they take plain arrays, not the
-# frozen records (``smarts.core.records``: a field read per agent would cost a load and a reference).
+# The blocks of ``_observe`` per agent, inlined into it by numba; they take plain arrays or tuples
+# built by ``_observe``, not the frozen records (``smarts.records``: a field read per agent
+# would cost a load and a reference).
 @numba.njit(cache=True, nogil=True, inline="always")
 @cache_depends_on(_geometry)
 def _ego_features(data, r, ln, lane_width, lane_speed_limit, h, speed, ego, i):  # pragma: no cover - compiled
@@ -434,32 +469,16 @@ def _nearest_rows(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _neighbour_features(
-    data,
-    lane,
-    role,
-    vtype,
-    lane_index,
-    lane_road,
-    ln,
-    near_row,
-    m,
-    x,
-    y,
-    h,
-    c,
-    s,
-    speed,
-    extended,
-    vis_mode,
-    visible,
-    i,
-    base,
-    neighbours,
-    neighbour_mask,
-):  # pragma: no cover - compiled
-    """The neighbours block of agent ``i`` (pose ``x, y, h``, c, s = cos h, sin h; lane ``ln``): one
-    row per nearest road user in the ego frame, the rest zero."""
+def _neighbour_features(users, pose, near_row, m, columns, visible, base, out, i):  # pragma: no cover - compiled
+    """The neighbours block of agent ``i`` (``pose``, an ``EgoPose``) into ``out`` (a
+    ``BasicObservation``): one row per nearest road user (``near_row[:m]``, from ``users``, a
+    ``RoadUsers``) in the ego frame, the rest zero; ``columns`` (``NeighbourColumns``) says which."""
+    data, lane, role, vtype, lane_index, lane_road = (
+        users.data, users.lane, users.role, users.vtype, users.lane_index, users.lane_road
+    )  # fmt: skip
+    x, y, h, c, s, speed, ln = pose.x, pose.y, pose.h, pose.c, pose.s, pose.speed, pose.lane
+    extended, vis_mode = columns.extended, columns.vis_mode
+    neighbours, neighbour_mask = out.neighbours, out.neighbour_mask
     vis_col = neighbours.shape[2] - 1
     neighbours[i] = 0.0
     neighbour_mask[i] = 0.0
@@ -495,11 +514,13 @@ def _neighbour_features(
 
 @numba.njit(cache=True, nogil=True, inline="always")
 @cache_depends_on(_geometry)
-def _waypoint_features(
-    flat_paths, flat_valid, stride, index, offsets, a, x, y, h, c, s, waypoints, waypoint_mask, i
-):  # pragma: no cover - compiled
-    """The waypoints of agent ``a`` (route point ``index``) at each offset along each of its paths, in
-    the frame of the ego pose (x, y, h; c, s = cos h, sin h)."""
+def _waypoint_features(paths, index, offsets, a, pose, out, i):  # pragma: no cover - compiled
+    """The waypoints of agent ``a`` (route point ``index``) at each offset along each of its paths
+    (``paths``, a ``RoutePaths``), in the frame of ``pose`` (an ``EgoPose``), into row ``i`` of
+    ``out`` (a ``BasicObservation``)."""
+    flat_paths, flat_valid, stride = paths.flat_paths, paths.flat_valid, paths.stride
+    x, y, h, c, s = pose.x, pose.y, pose.h, pose.c, pose.s
+    waypoints, waypoint_mask = out.waypoints, out.waypoint_mask
     # Indices past a path's end clip onto the padding rows, which are marked invalid.
     for q in range(offsets.shape[0]):
         flat = a * stride + min(index + offsets[q], stride - 1)

@@ -22,9 +22,9 @@ import numba
 import numpy as np
 
 import smarts.sensors.rays as _rays
-from smarts.core.records import cache_depends_on
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import COLUMN
+from smarts.records import cache_depends_on
 from smarts.sensors.rays import box_interval, parallel_worth_it, slab
 
 SHADOW_BINS = 1440

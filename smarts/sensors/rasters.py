@@ -141,8 +141,8 @@ class RasterSensor:
         )  # fmt: skip
         sub = Scope(scope.alive, scope.lo[part], scope.hi[part], scope.base[part])
         kernel = draw_rasters_parallel if parallel_worth_it(len(rows)) else draw_rasters
-        kernel(sim.table.data, sim.table.role, sub, agents, rows, self._pixels, grid, paths, sh, layers, cfg.rgb, rgb,
-               SHADED_PALETTE)  # fmt: skip
+        kernel(sim.table.data, sim.table.role, sub, agents, rows, self._pixels, grid, paths, sh,
+               RasterOut(layers, cfg.rgb, rgb))  # fmt: skip
 
 
 def _by_map(sim: Simulation, agents: np.ndarray):
@@ -189,6 +189,15 @@ class RoutePaths(NamedTuple):
     route_index: np.ndarray
 
 
+class RasterOut(NamedTuple):
+    """Where the raster kernel draws: ``layers`` uint8[n, L, size, size] and, when ``want_rgb``,
+    ``rgb`` uint8[n, size, size, 3] (else a one-image dummy)."""
+
+    layers: np.ndarray
+    want_rgb: bool
+    rgb: np.ndarray
+
+
 class ShadowView(NamedTuple):
     """Shadows for the raster kernel: per agent depth buffers and visible fractions (dummies when
     ``have_shadows`` is False), the sensor range, and whether hidden road users are left out."""
@@ -201,27 +210,21 @@ class ShadowView(NamedTuple):
 
 
 @numba.njit(cache=True, nogil=True)
-def draw_rasters(
-    data, role, scope, agents, rows, pix, grid, paths, sh, layers, want_rgb, rgb, shaded
-):  # pragma: no cover - compiled
+def draw_rasters(data, role, scope, agents, rows, pix, grid, paths, sh, out):  # pragma: no cover - compiled
     """Draw the layers (and the RGB view) of each agent ``agents[i]`` (row ``rows[i]``) among its
-    episode's road users (``scope``, a ``smarts.core.simulation.Scope``)."""
+    episode's road users (``scope``, a ``smarts.core.simulation.Scope``) into ``out``."""
     scratch = _new_scratch(pix.size * pix.size)
     for i in range(rows.shape[0]):
-        _draw_one(data, role, scope.alive[scope.lo[i]:scope.hi[i]], scope.base[i], agents[i], rows[i], pix, grid, paths,
-                  sh, _agent_part(sh.depth, i), _agent_part(sh.visible, i), scratch, layers[i], want_rgb,
-                  _agent_part(rgb, i), shaded)  # fmt: skip
+        _draw_one(data, role, scope, i, agents[i], rows[i], pix, grid, paths, sh, scratch, out)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def draw_rasters_parallel(
-    data, role, scope, agents, rows, pix, grid, paths, sh, layers, want_rgb, rgb, shaded
-):  # pragma: no cover - compiled
+def draw_rasters_parallel(data, role, scope, agents, rows, pix, grid, paths, sh, out):  # pragma: no cover - compiled
     """``draw_rasters`` with the agents spread over threads (each its own scratch buffers)."""
     for i in numba.prange(rows.shape[0]):
-        _draw_one(data, role, scope.alive[scope.lo[i]:scope.hi[i]], scope.base[i], agents[i], rows[i], pix, grid, paths,
-                  sh, _agent_part(sh.depth, i), _agent_part(sh.visible, i), _new_scratch(pix.size * pix.size), layers[i],
-                  want_rgb, _agent_part(rgb, i), shaded)  # fmt: skip
+        _draw_one(
+            data, role, scope, i, agents[i], rows[i], pix, grid, paths, sh, _new_scratch(pix.size * pix.size), out
+        )
 
 
 class _Scratch(NamedTuple):
@@ -250,31 +253,31 @@ def _agent_part(a, i):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _draw_one(
-    data, role, alive, row_base, a, r, pix, grid, paths, sh, depth, visible, scratch, layers, want_rgb, rgb, shaded
-):  # pragma: no cover - compiled
-    """One agent's rasters (its own scratch planes and output planes)."""
+def _draw_one(data, role, scope, i, a, r, pix, grid, paths, sh, scratch, out):  # pragma: no cover - compiled
+    """Agent ``a`` (row ``r``, number ``i`` of the call): its rasters into its planes of ``out``,
+    with its own scratch planes."""
     size, res = pix.size, pix.res
     half = 0.5 * size * res
     view = half * math.sqrt(2.0)  # farthest pixel corner from the ego
     x, y, h = data[_X, r], data[_Y, r], data[_H, r]
     c, s = math.cos(h), math.sin(h)
     occupant, route = scratch.occupant, scratch.route
-    _draw_boxes(data, alive, row_base, r, x, y, h, c, s, half, pix, sh, visible, occupant)
+    alive = scope.alive[scope.lo[i] : scope.hi[i]]
+    _draw_boxes(data, alive, scope.base[i], r, (x, y, h, c, s), half, pix, sh, _agent_part(sh.visible, i), occupant)
     _draw_route(paths, a, x, y, c, s, half, view, pix, route)
-    _read_map(grid, pix, sh, depth, x, y, c, s, scratch.cell, scratch.code, scratch.shade)
-    _fill_layers(pix, layers, scratch.code, route, occupant, scratch.shade)
-    if want_rgb:
-        _compose_rgb(size * size, role, occupant, route, scratch.code, scratch.shade, shaded, rgb)
+    _read_map(grid, pix, sh, _agent_part(sh.depth, i), x, y, c, s, scratch.cell, scratch.code, scratch.shade)
+    _fill_layers(pix, out.layers[i], scratch.code, route, occupant, scratch.shade)
+    if out.want_rgb:
+        _compose_rgb(size * size, role, occupant, route, scratch.code, scratch.shade, _agent_part(out.rgb, i))
 
 
 # The layers of ``_draw_one``, one loop nest each, inlined into it by numba.
 @numba.njit(cache=True, nogil=True, inline="always")
-def _draw_boxes(
-    data, alive, row_base, r, x, y, h, c, s, half, pix, sh, visible, occupant
-):  # pragma: no cover - compiled
-    """Boxes: ego = -1, other road users = row + 1, into the pixels whose centre they cover."""
+def _draw_boxes(data, alive, row_base, r, ego, half, pix, sh, visible, occupant):  # pragma: no cover - compiled
+    """Boxes: ego = -1, other road users = row + 1, into the pixels whose centre they cover
+    (``ego``: the ego's x, y, heading and the heading's cosine and sine)."""
     px_ex, px_ey, size, res = pix.ex, pix.ey, pix.size, pix.res
+    x, y, h, c, s = ego
     occupant[:] = 0
     for j in alive:
         if j != r and sh.hide_hidden and visible[j - row_base] <= 0.0:
@@ -401,8 +404,9 @@ def _fill_layers(pix, layers, code, route, occupant, shade):  # pragma: no cover
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _compose_rgb(n_px, role, occupant, route, code, shade, shaded, rgb):  # pragma: no cover - compiled
+def _compose_rgb(n_px, role, occupant, route, code, shade, rgb):  # pragma: no cover - compiled
     """The RGB view: road users over route over lane lines over road, each pixel shaded by its level."""
+    shaded = SHADED_PALETTE
     image = rgb.reshape(n_px, 3)
     for q in range(n_px):
         occ = occupant[q]

@@ -1,4 +1,4 @@
-"""Kernel records (``smarts.core.records``): fields found by name, the same arrays, and numba's
+"""Kernel records (``smarts.records``): fields found by name, the same arrays, and numba's
 cache surviving a record class that disappeared."""
 
 import os
@@ -10,9 +10,9 @@ import numba
 import pytest
 from numba.core.caching import IndexDataCacheFile
 
-from smarts.core.records import declare
 from smarts.core.sim_records import Lanes, freeze, lanes_of
 from smarts.maps import load_map
+from smarts.records import declare
 from smarts.scenario import builtin_map_path
 
 
@@ -62,7 +62,7 @@ def test_a_cache_index_naming_a_record_class_that_is_gone_reads_as_stale(tmp_pat
 _KERNEL = """
 import numba
 import dep
-from smarts.core.records import cache_depends_on
+from smarts.records import cache_depends_on
 
 
 @numba.njit(cache=True)
@@ -97,3 +97,31 @@ def test_a_kernel_that_names_its_dependencies_recompiles_when_one_of_them_change
     dep.write_text("import numba\n\n\n@numba.njit(cache=True)\ndef scale(x):\n    return x * 50\n")
     os.utime(dep, (dep.stat().st_atime, dep.stat().st_mtime + 5))
     assert _run_kernel(folder, cache)[0] == "100.0"  # the edit is seen, not the cached old code
+
+
+MAX_KERNEL_PARAMETERS = 12
+
+
+def _compiled_functions(root):
+    """(file, name, parameter count) of every ``numba.njit`` function under ``root``."""
+    import ast
+    from pathlib import Path
+
+    for path in sorted(Path(root).rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.FunctionDef) and any("njit" in ast.unparse(d) for d in node.decorator_list):
+                a = node.args
+                yield path, node.name, len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) + bool(a.vararg)
+
+
+def test_no_compiled_function_takes_more_than_a_dozen_parameters():
+    """Kernels take records: numba binds by position, so a long list of same-typed arrays lets
+    two swapped arguments pass silently."""
+    from pathlib import Path
+
+    import smarts
+
+    found = list(_compiled_functions(Path(smarts.__file__).parent))
+    assert len(found) > 100  # the scan sees the kernels
+    too_many = [f"{p.name}:{name} ({n})" for p, name, n in found if n > MAX_KERNEL_PARAMETERS]
+    assert not too_many, f"compiled functions with more than {MAX_KERNEL_PARAMETERS} parameters: {too_many}"

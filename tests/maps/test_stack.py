@@ -103,3 +103,16 @@ def test_the_combined_map_has_no_space_of_its_own(stack):
 def test_one_map_is_its_own_stack(maps):
     single = stack_maps(maps[:1])
     assert single.combined is maps[0] and single.windows == [maps[0]]
+
+
+def test_a_projected_map_pickles_and_projects_the_same_after(maps):
+    """The projection's frozen grids are made again on unpickling: maps travel to worker processes."""
+    import pickle
+
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-60.0, 60.0, (200, 2))
+    heading = rng.uniform(-np.pi, np.pi, 200)
+    before = project(maps[1], xy, heading)
+    again = project(pickle.loads(pickle.dumps(maps[1])), xy, heading)
+    for name in before._fields:
+        np.testing.assert_array_equal(getattr(before, name), getattr(again, name))

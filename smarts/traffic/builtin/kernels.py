@@ -25,8 +25,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from smarts.core.records import declare, freeze_fields
 from smarts.core.vehicle_table import COLUMN
+from smarts.records import declare, freeze_fields
 from smarts.traffic.builtin.junctions import NOMINAL_LENGTH
 
 # --- per-row float state st[k, row]
@@ -286,7 +286,7 @@ for _record in (LaneGraph, Routes, RouteSets, RowState):
 
 @numba.njit(cache=True, nogil=True)
 def freeze(fields):  # pragma: no cover - compiled
-    """The frozen record of one of this module's records (see ``smarts.core.records``)."""
+    """The frozen record of one of this module's records (see ``smarts.records``)."""
     return freeze_fields(fields)
 
 

@@ -24,8 +24,8 @@ import numpy as np
 
 import smarts.traffic.builtin.junctions as _junctions
 import smarts.traffic.builtin.kernels as K
-from smarts.core.records import cache_depends_on, declare, freeze_fields, view
 from smarts.core.simulation import Simulation
+from smarts.records import cache_depends_on, declare, freeze_fields, view
 
 
 class StageState(NamedTuple):
@@ -66,7 +66,7 @@ declare(StageState)
 
 @numba.njit(cache=True, nogil=True)
 def _freeze(fields):  # pragma: no cover - compiled
-    """The frozen record of this module's records (see ``smarts.core.records``)."""
+    """The frozen record of this module's records (see ``smarts.records``)."""
     return freeze_fields(fields)
 
 
