@@ -27,7 +27,6 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 from enum import IntEnum
 from typing import NamedTuple
 
@@ -66,8 +65,7 @@ class SenderKind(IntEnum):
     TRAFFIC = 2
 
 
-@dataclass
-class Received:
+class Received(NamedTuple):
     """What each receiver got this step, nearest sender first; padding has mask False.
 
     sender_row int64[n, M]: the sender's table row when it sent (-1 for padding).
@@ -77,6 +75,8 @@ class Received:
     age int32[n, M]: steps since the message was sent.
     payload float32[n, M, message_size].
     mask bool[n, M]; count int64[n] (messages per receiver).
+
+    A named tuple: ``_deliver`` makes one in compiled code.
     """
 
     sender_row: np.ndarray
@@ -89,7 +89,7 @@ class Received:
 
     @classmethod
     def empty(cls, n: int, max_messages: int, message_size: int) -> Received:
-        """Nothing received (``_deliver`` makes the same arrays in compiled code)."""
+        """Nothing received (``_deliver`` makes the same arrays in compiled code, and fills them)."""
         return cls(
             sender_row=np.full((n, max_messages), -1, dtype=np.int64),
             sender_kind=np.zeros((n, max_messages), dtype=np.int8),
@@ -99,23 +99,6 @@ class Received:
             mask=np.zeros((n, max_messages), dtype=bool),
             count=np.zeros(n, dtype=np.int64),
         )
-
-
-class Delivered(NamedTuple):
-    """The arrays of one ``Received`` (its fields, in its order), made and filled by ``_deliver``:
-    arrays made in compiled code cost less per call than seven arrays passed in."""
-
-    sender_row: np.ndarray
-    sender_kind: np.ndarray
-    pose: np.ndarray
-    age: np.ndarray
-    payload: np.ndarray
-    mask: np.ndarray
-    count: np.ndarray
-
-
-if Delivered._fields != tuple(Received.__dataclass_fields__):  # ``Received(*delivered)`` relies on it
-    raise TypeError("Delivered must name Received's fields in Received's order")
 
 
 class Queue(NamedTuple):
@@ -331,7 +314,7 @@ class V2VNetworks:
         bad, got = _deliver(self._state, steps, episode, rows, channels, data, base)
         if bad >= 0:
             raise ValueError(f"V2V deliver: receiver row {int(rows[bad])} is not a row of the vehicle table")
-        return Received(*got)
+        return got
 
 
 class V2VNetwork:
@@ -574,7 +557,7 @@ def _nearest_first(dist2, index, m, take):  # pragma: no cover - compiled
 @cache_depends_on(_geometry)
 def _deliver(network, steps, episode, receivers, r_channels, data, base):  # pragma: no cover - compiled
     """What each receiver (episode ``episode[i]``, row ``receivers[i]``, tuned to ``r_channels[i]``)
-    gets: (-1, a ``Delivered``), or (the index of the first receiver whose row is out of range,
+    gets: (-1, a ``Received``), or (the index of the first receiver whose row is out of range,
     nothing filled)."""
     rule, queue, seeds = network.rule, network.queue, network.seeds
     capacity, latency, limit = rule.capacity, rule.latency, rule.limit
@@ -582,7 +565,7 @@ def _deliver(network, steps, episode, receivers, r_channels, data, base):  # pra
         queue.slot_step, queue.count, queue.row, queue.kind, queue.pose, queue.payload
     )  # fmt: skip
     n, width, size = receivers.shape[0], rule.max_messages, q_payload.shape[3]
-    out = Delivered(
+    out = Received(
         sender_row=np.full((n, width), -1, dtype=np.int64), sender_kind=np.zeros((n, width), dtype=np.int8),
         pose=np.zeros((n, width, 3)), age=np.zeros((n, width), dtype=np.int32),
         payload=np.zeros((n, width, size), dtype=np.float32), mask=np.zeros((n, width), dtype=np.bool_),

@@ -264,7 +264,7 @@ class Driving:
             order = np.argsort(hearing, kind="stable")
             hearing = hearing[order]
             received = Received(
-                *(np.concatenate([getattr(got, f) for _, got in parts])[order] for f in Received.__dataclass_fields__)
+                *(np.concatenate([getattr(got, f) for _, got in parts])[order] for f in Received._fields)
             )
         if hearing.size == agents.size:
             V2VLink.merge(batches, agents, received)
