@@ -13,7 +13,6 @@ generator seeded with the scenario seed and reseeded at every episode start.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import gymnasium as gym
 import numba
@@ -24,7 +23,7 @@ from smarts.core.simulation import Scope, Simulation
 from smarts.core.vehicle_table import COLUMN, Role
 from smarts.records import cache_depends_on
 from smarts.sensors.interface import LidarInterface
-from smarts.sensors.map_fields import map_fields
+from smarts.sensors.map_fields import cell_grid, map_fields
 from smarts.sensors.rays import box_interval, parallel_worth_it, ray_box
 
 HIT_NONE, HIT_VEHICLE, HIT_PEDESTRIAN, HIT_ROAD_EDGE = 0, 1, 2, 3
@@ -68,7 +67,7 @@ class LidarSensor:
             )
             kernel = lidar_scan_parallel if parallel_worth_it(len(idx)) else lidar_scan
             part = Scope(scope.alive, scope.lo[idx], scope.hi[idx], scope.base[idx])
-            grid = ClearanceGrid(f.origin, float(f.inv_res), f.cell_max, int(f.width), f.road_clearance)
+            grid = cell_grid(f, f.road_clearance)
             kernel(sim.table.data, sim.table.role, part, rows[idx], cfg.range, grid, d, h)
             if len(idx) != n:
                 dist[idx], hit[idx] = d, h
@@ -92,16 +91,6 @@ class LidarSensor:
             rng = np.random.default_rng([seed, _NOISE_STREAM, self.episode_streams.get(episode, self._stream)])
         self._rngs[episode] = (rng, (seed, step))
         return rng
-
-
-class ClearanceGrid(NamedTuple):
-    """A map's road clearance field as the lidar reads it (``smarts.sensors.map_fields``)."""
-
-    origin: np.ndarray
-    inv_res: float
-    cell_max: np.ndarray
-    width: int
-    clearance: np.ndarray
 
 
 @numba.njit(cache=True, nogil=True)
@@ -190,7 +179,7 @@ def _scan_one(data, role, alive, r, max_range, grid, dist, hit):  # pragma: no c
 def _clearance_at(x, y, grid):  # pragma: no cover - compiled
     cx = min(max((x - grid.origin[0]) * grid.inv_res, 0.0), grid.cell_max[0])
     cy = min(max((y - grid.origin[1]) * grid.inv_res, 0.0), grid.cell_max[1])
-    return grid.clearance[int(cy) * grid.width + int(cx)]
+    return grid.cells[int(cy) * grid.width + int(cx)]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -12,6 +12,7 @@ Both are uint8 (clipped at 255 cells), which bounds their memory to that of the 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -31,6 +32,23 @@ class MapFields:
     drivable: np.ndarray  # bool[H * W], row-major (y, x)
     road_clearance: np.ndarray  # uint8[H * W]
     lane_distance: np.ndarray  # uint8[H * W]
+
+
+class CellGrid(NamedTuple):
+    """One per-cell field of a map with the grid it lies on, as a kernel reads it: cell (cx, cy)
+    of point (x, y) is ``(x, y) - origin`` times ``inv_res``, clamped to ``cell_max``, and its
+    value ``cells[cy * width + cx]``."""
+
+    origin: np.ndarray
+    inv_res: float
+    cell_max: np.ndarray
+    width: int
+    cells: np.ndarray
+
+
+def cell_grid(fields: MapFields, cells: np.ndarray) -> CellGrid:
+    """``cells`` (one of ``fields``' arrays, or one made on its grid) with that grid."""
+    return CellGrid(fields.origin, float(fields.inv_res), fields.cell_max, int(fields.width), cells)
 
 
 def map_fields(road_map: RoadMap) -> MapFields:

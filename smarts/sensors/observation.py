@@ -51,6 +51,7 @@ import numba
 import numpy as np
 
 import smarts.core.geometry as _geometry
+import smarts.sensors.rasters as _rasters
 from smarts.core.events import NUM_EVENTS
 from smarts.core.following import ahead_state, lead_state
 from smarts.core.geometry import wrap_scalar
@@ -65,7 +66,7 @@ from smarts.sensors.interface import (
 )
 from smarts.sensors.lidar import LidarSensor
 from smarts.sensors.occlusion import ShadowCaster, Shadows
-from smarts.sensors.rasters import RasterSensor
+from smarts.sensors.rasters import RasterSensor, RoutePaths
 
 EGO_FEATURES = 12
 NEIGHBOUR_FEATURES = 9
@@ -139,15 +140,6 @@ class NeighbourColumns(NamedTuple):
 
     extended: bool  # the extended columns
     vis_mode: int  # _VIS_OFF, _VIS_HIDE or _VIS_FLAG: _VIS_FLAG adds the visible fraction
-
-
-class RoutePaths(NamedTuple):
-    """The agents' paths along their routes, ``stride`` rows per agent (built once per ``_observe``
-    call)."""
-
-    flat_paths: np.ndarray  # float64[A * stride, 3, 3] x, y, heading of point i of agent a at row a * stride + i
-    flat_valid: np.ndarray  # bool[A * stride, 3]
-    stride: int
 
 
 class EgoPose(NamedTuple):
@@ -350,7 +342,7 @@ def lead_features(sim: Simulation, agents: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-@cache_depends_on(_geometry)
+@cache_depends_on(_geometry, _rasters)  # (it builds the rasters' RoutePaths)
 def _observe(
     tables, setup, alive, alive_lo, alive_hi, row_base, agents, rows, visible, out
 ):  # pragma: no cover - compiled
@@ -366,7 +358,7 @@ def _observe(
     signal_via, signal_s, via_colours = t.signal_via, t.signal_s, t.via_colour
     agent_episode, events, episode_step, dt = t.agent_episode, t.agent_events, t.episode_step, t.dt
     users = RoadUsers(data=data, lane=lane, role=t.role, vtype=t.vtype, lane_index=t.lane_index, lane_road=t.lane_road)
-    paths = RoutePaths(flat_paths=t.flat_paths, flat_valid=t.flat_valid, stride=stride)
+    paths = RoutePaths(t.flat_paths, t.flat_valid, stride, t.path_len, route_index)
     offsets, radius2, vis_mode, ego_extended, yaw = (
         setup.offsets, setup.radius2, setup.vis_mode, setup.ego_extended, setup.yaw
     )  # fmt: skip
@@ -398,7 +390,7 @@ def _observe(
         m = _nearest_rows(data, alive[alive_lo[i] : alive_hi[i]], r, x, y, radius2, vis_mode == _VIS_HIDE, visible, i,
                           base, near_d2, near_row)  # fmt: skip
         _neighbour_features(users, pose, near_row, m, columns, visible, base, out, i)
-        _waypoint_features(paths, route_index[a], offsets, a, pose, out, i)
+        _waypoint_features(paths, offsets, a, pose, out, i)
 
         if goal_kind[a] != 0:
             dx, dy = goal_xy[a, 0] - x, goal_xy[a, 1] - y
@@ -514,11 +506,11 @@ def _neighbour_features(users, pose, near_row, m, columns, visible, base, out, i
 
 @numba.njit(cache=True, nogil=True, inline="always")
 @cache_depends_on(_geometry)
-def _waypoint_features(paths, index, offsets, a, pose, out, i):  # pragma: no cover - compiled
-    """The waypoints of agent ``a`` (route point ``index``) at each offset along each of its paths
-    (``paths``, a ``RoutePaths``), in the frame of ``pose`` (an ``EgoPose``), into row ``i`` of
-    ``out`` (a ``BasicObservation``)."""
-    flat_paths, flat_valid, stride = paths.flat_paths, paths.flat_valid, paths.stride
+def _waypoint_features(paths, offsets, a, pose, out, i):  # pragma: no cover - compiled
+    """The waypoints of agent ``a`` at each offset from its route point along each of its paths
+    (``paths``, a ``smarts.sensors.rasters.RoutePaths``), in the frame of ``pose`` (an
+    ``EgoPose``), into row ``i`` of ``out`` (a ``BasicObservation``)."""
+    flat_paths, flat_valid, stride, index = paths.flat_paths, paths.flat_valid, paths.stride, paths.route_index[a]
     x, y, h, c, s = pose.x, pose.y, pose.h, pose.c, pose.s
     waypoints, waypoint_mask = out.waypoints, out.waypoint_mask
     # Indices past a path's end clip onto the padding rows, which are marked invalid.

@@ -30,7 +30,7 @@ import numpy as np
 from smarts.core.simulation import Scope, Simulation
 from smarts.core.vehicle_table import COLUMN
 from smarts.sensors.interface import RASTER_LAYERS, RasterInterface
-from smarts.sensors.map_fields import ON_ROAD, map_fields, raster_codes
+from smarts.sensors.map_fields import ON_ROAD, cell_grid, map_fields, raster_codes
 from smarts.sensors.occlusion import SHADOW_BINS, Shadows
 from smarts.sensors.rays import parallel_worth_it
 
@@ -131,7 +131,7 @@ class RasterSensor:
         ma = sim.mission_arrays
         # A pixel is on a lane line within half a pixel of it (at least one map cell).
         lane_cells = max(0.5 * cfg.resolution * f.inv_res, 1.0)
-        grid = MapGrid(f.origin, float(f.inv_res), f.cell_max, int(f.width), raster_codes(road_map, lane_cells))
+        grid = cell_grid(f, raster_codes(road_map, lane_cells))  # on road / on a lane line per cell
         paths = RoutePaths(ma.flat_paths, ma.flat_valid, int(ma.stride), ma.path_len, sim.route_index)
         sh = ShadowView(
             shadows.depth[part] if shadows is not None else self._no_shadow,
@@ -166,17 +166,6 @@ class RasterPixels(NamedTuple):
     size: int
     res: float
     slot: np.ndarray
-
-
-class MapGrid(NamedTuple):
-    """A map's rasterised fields as the raster kernel reads them: one byte per map cell
-    (``raster_codes``: bit 0 on the road, bit 1 on a lane line), so a pixel is one lookup."""
-
-    origin: np.ndarray
-    inv_res: float
-    cell_max: np.ndarray
-    width: int
-    code: np.ndarray
 
 
 class RoutePaths(NamedTuple):
@@ -362,7 +351,7 @@ def _read_map(grid, pix, sh, depth, x, y, c, s, cell, code, shade):  # pragma: n
     over the flat pixel index with 32-bit cell numbers, so the compiler vectorises them."""
     px_ex, px_ey, px_bin, px_dist = pix.ex, pix.ey, pix.bin, pix.dist
     ox, oy, inv_res = grid.origin[0], grid.origin[1], grid.inv_res
-    mx, my, width, codes = grid.cell_max[0], grid.cell_max[1], np.int32(grid.width), grid.code
+    mx, my, width, codes = grid.cell_max[0], grid.cell_max[1], np.int32(grid.width), grid.cells
     n_px = pix.size * pix.size
     for q in range(n_px):
         ex, ey = px_ex[q], px_ey[q]
