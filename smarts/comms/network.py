@@ -87,19 +87,6 @@ class Received(NamedTuple):
     mask: np.ndarray
     count: np.ndarray
 
-    @classmethod
-    def empty(cls, n: int, max_messages: int, message_size: int) -> Received:
-        """Nothing received (``_deliver`` makes the same arrays in compiled code, and fills them)."""
-        return cls(
-            sender_row=np.full((n, max_messages), -1, dtype=np.int64),
-            sender_kind=np.zeros((n, max_messages), dtype=np.int8),
-            pose=np.zeros((n, max_messages, 3)),
-            age=np.zeros((n, max_messages), dtype=np.int32),
-            payload=np.zeros((n, max_messages, message_size), dtype=np.float32),
-            mask=np.zeros((n, max_messages), dtype=bool),
-            count=np.zeros(n, dtype=np.int64),
-        )
-
 
 class Queue(NamedTuple):
     """The message rings of every episode: slot s of episode e holds the messages sent at step
@@ -309,8 +296,6 @@ class V2VNetworks:
     ) -> Received:
         """The messages sent ``latency`` steps ago that reach each receiver (episode
         ``episode[i]``, its row ``rows[i]``, tuned to ``channels[i]``) at its episode's step."""
-        if rows.shape[0] == 0:
-            return Received.empty(0, self.config.max_messages, self.config.message_size)
         bad, got = _deliver(self._state, steps, episode, rows, channels, data, base)
         if bad >= 0:
             raise ValueError(f"V2V deliver: receiver row {int(rows[bad])} is not a row of the vehicle table")
