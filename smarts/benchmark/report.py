@@ -214,7 +214,8 @@ class ReportAhead(_Reading):
 
         self.budget = budget
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
-        self._logs: dict[str, Any] = {}
+        self._logs: dict[str, tuple[int, Any]] = {}  # path -> (the offer it was read for, log)
+        self._offers: dict[str, int] = {}  # path -> how often it was offered (a re-run offers it again)
         self._scores: dict[int, tuple[Any, Any, dict[str, float]]] = {}  # id(log) -> (log, params, scores)
         self._enough = False  # set when the report starts: the thread stops after the log in hand
         self._thread = threading.Thread(target=self._read_ahead, name="report-ahead", daemon=True)
@@ -232,7 +233,9 @@ class ReportAhead(_Reading):
     def offer(self, summary: dict) -> None:
         """A finished episode's summary (``run_jobs``'s ``on_result``)."""
         if summary.get("log") and self.budget > 0:
-            self._queue.put(str(summary["log"]))
+            path = str(summary["log"])
+            self._offers[path] = offer = self._offers.get(path, 0) + 1
+            self._queue.put((path, offer))
         scenario = summary.get("scenario")
         if self.drawing is None or summary.get("episode") != 0 or scenario not in self._waiting:
             return
@@ -256,12 +259,14 @@ class ReportAhead(_Reading):
             with contextlib.suppress(Exception):  # the report imports them again and says what is wrong
                 prepare_drawing()  # for the trajectory figures drawn here
         params = None
-        while (path := self._queue.get()) is not None and not self._enough:
+        while (item := self._queue.get()) is not None and not self._enough:
+            path, offer = item
             try:
                 size = os.path.getsize(path)
                 if size > self.budget:
                     continue
-                self._logs[path] = log = read_episode(path)  # a path offered again (a re-run) is read again
+                log = read_episode(path)  # a path offered again (a re-run) is read again
+                self._logs[path] = (offer, log)
                 self.budget -= size
                 params = load_params() if params is None else params
                 self._scores[id(log)] = (log, params, score_episode(log, params))
@@ -276,8 +281,10 @@ class ReportAhead(_Reading):
             self._enough = True
             self._queue.put(None)
             self._thread.join()
-        log = self._logs.pop(str(path), None)
-        return log if log is not None else read_episode(path)
+        offer, log = self._logs.pop(str(path), (None, None))
+        # A log read for an earlier offer of its path is stale: its episode ran again and the
+        # thread stopped before reading the new file.
+        return log if log is not None and offer == self._offers.get(str(path)) else read_episode(path)
 
     def score(self, log, params) -> dict[str, float]:
         """``score_episode(log, params)``: as computed ahead for a log :meth:`read` gave, else now."""

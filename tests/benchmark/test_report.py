@@ -263,6 +263,20 @@ def test_a_report_prepared_while_episodes_run_is_the_report(adaptive_report, tmp
     with pytest.raises(LogError, match="not a readable .npz episode log"):
         ahead.read(second)
 
+    # The re-run's offer arrives after the thread read the first file but before it reads again
+    # (the report started meanwhile): the log in hand is stale and the file is read now.
+    shutil.copy(paths[0], first)
+    ahead = ReportAhead(tmp_path / "stale", suite, [], jobs)
+    ahead.offer({"log": str(first)})
+    deadline = time.monotonic() + 30
+    while str(first) not in ahead._logs and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert str(first) in ahead._logs
+    ahead._enough = True  # the thread takes nothing more
+    first.write_bytes(paths[1].read_bytes())
+    ahead.offer({"log": str(first)})
+    assert ahead.read(first).scenario == read_episode(paths[1]).scenario
+
     small = ReportAhead(tmp_path / "small", suite, [], jobs, budget=paths[0].stat().st_size - 1)
     small.offer({"log": str(paths[0])})
     assert small.read(paths[0]).scenario == read_episode(paths[0]).scenario and small._logs == {}
