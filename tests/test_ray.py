@@ -129,3 +129,46 @@ def test_local_ray_listens_on_loopback_only():
             assert addresses, "found none of Ray's listening sockets"
             mapped = [getattr(a, "ipv4_mapped", None) or a for a in addresses]
             assert all(a.is_loopback for a in mapped), addresses
+
+
+def test_ray_training_listens_on_loopback_only():
+    """The learner and its Ray collectors, built as ``--ray-address local`` builds them and after
+    a batch and a weight update, listen on loopback only (weights travel through Ray's own
+    loopback channels, no other server is opened)."""
+    import contextlib as _contextlib
+
+    from train.config import load_config
+    from train.ppo import open_envs
+    from train.run import BatchPlan
+
+    cfg = load_config(
+        "platoon",
+        overrides={"envs": 2, "workers": 2, "ray_address": "local", "frames_per_batch": 64, "minibatch_size": 64},
+    )
+    with _contextlib.ExitStack() as scale_out:
+        envs = open_envs(cfg, None, scale_out)
+        plan = BatchPlan.of(128, cfg.frames_per_batch, envs.slots, whole=True)
+        collection = envs.collection(cfg, plan, torch.device("cpu"))
+        scale_out.callback(collection.close)
+        import ray
+        from tensordict import TensorDict
+
+        def remote_weights() -> list[dict]:
+            return [ray.get(a.state_dict.remote())["policy_state_dict"] for a in collection.collector.remote_collectors]
+
+        def same(remote: dict) -> bool:
+            local = dict(TensorDict.from_module(collection.actor).data.flatten_keys(".").items())
+            return remote.keys() == local.keys() and all(torch.equal(v, local[k]) for k, v in remote.items())
+
+        assert all(same(w) for w in remote_weights())  # the actors start from the learner's weights
+        with torch.no_grad():
+            for p in envs.parts.actor_net.parameters():
+                p.add_(0.5)
+        assert not any(same(w) for w in remote_weights())
+        collection.sync(envs.parts)
+        assert all(same(w) for w in remote_weights())  # an update reaches every actor
+        assert collection.take() is not None
+        addresses = _listening_addresses(_descendants(os.getpid()) | {os.getpid()})
+        assert addresses, "found none of Ray's listening sockets"
+        mapped = [getattr(a, "ipv4_mapped", None) or a for a in addresses]
+        assert all(a.is_loopback for a in mapped), addresses

@@ -810,7 +810,12 @@ class LocalCollection(Collection):
 class RayCollection(Collection):
     """Batches from torchrl's ``Collector`` with ``backend="ray"``: each of the ``workers`` Ray
     actors steps its share of the copies as a ``SmartsBatchedEnv``, acting with the policy's
-    TorchRL modules; the learner sends the new weights after every update (no overlap)."""
+    TorchRL modules; the learner sends the new weights after every update (no overlap).
+
+    The weights travel through Ray's object store, which the session keeps on loopback. torchrl's
+    default for Ray collectors (``RayWeightSyncScheme``) opens a ``TCPStore`` and Gloo sockets on
+    every interface instead, so it is switched off (``weight_sync_schemes={}``) and :meth:`sync`
+    hands each actor the weights itself."""
 
     overlap = False
 
@@ -823,8 +828,8 @@ class RayCollection(Collection):
         self._slots = slots
         self.collector = Collector(factories, self.actor, backend="ray", num_collectors=cfg.workers, sync=True,
                                    frames_per_batch=plan.first_steps * slots, total_frames=plan.frames,
-                                   remote_configs={"num_cpus": 1})  # fmt: skip
-        self.collector.update_policy_weights_()  # the actors start from these (possibly resumed) weights
+                                   remote_configs={"num_cpus": 1}, weight_sync_schemes={})  # fmt: skip
+        self.sync(parts)  # the actors start from these (possibly resumed) weights
         self.iterator = iter(self.collector)
 
     @property
@@ -838,7 +843,10 @@ class RayCollection(Collection):
         return batch_from_tensordict(next(self.iterator), self.layout, self.device)
 
     def sync(self, parts: PolicyParts) -> None:
-        self.collector.update_policy_weights_()
+        import ray
+
+        weights = ray.put(TensorDict.from_module(self.actor).data)
+        ray.get([actor.update_policy_weights_.remote(weights) for actor in self.collector.remote_collectors])
 
     def close(self) -> None:
         if self.collector is not None:
