@@ -36,7 +36,7 @@ Declaring one::
 
     declare(LaneGraph)
 
-    @numba.njit(cache=True)
+    @njit  # smarts.compiled.njit
     def freeze(fields):  # one per module that declares records (see ``freeze_fields``)
         return freeze_fields(fields)
 
@@ -47,15 +47,12 @@ when one of them is replaced (not when its contents change).
 
 from __future__ import annotations
 
-import os
-import pickle
-
 import numba
-from numba.core import caching, types
+from numba.core import types
 from numba.core.extending import overload
 from numba.experimental import structref
 
-__all__ = ["cache_depends_on", "declare", "freeze_fields", "view"]
+__all__ = ["declare", "freeze_fields", "view"]
 
 
 class _RecordType(types.StructRef):
@@ -99,7 +96,7 @@ def declare(fields_class: type) -> type:
 def freeze_fields(fields):  # pragma: no cover - replaced in compiled code
     """Compiled code only: the frozen record of a declared fields tuple (same arrays, not copies).
 
-    Call it from a ``numba.njit(cache=True)`` function in the module that declares the record:
+    Call it from a ``smarts.compiled.njit`` function in the module that declares the record:
     numba keys its cache of that function by the tuple's field types but not its field names, and
     drops it when that module's file changes, so a renamed or reordered field can never meet a
     stale compiled copy."""
@@ -139,81 +136,3 @@ def _view(record):
         raise numba.core.errors.TypingError(f"view: expected a frozen record, got {record}")
     names = [name for name, _ in record.field_dict.items()]
     return _impl("record", f"    return cls({', '.join(f'{n}=record.{n}' for n in names)})\n", cls=cls)
-
-
-def _tolerate_stale_cache_indexes() -> None:
-    """Let numba treat a cache index that no longer unpickles as stale.
-
-    numba's on-disk cache reads an index's source stamp and its entries in one unpickling, before
-    comparing the stamp, and each entry's signature names the record classes of its arguments by
-    module path. Once such a class is renamed or removed, every stale index that names it raises
-    on load and the kernel cannot be compiled at all, where numba would otherwise find the index
-    stale, compile again and overwrite it. Reading such an index as empty does exactly that."""
-    cls = getattr(caching, "IndexDataCacheFile", None)
-    load = getattr(cls, "_load_index", None)
-    if load is None or getattr(load, "tolerates_stale_classes", False):
-        return
-
-    def _load_index(self):
-        try:
-            return load(self)
-        except (AttributeError, ImportError, pickle.UnpicklingError, EOFError, TypeError, ValueError):
-            return {}
-
-    _load_index.tolerates_stale_classes = True
-    cls._load_index = _load_index
-
-
-_tolerate_stale_cache_indexes()
-
-
-def cache_depends_on(*modules) -> object:
-    """Decorator under ``numba.njit(cache=True)``: the on-disk cache of the kernel is also stale
-    when one of ``modules`` (those whose compiled functions it calls) changes.
-
-    Why: numba's cache of a function holds the code of what it calls but is checked only against
-    its own file, so a kernel that fuses stages of several modules would go on running an edited
-    stage's old code (and a mutation test would miss the edit)."""
-    files = tuple(m.__file__ for m in modules)
-
-    def mark(py_func):
-        py_func.__cache_depends__ = files
-        return py_func
-
-    return mark
-
-
-class _DependentLocator:
-    """The cache locator of a ``cache_depends_on`` kernel: numba's own, with a source stamp that
-    also covers the files of the modules it depends on."""
-
-    def __init__(self, inner, files: tuple[str, ...]):
-        self._inner, self._files = inner, files
-
-    @classmethod
-    def from_function(cls, py_func, py_file):
-        files = getattr(py_func, "__cache_depends__", None)
-        if not files:
-            return None
-        for base in caching.CacheImpl._locator_classes:
-            inner = None if base is cls else base.from_function(py_func, py_file)
-            if inner is not None:
-                return cls(inner, files)
-        return None
-
-    def get_source_stamp(self):
-        stamps = tuple((path, os.stat(path).st_mtime, os.stat(path).st_size) for path in self._files)
-        return self._inner.get_source_stamp(), stamps
-
-    def __getattr__(self, name: str):
-        return getattr(self._inner, name)
-
-
-def _register_dependent_locator() -> None:
-    """Put ``_DependentLocator`` first among numba's cache locators (once)."""
-    classes = getattr(getattr(caching, "CacheImpl", None), "_locator_classes", None)
-    if classes is not None and not any(c.__name__ == "_DependentLocator" for c in classes):
-        classes.insert(0, _DependentLocator)
-
-
-_register_dependent_locator()

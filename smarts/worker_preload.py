@@ -5,15 +5,14 @@ the kernel). Importing this module does that work; nothing else imports it. (The
 torch, 1.5-2 s of imports, is preloaded beside it unless the caller says its workers mostly do
 without: :data:`~smarts.worker_processes.TORCH_PRELOAD`.)"""
 
-import numba
-
 import smarts.benchmark.batched  # noqa: F401
 import smarts.benchmark.runner  # noqa: F401
 import smarts.env.batched.driving  # noqa: F401
 import smarts.traffic.builtin.provider  # noqa: F401 - imported by a simulation's first built-in traffic
+from smarts.compiled import njit
 
 
-@numba.njit(cache=True)
+@njit
 def _first_compiled_call(x: int) -> int:
     return x + 1
 

@@ -38,12 +38,12 @@ from __future__ import annotations
 
 from typing import Any
 
-import numba
 import numpy as np
 
 from smarts.benchmark.metrics.log import SCENE_RADIUS, TIME_LIMIT_TOLERANCE, AgentTrace, EpisodeLog, SceneTrace
 from smarts.benchmark.metrics.params import MetricParams
 from smarts.benchmark.metrics.scores import time_gap_to_margin
+from smarts.compiled import njit
 from smarts.core.errors import MapError
 from smarts.core.events import Event
 from smarts.core.following import LEAD_SIGHT, lead_rows, lead_state
@@ -442,7 +442,7 @@ def _member(values: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
     return sorted_keys[at] == values
 
 
-@numba.njit(cache=True)
+@njit
 def _nearest_points(xy: np.ndarray, path: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For each point of ``xy``, the index of the nearest point of ``path`` (the first of equals)
     and its squared distance: the arithmetic of numpy's ``((a - b) ** 2).sum(axis=-1).argmin()``

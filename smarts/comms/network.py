@@ -30,14 +30,13 @@ from collections.abc import Sequence
 from enum import IntEnum
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
-import smarts.core.geometry as _geometry
 from smarts.comms.config import CommsConfig
+from smarts.compiled import njit
 from smarts.core.geometry import wrap_scalar
 from smarts.core.vehicle_table import COLUMN, Role, VehicleTable
-from smarts.records import cache_depends_on, declare, freeze_fields
+from smarts.records import declare, freeze_fields
 
 TRAFFIC_PAYLOAD_FIELDS: tuple[str, ...] = (
     "x",
@@ -139,7 +138,7 @@ class Receiver(NamedTuple):
 declare(NetworkState)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _freeze(fields):  # pragma: no cover - compiled
     """The frozen record of this module's records (see ``smarts.records``)."""
     return freeze_fields(fields)
@@ -396,7 +395,7 @@ _MIX2 = np.uint64(0x94D049BB133111EB)
 _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _mix(z):  # pragma: no cover - compiled
     """SplitMix64 finaliser: a well-spread 64-bit hash of z."""
     z = (z ^ (z >> _S30)) * _MIX1
@@ -404,7 +403,7 @@ def _mix(z):  # pragma: no cover - compiled
     return z ^ (z >> _S31)
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _loss_uniform(seed, sent_step, message, receiver_row):  # pragma: no cover - compiled
     """Uniform [0, 1) fixed by (seed, send step, message slot, receiver row)."""
     z = _mix(seed + _GOLDEN)
@@ -414,7 +413,7 @@ def _loss_uniform(seed, sent_step, message, receiver_row):  # pragma: no cover -
     return float(z >> _S11) * 1.1102230246251565e-16  # 2**-53
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _open_slot(queue, steps, e):  # pragma: no cover - compiled
     """Episode ``e``'s slot of its step (emptied if it held an older step)."""
     slot_step = queue.slot_step
@@ -426,7 +425,7 @@ def _open_slot(queue, steps, e):  # pragma: no cover - compiled
     return slot
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _enqueue_agents(network, steps, episode, rows, channels, payloads, data, base):  # pragma: no cover - compiled
     """Write agents' messages into their episodes' slots; returns the index of the first bad
     message (row or channel out of range, non-finite payload) without writing anything, -2 when a
@@ -462,7 +461,7 @@ def _enqueue_agents(network, steps, episode, rows, channels, payloads, data, bas
     return -1
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _enqueue_traffic(network, steps, episodes, alive, role, data, base):  # pragma: no cover - compiled
     """Write the state message of every live connected traffic row of ``episodes``; returns -1
     when a slot overflows, else 0."""
@@ -499,7 +498,7 @@ def _enqueue_traffic(network, steps, episodes, alive, role, data, base):  # prag
 
 
 # The two steps of ``_deliver`` per receiver, inlined into it by numba.
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _heard(queue, e, slot, n_sent, sent, receiver, rule, seed, dist2, index):  # pragma: no cover - compiled
     """Which of the ``n_sent`` messages of episode ``e``'s slot (sent at step ``sent``) the receiver
     hears: not its own, on its channel (or broadcast), within range and not lost. Writes their
@@ -526,7 +525,7 @@ def _heard(queue, e, slot, n_sent, sent, receiver, rule, seed, dist2, index):  #
     return m
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _nearest_first(dist2, index, m, take):  # pragma: no cover - compiled
     """Partial selection sort of the first ``m`` entries: the ``take`` nearest (ties: sent first) first."""
     for j in range(take):
@@ -538,8 +537,7 @@ def _nearest_first(dist2, index, m, take):  # pragma: no cover - compiled
         index[j], index[best] = index[best], index[j]
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_geometry)
+@njit(nogil=True)
 def _deliver(network, steps, episode, receivers, r_channels, data, base):  # pragma: no cover - compiled
     """What each receiver (episode ``episode[i]``, row ``receivers[i]``, tuned to ``r_channels[i]``)
     gets: (-1, a ``Received``), or (the index of the first receiver whose row is out of range,

@@ -19,11 +19,11 @@ import math
 from collections.abc import Sequence
 
 import gymnasium
-import numba
 import numpy as np
 
 from smarts.comms.config import CommsConfig
 from smarts.comms.network import TRAFFIC_PAYLOAD_BOUND, Received, SenderKind
+from smarts.compiled import njit
 from smarts.core.errors import ActionError
 
 MESSAGE_FEATURES: tuple[str, ...] = ("from_agent", "from_traffic", "dx", "dy", "dheading", "age")
@@ -90,7 +90,7 @@ def split_message_action(
     return payloads, channels
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _split(actions, bound, channel_action, n_channels, payloads, channels):  # pragma: no cover
     """Clip payloads and round channels into the outputs; True if any number is not finite."""
     n, size = payloads.shape
@@ -148,7 +148,7 @@ def received_to_observation(received: Received) -> dict[str, np.ndarray]:
     return {"messages": messages, "message_mask": mask}
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _fill_observation(kind, pose, age, payload, present, messages, mask):  # pragma: no cover
     n, m, size = payload.shape
     for i in range(n):

@@ -10,13 +10,11 @@ import math
 from enum import IntEnum
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
-import smarts.maps.drivable as _drivable
+from smarts.compiled import njit
 from smarts.core.vehicle_table import COLUMN
 from smarts.maps.drivable import on_road_at
-from smarts.records import cache_depends_on
 
 
 class Event(IntEnum):
@@ -41,7 +39,7 @@ def event_from_name(name: str) -> Event:
         raise ValueError(f"unknown event {name!r}; expected one of {list(EVENT_NAMES)}") from None
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _corners(x, y, heading, length, width, out):  # pragma: no cover - compiled
     """Write a box's corners (front-left, front-right, rear-right, rear-left) into out[4, 2]."""
     c, s = math.cos(heading), math.sin(heading)
@@ -53,7 +51,7 @@ def _corners(x, y, heading, length, width, out):  # pragma: no cover - compiled
     out[3, 0], out[3, 1] = x - fx + lx, y - fy + ly
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _separated_on_axes(a, b):  # pragma: no cover - compiled
     """Whether one of a's two edge directions separates boxes a and b (corners [4, 2])."""
     for e in range(2):
@@ -70,13 +68,13 @@ def _separated_on_axes(a, b):  # pragma: no cover - compiled
     return False
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def boxes_overlap(a, b):  # pragma: no cover - compiled
     """Separating axis test of two oriented boxes given by their corners [4, 2]."""
     return not (_separated_on_axes(a, b) or _separated_on_axes(b, a))
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _all_pairs(corners, x, y, radius, hit):  # pragma: no cover - compiled
     n = x.shape[0]
     for i in range(n):
@@ -129,7 +127,7 @@ class NotMovingTracker:
         return out
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def not_moving_step(anchor, anchor_time, row, x, y, time, seconds, distance):  # pragma: no cover
     """Move the row's anchor if it got farther than ``distance``; True if stuck for ``seconds``."""
     dx, dy = x - anchor[row, 0], y - anchor[row, 1]
@@ -181,8 +179,7 @@ _END_MARGIN = 0.5
 """Metres short of a dead-end lane's end at which a vehicle's front counts as having reached it."""
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_drivable)
+@njit(nogil=True)
 def event_tables(tables):  # pragma: no cover - compiled
     """The ``EventTables`` of a frozen ``SimTables`` (read once per kernel call: the per-episode
     calls then pass values, not the record)."""
@@ -224,15 +221,13 @@ def event_tables(tables):  # pragma: no cover - compiled
     )
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_drivable)
+@njit(nogil=True)
 def agent_events(tables, alive, agents, rows, b, time):  # pragma: no cover - compiled
     """``episode_events`` from a frozen ``SimTables`` (the entry from Python)."""
     episode_events(event_tables(tables), alive, agents, rows, b, time)
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_drivable)
+@njit(nogil=True)
 def events_by_episode(
     tables,
     alive,
@@ -261,8 +256,7 @@ def events_by_episode(
         episode_events(et, alive[alive_lo[b] : alive_hi[b]], agents[lo:hi], rows[lo:hi], b, episode_time[b])
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_drivable)
+@njit(nogil=True)
 def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - compiled
     """Every event of ``Event`` for the agents ``agents`` (rows ``rows``) of episode ``b`` at its
     clock ``time``, from and into ``et`` (``EventTables``): its ``agent_events`` and
@@ -330,7 +324,7 @@ def episode_events(et, alive, agents, rows, b, time):  # pragma: no cover - comp
 
 
 # The per-agent tests of ``episode_events``, inlined into it by numba (no call per agent).
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _collides(data, alive, r, x, y, radius, own, other):  # pragma: no cover - compiled
     """Whether row ``r`` (box corners ``own``, bounding ``radius``) overlaps another ``alive`` row:
     a circle pre-test, then separating axes (``other`` is scratch for the other box's corners)."""
@@ -347,8 +341,7 @@ def _collides(data, alive, r, x, y, radius, own, other):  # pragma: no cover - c
     return False
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-@cache_depends_on(_drivable)
+@njit(nogil=True, inline="always")
 def _corner_off_road(flat_raster, raster_width, raster_origin, inv_res, cell_max, own):  # pragma: no cover - compiled
     """Whether any of the four box corners ``own`` lies off the drivable raster."""
     off = False
@@ -358,7 +351,7 @@ def _corner_off_road(flat_raster, raster_width, raster_origin, inv_res, cell_max
     return off
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _at_dead_end(et, a, r, ln, road, length):  # pragma: no cover - compiled
     """Whether row ``r``'s front has reached the end of a lane of agent ``a``'s route that leads
     nowhere, still within the lane's width (it has left the map, not the road)."""
@@ -372,7 +365,7 @@ def _at_dead_end(et, a, r, ln, road, length):  # pragma: no cover - compiled
     )
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _reached_goal(et, a, r, ln, road, px, py, x, y):  # pragma: no cover - compiled
     """Whether agent ``a`` (row ``r``, moved from (px, py) to (x, y)) reached its goal this step:
     kind 1 passes within the radius of the point, kind 2 is on the goal road (and lane) past
@@ -391,7 +384,7 @@ def _reached_goal(et, a, r, ln, road, px, py, x, y):  # pragma: no cover - compi
     return False
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def segment_point_distance2(x0, y0, x1, y1, px, py):  # pragma: no cover - compiled
     """Squared distance from point (px, py) to the segment (x0, y0)-(x1, y1)."""
     dx, dy = x1 - x0, y1 - y0
@@ -401,7 +394,7 @@ def segment_point_distance2(x0, y0, x1, y1, px, py):  # pragma: no cover - compi
     return ex * ex + ey * ey
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def crosses_gate(x0, y0, x1, y1, gate):  # pragma: no cover - compiled
     """Whether moving from (x0, y0) to (x1, y1) crosses a goal line forwards: from behind it to
     on or past it, between its ends. ``gate``: x, y, unit direction dx, dy, lateral lo, hi."""

@@ -18,9 +18,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
+from smarts.compiled import njit
 from smarts.core.sim_records import lanes_record
 from smarts.core.vehicle_table import COLUMN
 
@@ -132,7 +132,7 @@ class Successors(NamedTuple):
     length: np.ndarray  # float64[L]
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def lane_distance_ahead(graph, from_lane, from_s, to_lane, to_s, limit):  # pragma: no cover - compiled
     """Metres along the lane graph (``graph``, ``Successors``) from (from_lane, from_s) forward
     to (to_lane, to_s); inf when ``to_lane`` is not reached within ``limit`` metres (or lies
@@ -165,7 +165,7 @@ def lane_distance_ahead(graph, from_lane, from_s, to_lane, to_s, limit):  # prag
     return best
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _lead_kernel(frozen_lanes, data, lane, rows, leads, sight, flags, values):  # pragma: no cover - compiled
     """``lead_state`` of the agents on ``rows`` (their leads on ``leads``) into the rows of
     ``flags`` and ``values`` (``_PRESENT``..., ``_GAP``...); ``frozen_lanes`` is the map's frozen
@@ -239,7 +239,7 @@ def ahead_state(sim, agents: np.ndarray, sight: float = LEAD_SIGHT) -> AheadStat
                       accel=values[_A_ACCEL])  # fmt: skip
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _ahead_kernel(
     frozen_lanes, data, lane, rows, alive, alive_lo, alive_hi, sight, present, values
 ):  # pragma: no cover - compiled

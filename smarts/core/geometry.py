@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
+
+from smarts.compiled import njit
 
 _TWO_PI = 2.0 * np.pi
 _INV_TWO_PI = 1.0 / _TWO_PI
@@ -16,7 +17,7 @@ def wrap_angle(angle):
     return angle + _TWO_PI * np.floor((np.pi - angle) * _INV_TWO_PI)
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def wrap_scalar(angle: float) -> float:  # pragma: no cover - compiled
     """``wrap_angle`` for one float, for compiled kernels."""
     return angle + _TWO_PI * math.floor((math.pi - angle) * _INV_TWO_PI)

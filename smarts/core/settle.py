@@ -14,23 +14,18 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
-import smarts.core.events as _events_module
-import smarts.maps.drivable as _drivable_module
-import smarts.maps.projection as _projection_module
+from smarts.compiled import njit
 from smarts.core.events import episode_events, event_tables
 from smarts.core.vehicle_table import COLUMN
 from smarts.maps.projection import Grids, project_point
-from smarts.records import cache_depends_on
 
 ROUTE_WINDOW_BACK = 2  # route points searched behind the last match
 ROUTE_WINDOW_AHEAD = 10  # ... and ahead of it (more than the farthest one-step move at ~1 m spacing)
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_events_module, _projection_module, _drivable_module)
+@njit(nogil=True)
 def settle(tables, agents, episode_time):  # pragma: no cover - compiled
     """After the providers: project every live row, advance the route progress of ``agents`` (the
     active agents, ascending) and test the events of every episode at its clock
@@ -44,7 +39,7 @@ def settle(tables, agents, episode_time):  # pragma: no cover - compiled
     return alive
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def advance_clocks(episode_step, episode_time, dt):  # pragma: no cover - compiled
     """One more step on every episode's clock: ``time = step * dt`` (no drift from summing dt).
     Compiled: two numpy operations on arrays of one episode cost more than a call."""
@@ -53,8 +48,7 @@ def advance_clocks(episode_step, episode_time, dt):  # pragma: no cover - compil
         episode_time[b] = episode_step[b] * dt
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_projection_module)
+@njit(nogil=True)
 def project_rows(t, rows):  # pragma: no cover - compiled
     """Lane, s, t, lane heading and distance of ``rows``, each on its episode's map."""
     grids = Grids(t.grid_table, t.grid_offsets, t.grid_segs, t.grid_cell_base, t.grid_ny, t.grid_origin,
@@ -66,8 +60,7 @@ def project_rows(t, rows):  # pragma: no cover - compiled
         data[_S, r], data[_T, r], data[_LANE_HEADING, r], data[_LANE_DISTANCE, r] = s, offset, heading, distance
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_events_module, _drivable_module)
+@njit(nogil=True)
 def events_of_episodes(t, alive, agents, rows, episode_time):  # pragma: no cover - compiled
     """Clear the events of agents no longer active, then ``episode_events`` of each episode with
     only its own live rows and agents (``alive`` and ``agents`` ascending)."""
@@ -98,7 +91,7 @@ def events_of_episodes(t, alive, agents, rows, episode_time):  # pragma: no cove
         row_lo, agent_lo = row_hi, agent_hi
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def route_progress(tables, agents, rows, first):  # pragma: no cover - compiled
     """Nearest route point in a window around the last one, and the arc length reached (into
     ``tables``, the simulation's frozen ``SimTables``)."""

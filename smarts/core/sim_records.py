@@ -13,9 +13,9 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
+from smarts.compiled import njit
 from smarts.records import declare, freeze_fields
 
 
@@ -125,7 +125,7 @@ for _record in (Lanes, SimTables):
     declare(_record)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def freeze(fields):  # pragma: no cover - compiled
     """The frozen record of one of this module's records (see ``smarts.records``)."""
     return freeze_fields(fields)

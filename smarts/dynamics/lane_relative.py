@@ -37,15 +37,14 @@ import math
 from dataclasses import asdict
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
-import smarts.core.geometry as _geometry
+from smarts.compiled import njit
 from smarts.core.geometry import wrap_scalar
 from smarts.core.sim_records import lanes_record
 from smarts.core.spec.lane_relative import LaneRelativeParams
 from smarts.core.vehicle_table import COLUMN
-from smarts.records import cache_depends_on, declare, freeze_fields, view
+from smarts.records import declare, freeze_fields, view
 
 COMMAND_COMPONENTS = ("speed", "lane_change")
 DEFAULT_SPEED_LIMIT = 13.89
@@ -85,7 +84,7 @@ class ControllerState(NamedTuple):
 declare(ControllerState)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _freeze(fields):  # pragma: no cover - compiled
     """The frozen record of this module's records (see ``smarts.records``)."""
     return freeze_fields(fields)
@@ -189,7 +188,7 @@ class LaneRelativeController:
         return np.stack([drive, brake, steering], axis=1)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _smooth(u):  # pragma: no cover - compiled
     """Quintic smoothstep on [0, 1]: zero velocity and acceleration at both ends."""
     if u <= 0.0:
@@ -199,7 +198,7 @@ def _smooth(u):  # pragma: no cover - compiled
     return u * u * u * (10.0 - 15.0 * u + 6.0 * u * u)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _point_on_lane(offsets, points, point_s, heading, lane, s):  # pragma: no cover - compiled
     a, b = offsets[lane], offsets[lane + 1]
     if b - a == 1:
@@ -224,8 +223,7 @@ def _point_on_lane(offsets, points, point_s, heading, lane, s):  # pragma: no co
     return x, y, heading[k] if u < 0.5 else heading[k + 1]
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_geometry)
+@njit(nogil=True)
 def _turn_of(lanes, lane, nxt):  # pragma: no cover - compiled
     """Heading change from the end of ``lane`` through the junction that ``nxt`` enters (rad, +
     left): junction lanes with a single successor are followed to the lane leaving the junction."""
@@ -245,8 +243,7 @@ def _turn_of(lanes, lane, nxt):  # pragma: no cover - compiled
     return wrap_scalar(heading[offsets[cur + 1] - 1] - end)
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_geometry)
+@njit(nogil=True)
 def _next_lane(lanes, route_road, lane, branch, agent):  # pragma: no cover - compiled
     """The successor to follow at the end of ``lane``: the default one (on the agent's route, else
     the straightest), or with a branch request the next one to its left (+1) or right (-1)."""
@@ -276,7 +273,7 @@ def _next_lane(lanes, route_road, lane, branch, agent):  # pragma: no cover - co
     return best
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _accel(limits, command, limit, v, previous, dt):  # pragma: no cover - compiled
     """Towards the target speed ``limit * (1 + command)``, within the acceleration and jerk limits
     (``limits``, a ``Limits``)."""
@@ -296,7 +293,7 @@ def _accel(limits, command, limit, v, previous, dt):  # pragma: no cover - compi
     return accel
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _nearest_segment(offsets, points, point_s, lane, x, y, lo, hi):  # pragma: no cover - compiled
     """(d2, s, t, k) of the nearest of segments ``lo..hi`` of one lane to a point (t + left); the
     lane's first and last segments extend past its ends, so s keeps growing there."""
@@ -321,7 +318,7 @@ def _nearest_segment(offsets, points, point_s, lane, x, y, lo, hi):  # pragma: n
     return best_d2, best_s, best_t, best_k
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _project_on_lane(offsets, points, point_s, lane, x, y):  # pragma: no cover - compiled
     """(s, t) of a point on one lane's centre line (t + left); s runs on past both ends."""
     a, b = offsets[lane], offsets[lane + 1]
@@ -335,7 +332,7 @@ PROJECTION_WINDOW = 8
 """Segments searched on each side of the hinted one before the whole lane is scanned."""
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _project_near(offsets, points, point_s, lane, x, y, s_hint):  # pragma: no cover - compiled
     """``_project_on_lane`` searched near arc length ``s_hint`` (where the car was, or where it
     is on a parallel lane): ``PROJECTION_WINDOW`` segments either side, and the whole lane when
@@ -354,8 +351,7 @@ def _project_near(offsets, points, point_s, lane, x, y, s_hint):  # pragma: no c
     return s, t
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_geometry)
+@njit(nogil=True)
 def _targets_kernel(
     frozen_lanes,
     frozen_state,

@@ -20,15 +20,13 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
-import smarts.core.geometry as _geometry
+from smarts.compiled import njit
 from smarts.core.geometry import wrap_scalar
 from smarts.core.vehicle_table import COLUMN, VehicleTable
 from smarts.dynamics.action_spaces import ActionSpaceType, check_actions
 from smarts.dynamics.limits import ReachLimits
-from smarts.records import cache_depends_on
 
 
 def limit_relative_pose(
@@ -61,7 +59,7 @@ def limit_params(limits: ReachLimits) -> np.ndarray:
     )
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _limit_one(dx, dy, dh, v0, dt, params):  # pragma: no cover - compiled
     """The limiter for one request; see the module docstring for the order of the limits."""
     max_speed, max_accel, max_decel, max_yaw_rate, max_curvature, max_slip = params[:6]
@@ -93,14 +91,13 @@ def _limit_one(dx, dy, dh, v0, dt, params):  # pragma: no cover - compiled
     return d * math.cos(direction), d * math.sin(direction), dh, d / dt
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _limit_kernel(req, speed, dt, params, out):  # pragma: no cover - compiled
     for i in range(req.shape[0]):
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = _limit_one(req[i, 0], req[i, 1], req[i, 2], speed[i], dt, params)
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_geometry)
+@njit(nogil=True)
 def _move_kernel(data, rows, req, world_frame, dt, params):  # pragma: no cover - compiled
     """Limit each row's request and write its new pose and derived kinematic columns."""
     for i in range(rows.shape[0]):
@@ -169,7 +166,7 @@ def move_to_poses(
     _move_kernel(table.data, rows, actions, world_frame, dt, params)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def all_finite(values):  # pragma: no cover - compiled
     """Whether every number of a 2-D float64 array is finite (one compiled pass: a fraction of
     ``np.isfinite(values).all()``'s cost on the few numbers of a step's actions)."""

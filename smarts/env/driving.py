@@ -16,10 +16,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import gymnasium as gym
-import numba
 import numpy as np
 
 from smarts.comms import Received
+from smarts.compiled import njit
 from smarts.core.errors import ActionError
 from smarts.core.events import NUM_EVENTS, Event
 from smarts.core.policies import PolicyResolver
@@ -321,7 +321,7 @@ def _by_episode(sim, agents: np.ndarray) -> list[tuple[int, np.ndarray]]:
     return [(int(episode[g[0]]), agents[g]) for g in np.split(np.arange(len(agents)), cuts)]
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _ends(events, done, agents, rules, agent_episode, out_events, out):  # pragma: no cover - compiled
     """``out_events[i]``: the events of agent ``agents[i]``; ``out[0, i]``: it had a terminal
     event (``rules``: of its episode, or one row for all); ``out[1, i]``: it is done without one

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from typing import Callable
 
-import numba
 import numpy as np
 
+from smarts.compiled import njit
 from smarts.core.events import Event
 from smarts.core.simulation import Simulation
 
@@ -35,7 +35,7 @@ def default_rewards(sim: Simulation, agents: np.ndarray, weights) -> np.ndarray:
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _rewards(events, delta, agents, weights, out):  # pragma: no cover - compiled
     per_agent = weights.shape[1] > 1
     for i in range(agents.shape[0]):

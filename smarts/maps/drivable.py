@@ -9,9 +9,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-import numba
 import numpy as np
 
+from smarts.compiled import njit
 from smarts.maps.road_map import RoadMap
 
 
@@ -36,7 +36,7 @@ def raster_lookup(road_map: RoadMap) -> tuple[np.ndarray, float, np.ndarray, int
     return road_map.__dict__.get("_raster_lookup") or _raster_lookup(road_map)
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def on_road_at(flat, width, origin, inv_res, cell_max, x, y):  # pragma: no cover - compiled
     """``on_road`` for one point, for compiled per-step kernels (same clamping rules)."""
     cx = min(max((x - origin[0]) * inv_res, 0.0), cell_max[0])

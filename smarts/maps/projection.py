@@ -10,9 +10,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
+from smarts.compiled import njit
 from smarts.maps.road_map import RoadMap
 from smarts.records import declare, freeze_fields, view
 
@@ -57,7 +57,7 @@ class Grids(NamedTuple):
 declare(Grids)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def freeze(fields):  # pragma: no cover - compiled
     """The frozen record of this module's records (see ``smarts.records``): grids are built
     once per map (or stack) and frozen once, so a projection types one argument, not eight."""
@@ -165,7 +165,7 @@ def project_on_grids(
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _project_kernel(
     frozen_grids, point_map, xy, heading, out_lane, out_s, out_t, out_heading, out_distance
 ):  # pragma: no cover - compiled
@@ -184,7 +184,7 @@ def _project_kernel(
         out_lane[p], out_s[p], out_t[p], out_heading[p], out_distance[p] = lane, s, t, lane_heading, distance
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def project_point(grids, m, x, y, heading, use_heading):  # pragma: no cover - compiled
     """``(lane, s, t, lane_heading, distance)`` of one point on map ``m`` of ``grids`` (a
     ``Grids`` tuple): the projection of ``project`` (lane -1 and distance inf where no lane is

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
+from smarts.compiled import njit
 
-@numba.njit(cache=True, nogil=True)
+
+@njit(nogil=True)
 def chord_headings(sx, sy, start, end, reach, window):  # pragma: no cover - compiled
     """Per sample ``i`` of concatenated tracks (``start[i]``/``end[i]``: its track's first index and
     one past its last): the direction of the chord between the nearest earlier and later samples at

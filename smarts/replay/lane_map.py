@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import hashlib
 
-import numba
 import numpy as np
 
+from smarts.compiled import njit
 from smarts.core.errors import ReplayError
 from smarts.maps.assemble import LaneSpec, assemble_road_map
 from smarts.maps.projection import project
@@ -359,7 +359,7 @@ def _crossing_lanes(shapes: list[np.ndarray], dm: DatasetMap, usable: list[int],
     return out & (lengths <= JUNCTION_LANE_LENGTH)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _crossings(points, offsets, a, b, max_cos, end_margin):  # pragma: no cover - compiled
     """bool per lane pair (a[k], b[k]): their centre lines cross properly at an angle whose cosine is
     below ``max_cos``, more than ``end_margin`` metres from every end of both."""

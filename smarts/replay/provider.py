@@ -17,14 +17,13 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, NamedTuple
 
-import numba
 import numpy as np
 
-import smarts.core.geometry as _geometry
+from smarts.compiled import njit
 from smarts.core.geometry import wrap_scalar
 from smarts.core.provider import ProviderBase
 from smarts.core.vehicle_table import COLUMN, Role, VehicleType
-from smarts.records import cache_depends_on, declare, freeze_fields, view
+from smarts.records import declare, freeze_fields, view
 from smarts.replay.recording import FRAME_EPS, ObjectKind, Recording, interpolate
 
 if TYPE_CHECKING:
@@ -65,7 +64,7 @@ class Tracks(NamedTuple):
 declare(Tracks)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _freeze(fields):  # pragma: no cover - compiled
     """The frozen record of this module's records (see ``smarts.records``)."""
     return freeze_fields(fields)
@@ -247,8 +246,7 @@ _X, _Y, _H, _V = COLUMN["x"], COLUMN["y"], COLUMN["heading"], COLUMN["speed"]
 _ACC, _YAW, _LAT = COLUMN["accel"], COLUMN["yaw_rate"], COLUMN["lat_accel"]
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_geometry)
+@njit(nogil=True)
 def _advance_tracks(tracks, frame, data, dt):  # pragma: no cover - compiled
     """One pass over the window's tracks (a frozen ``Tracks``) at fractional ``frame``: driven
     vehicles get their interpolated state (and the acceleration and yaw rate since the last step)

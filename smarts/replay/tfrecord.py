@@ -14,9 +14,9 @@ import struct
 from collections.abc import Iterator
 from pathlib import Path
 
-import numba
 import numpy as np
 
+from smarts.compiled import njit
 from smarts.core.errors import ReplayError
 
 _MASK_DELTA = 0xA282EAD8
@@ -39,7 +39,7 @@ def _crc32c_table() -> np.ndarray:
 _TABLE = _crc32c_table()
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _crc32c(data, table):  # pragma: no cover - compiled
     crc = np.uint32(0xFFFFFFFF)
     for b in data:

@@ -18,10 +18,9 @@ import gymnasium as gym
 import numba
 import numpy as np
 
-import smarts.sensors.rays as _rays
+from smarts.compiled import njit
 from smarts.core.simulation import Scope, Simulation
 from smarts.core.vehicle_table import COLUMN, Role
-from smarts.records import cache_depends_on
 from smarts.sensors.interface import LidarInterface
 from smarts.sensors.map_fields import cell_grid, map_fields
 from smarts.sensors.rays import box_interval, parallel_worth_it, ray_box
@@ -93,8 +92,7 @@ class LidarSensor:
         return rng
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_rays)
+@njit(nogil=True)
 def lidar_scan(data, role, scope, rows, max_range, grid, dist, hit):  # pragma: no cover - compiled
     """Each agent's rays (``rows[i]`` among the live rows of its episode, ``scope``, a
     ``smarts.core.simulation.Scope``)."""
@@ -102,16 +100,14 @@ def lidar_scan(data, role, scope, rows, max_range, grid, dist, hit):  # pragma: 
         _scan_one(data, role, scope.alive[scope.lo[i] : scope.hi[i]], rows[i], max_range, grid, dist[i], hit[i])
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
-@cache_depends_on(_rays)
+@njit(nogil=True, parallel=True)
 def lidar_scan_parallel(data, role, scope, rows, max_range, grid, dist, hit):  # pragma: no cover - compiled
     """``lidar_scan`` with the agents spread over threads (each agent's rays are its own)."""
     for i in numba.prange(rows.shape[0]):
         _scan_one(data, role, scope.alive[scope.lo[i] : scope.hi[i]], rows[i], max_range, grid, dist[i], hit[i])
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_rays)
+@njit(nogil=True)
 def _scan_one(data, role, alive, r, max_range, grid, dist, hit):  # pragma: no cover - compiled
     n_rays = dist.shape[0]
     step = 2.0 * math.pi / n_rays
@@ -175,14 +171,14 @@ def _scan_one(data, role, alive, r, max_range, grid, dist, hit):  # pragma: no c
             hit[k] = HIT_ROAD_EDGE
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _clearance_at(x, y, grid):  # pragma: no cover - compiled
     cx = min(max((x - grid.origin[0]) * grid.inv_res, 0.0), grid.cell_max[0])
     cy = min(max((y - grid.origin[1]) * grid.inv_res, 0.0), grid.cell_max[1])
     return grid.cells[int(cy) * grid.width + int(cx)]
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _edge_stretch(px, py, dx, dy, limit, grid):  # pragma: no cover - compiled
     """Along a ray that starts on the road: the last distance known on the road and the first
     sampled off it, where it leaves within ``limit`` (else -1 for the latter). Jumps by the road

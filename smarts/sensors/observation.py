@@ -47,18 +47,16 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import gymnasium as gym
-import numba
 import numpy as np
 
-import smarts.core.geometry as _geometry
-import smarts.sensors.rasters as _rasters
+from smarts.compiled import njit
 from smarts.core.events import NUM_EVENTS
 from smarts.core.following import ahead_state, lead_state
 from smarts.core.geometry import wrap_scalar
 from smarts.core.sim_records import sim_tables
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import COLUMN, Role, VehicleType
-from smarts.records import cache_depends_on, declare, freeze_fields
+from smarts.records import declare, freeze_fields
 from smarts.sensors.interface import (
     AgentInterface,
     NeighboursInterface,
@@ -157,7 +155,7 @@ class EgoPose(NamedTuple):
 declare(ObserveSetup)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _freeze(fields):  # pragma: no cover - compiled
     """The frozen record of this module's records (see ``smarts.records``)."""
     return freeze_fields(fields)
@@ -341,8 +339,7 @@ def lead_features(sim: Simulation, agents: np.ndarray) -> np.ndarray:
     return out
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_geometry, _rasters)  # (it builds the rasters' RoutePaths)
+@njit(nogil=True)
 def _observe(
     tables, setup, alive, alive_lo, alive_hi, row_base, agents, rows, visible, out
 ):  # pragma: no cover - compiled
@@ -414,8 +411,7 @@ def _observe(
 # The blocks of ``_observe`` per agent, inlined into it by numba; they take plain arrays or tuples
 # built by ``_observe``, not the frozen records (``smarts.records``: a field read per agent
 # would cost a load and a reference).
-@numba.njit(cache=True, nogil=True, inline="always")
-@cache_depends_on(_geometry)
+@njit(nogil=True, inline="always")
 def _ego_features(data, r, ln, lane_width, lane_speed_limit, h, speed, ego, i):  # pragma: no cover - compiled
     """The ego block's first 12 columns of row ``r`` (lane ``ln``, -1: off every lane) into ``ego[i]``."""
     ego[i, 0] = speed
@@ -432,7 +428,7 @@ def _ego_features(data, r, ln, lane_width, lane_speed_limit, h, speed, ego, i): 
     ego[i, 11] = data[_WIDTH, r]
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _nearest_rows(
     data, alive, r, x, y, radius2, hide, visible, i, base, near_d2, near_row
 ):  # pragma: no cover - compiled
@@ -460,7 +456,7 @@ def _nearest_rows(
     return m
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _neighbour_features(users, pose, near_row, m, columns, visible, base, out, i):  # pragma: no cover - compiled
     """The neighbours block of agent ``i`` (``pose``, an ``EgoPose``) into ``out`` (a
     ``BasicObservation``): one row per nearest road user (``near_row[:m]``, from ``users``, a
@@ -504,8 +500,7 @@ def _neighbour_features(users, pose, near_row, m, columns, visible, base, out, i
         neighbour_mask[i, q] = 1.0
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-@cache_depends_on(_geometry)
+@njit(nogil=True, inline="always")
 def _waypoint_features(paths, offsets, a, pose, out, i):  # pragma: no cover - compiled
     """The waypoints of agent ``a`` at each offset from its route point along each of its paths
     (``paths``, a ``smarts.sensors.rasters.RoutePaths``), in the frame of ``pose`` (an

@@ -21,10 +21,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-import smarts.sensors.rays as _rays
+from smarts.compiled import njit
 from smarts.core.simulation import Simulation
 from smarts.core.vehicle_table import COLUMN
-from smarts.records import cache_depends_on
 from smarts.sensors.rays import box_interval, parallel_worth_it, slab
 
 SHADOW_BINS = 1440
@@ -67,8 +66,7 @@ class ShadowCaster:
         return Shadows(depth, owner, visible, self.range)
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_rays)
+@njit(nogil=True)
 def cast_shadows(
     data, alive, alive_lo, alive_hi, row_base, rows, sensor_range, depth, owner, visible
 ):  # pragma: no cover - compiled
@@ -81,8 +79,7 @@ def cast_shadows(
         )
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
-@cache_depends_on(_rays)
+@njit(nogil=True, parallel=True)
 def cast_shadows_parallel(
     data, alive, alive_lo, alive_hi, row_base, rows, sensor_range, depth, owner, visible
 ):  # pragma: no cover - compiled
@@ -94,8 +91,7 @@ def cast_shadows_parallel(
         )
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(_rays)
+@njit(nogil=True)
 def _cast_one(data, alive, base, r, sensor_range, depth, owner, visible):  # pragma: no cover - compiled
     """One agent's depth buffer, owners and visible fractions."""
     n_bins = depth.shape[0]

@@ -27,6 +27,7 @@ import gymnasium as gym
 import numba
 import numpy as np
 
+from smarts.compiled import njit
 from smarts.core.simulation import Scope, Simulation
 from smarts.core.vehicle_table import COLUMN
 from smarts.sensors.interface import RASTER_LAYERS, RasterInterface
@@ -198,7 +199,7 @@ class ShadowView(NamedTuple):
     hide_hidden: bool
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def draw_rasters(data, role, scope, agents, rows, pix, grid, paths, sh, out):  # pragma: no cover - compiled
     """Draw the layers (and the RGB view) of each agent ``agents[i]`` (row ``rows[i]``) among its
     episode's road users (``scope``, a ``smarts.core.simulation.Scope``) into ``out``."""
@@ -207,7 +208,7 @@ def draw_rasters(data, role, scope, agents, rows, pix, grid, paths, sh, out):  #
         _draw_one(data, role, scope, i, agents[i], rows[i], pix, grid, paths, sh, scratch, out)
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
+@njit(nogil=True, parallel=True)
 def draw_rasters_parallel(data, role, scope, agents, rows, pix, grid, paths, sh, out):  # pragma: no cover - compiled
     """``draw_rasters`` with the agents spread over threads (each its own scratch buffers)."""
     for i in numba.prange(rows.shape[0]):
@@ -227,7 +228,7 @@ class _Scratch(NamedTuple):
     shade: np.ndarray
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _new_scratch(n_px):  # pragma: no cover - compiled
     return _Scratch(
         np.empty(n_px, np.int32), np.empty(n_px, np.uint8), np.empty(n_px, np.int32), np.empty(n_px, np.uint8),
@@ -235,13 +236,13 @@ def _new_scratch(n_px):  # pragma: no cover - compiled
     )  # fmt: skip
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _agent_part(a, i):  # pragma: no cover - compiled
     """Row ``i`` of a per-agent array, or the dummy's only row."""
     return a[min(np.int64(i), np.int64(a.shape[0] - 1))]  # (a prange index is unsigned)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _draw_one(data, role, scope, i, a, r, pix, grid, paths, sh, scratch, out):  # pragma: no cover - compiled
     """Agent ``a`` (row ``r``, number ``i`` of the call): its rasters into its planes of ``out``,
     with its own scratch planes."""
@@ -261,7 +262,7 @@ def _draw_one(data, role, scope, i, a, r, pix, grid, paths, sh, scratch, out):  
 
 
 # The layers of ``_draw_one``, one loop nest each, inlined into it by numba.
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _draw_boxes(data, alive, row_base, r, ego, half, pix, sh, visible, occupant):  # pragma: no cover - compiled
     """Boxes: ego = -1, other road users = row + 1, into the pixels whose centre they cover
     (``ego``: the ego's x, y, heading and the heading's cosine and sine)."""
@@ -293,7 +294,7 @@ def _draw_boxes(data, alive, row_base, r, ego, half, pix, sh, visible, occupant)
                         occupant[q] = mark
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _draw_route(paths, a, x, y, c, s, half, view, pix, route):  # pragma: no cover - compiled
     """Route: agent ``a``'s path polyline sampled every half pixel, from where it enters the view;
     a segment with both ends a pixel beyond the same side of the image (``half`` metres from the
@@ -345,7 +346,7 @@ def _draw_route(paths, a, x, y, c, s, half, view, pix, route):  # pragma: no cov
         entered = entered or near
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _read_map(grid, pix, sh, depth, x, y, c, s, cell, code, shade):  # pragma: no cover - compiled
     """Every pixel: its map cell, that cell's code, and the pixel's shadow level. Simple loops
     over the flat pixel index with 32-bit cell numbers, so the compiler vectorises them."""
@@ -370,7 +371,7 @@ def _read_map(grid, pix, sh, depth, x, y, c, s, cell, code, shade):  # pragma: n
         shade[:] = OCCLUSION_VISIBLE
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _fill_layers(pix, layers, code, route, occupant, shade):  # pragma: no cover - compiled
     """Write each asked-for layer into its plane (``pix.slot``: the plane of each layer, -1: not drawn)."""
     n_px = pix.size * pix.size
@@ -392,7 +393,7 @@ def _fill_layers(pix, layers, code, route, occupant, shade):  # pragma: no cover
         flat[s_occl, :] = shade
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _compose_rgb(n_px, role, occupant, route, code, shade, rgb):  # pragma: no cover - compiled
     """The RGB view: road users over route over lane lines over road, each pixel shaded by its level."""
     shaded = SHADED_PALETTE

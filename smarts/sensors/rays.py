@@ -11,6 +11,8 @@ import os
 
 import numba
 
+from smarts.compiled import njit
+
 _TWO_PI = 2.0 * math.pi
 PARALLEL_AGENTS = 16
 """Agents from which the sensors spread their per-agent work over threads; below it waking the
@@ -48,7 +50,7 @@ def parallel_worth_it(n_agents: int) -> bool:
 GRAZE = 1e-6  # metres: a ray touching a box corner still hits it
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def ray_box(px, py, dx, dy, bx, by, bc, bs, half_length, half_width):  # pragma: no cover - compiled
     """Distance along the unit ray (px, py) + t (dx, dy), t >= 0, to where it enters the box
     centred at (bx, by) with heading cosine/sine (bc, bs); inf when it misses."""
@@ -56,7 +58,7 @@ def ray_box(px, py, dx, dy, bx, by, bc, bs, half_length, half_width):  # pragma:
     return slab(bc * ox + bs * oy, -bs * ox + bc * oy, bc * dx + bs * dy, -bs * dx + bc * dy, half_length, half_width)
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def slab(lx, ly, ldx, ldy, half_length, half_width):  # pragma: no cover - compiled
     """``ray_box`` with the ray already in the box frame: origin (lx, ly), unit direction (ldx, ldy)."""
     t_in, t_out = -math.inf, math.inf
@@ -78,7 +80,7 @@ def slab(lx, ly, ldx, ldy, half_length, half_width):  # pragma: no cover - compi
     return t_in
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def box_interval(px, py, heading, bx, by, bh, half_length, half_width):  # pragma: no cover - compiled
     """Angular extent [lo, hi] (ego frame, radians; lo may be below -pi and hi above pi) of a box
     seen from (px, py), and whether the point lies inside the box (then the extent is undefined)."""

@@ -56,9 +56,9 @@ from itertools import chain
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numba
 import numpy as np
 
+from smarts.compiled import njit
 from smarts.core.errors import ScenarioError
 from smarts.core.provider import ProviderBase
 from smarts.core.spec.traffic import TrafficSpec
@@ -636,7 +636,7 @@ _LENGTH = COLUMN["length"]
 _AGENT, _SOCIAL_AGENT = int(Role.AGENT), int(Role.SOCIAL_AGENT)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _twin_rows(alive, owner, role, me):  # pragma: no cover - compiled
     """Rows of agent vehicles (AGENT / SOCIAL_AGENT roles) that another provider owns."""
     out = np.empty(alive.shape[0], dtype=np.int64)
@@ -648,7 +648,7 @@ def _twin_rows(alive, owner, role, me):  # pragma: no cover - compiled
     return out[:n]
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _twin_poses(data, rows):  # pragma: no cover - compiled
     """float64[n, 4]: front-bumper x, y, SUMO angle (degrees) and speed (>= 0) of table rows."""
     out = np.empty((rows.shape[0], 4))
@@ -663,7 +663,7 @@ def _twin_poses(data, rows):  # pragma: no cover - compiled
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _write_states(data, rows, pos, angle, speed, dt, front_offset):  # pragma: no cover - compiled
     """Write SUMO readings (flat x0 y0 x1 y1 ..., angles in degrees, speeds) into table rows.
 

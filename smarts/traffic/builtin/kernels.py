@@ -22,9 +22,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
+from smarts.compiled import njit
 from smarts.core.vehicle_table import COLUMN
 from smarts.records import declare, freeze_fields
 from smarts.traffic.builtin.junctions import NOMINAL_LENGTH
@@ -284,13 +284,13 @@ for _record in (LaneGraph, Routes, RouteSets, RowState):
     declare(_record)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def freeze(fields):  # pragma: no cover - compiled
     """The frozen record of one of this module's records (see ``smarts.records``)."""
     return freeze_fields(fields)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def set_routes(sets, t):  # pragma: no cover - compiled
     """Set ``t``'s ``Routes`` out of ``RouteSets`` ``sets`` (views)."""
     tb, b = sets.tables, sets.bounds
@@ -313,7 +313,7 @@ def set_routes(sets, t):  # pragma: no cover - compiled
 # ----------------------------------------------------------------------------- small helpers
 # These run for every vehicle and lane entry and take just the arrays they read (never more than
 # eleven parameters): a tuple argument counts a reference to each of its arrays at every call.
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def idm(v, v0, gap, v_lead, a, b, tau, s0):  # pragma: no cover - compiled
     """Intelligent Driver Model acceleration for a bumper-to-bumper ``gap`` to a leader."""
     free = 1.0 - (v / max(v0, 0.1)) ** IDM_DELTA
@@ -324,7 +324,7 @@ def idm(v, v0, gap, v_lead, a, b, tau, s0):  # pragma: no cover - compiled
     return a * (free - (s_star / g) ** 2)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def travel_time(dist, v, a, v_max):  # pragma: no cover - compiled
     """Seconds to cover ``dist`` from speed ``v`` accelerating at ``a`` up to ``v_max``."""
     if dist <= 0.0:
@@ -339,7 +339,7 @@ def travel_time(dist, v, a, v_max):  # pragma: no cover - compiled
     return t1 + (dist - d1) / top
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def lane_pose(lane, s, point_off, point_s, points, seg_heading):  # pragma: no cover - compiled
     """Centre-line point and heading of ``lane`` at arc length ``s`` (extrapolated past the ends).
 
@@ -371,7 +371,7 @@ def lane_pose(lane, s, point_off, point_s, points, seg_heading):  # pragma: no c
     return x, y, h + w * turn
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _first_ahead(lane, s, row, lane_off, e_s, e_row):  # pragma: no cover - compiled
     """Index of the first entry on ``lane`` ordered after (s, row), skipping ``row``'s own
     entries, or -1. Entries are sorted by (arc length, row), so two road users at the same arc
@@ -390,7 +390,7 @@ def _first_ahead(lane, s, row, lane_off, e_s, e_row):  # pragma: no cover - comp
     return k if k < end else -1
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _last_behind(lane, s, row, lane_off, e_s, e_row):  # pragma: no cover - compiled
     """Index of the last entry on ``lane`` ordered before (s, row), skipping ``row``, or -1."""
     lo, hi = lane_off[lane], lane_off[lane + 1]
@@ -407,7 +407,7 @@ def _last_behind(lane, s, row, lane_off, e_s, e_row):  # pragma: no cover - comp
     return k if k >= start else -1
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def find_leader(slot, s, row, max_dist, slot_int, lane_f, lane_off, e_s, e_half, e_row):  # pragma: no cover
     """Entry ahead of arc length ``s`` on the slot's lane and the route's next lanes.
 
@@ -432,7 +432,7 @@ def find_leader(slot, s, row, max_dist, slot_int, lane_f, lane_off, e_s, e_half,
     return -1, INF
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def find_follower(
     lane, s, row, max_back, lane_f, lane_off, e_s, e_half, e_row, pred_off, pred
 ):  # pragma: no cover - compiled
@@ -474,14 +474,14 @@ def find_follower(
 
 
 # ----------------------------------------------------------------------------- occupancy
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _put(raw, n, lane, s, half, v, row, kind):  # pragma: no cover - compiled
     raw.lane[n], raw.s[n], raw.half[n] = lane, s, half
     raw.v[n], raw.row[n], raw.kind[n] = v, row, kind
     return n + 1
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def build_occupancy(own, others, data, state, lanes, routes, raw, occ):  # pragma: no cover - compiled
     """Fill ``occ`` (an ``Occupancy``; ``raw``, ``RawEntries`` of the same size, is scratch) with
     every road user on the lanes; returns the number of entries.
@@ -537,7 +537,7 @@ def build_occupancy(own, others, data, state, lanes, routes, raw, occ):  # pragm
     return n
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _sort_entries(n, raw, occ):  # pragma: no cover - compiled
     """Counting sort of the first ``n`` raw entries by lane into ``occ``, then insertion sort by
     arc length within each (short) lane list."""
@@ -570,18 +570,18 @@ def _sort_entries(n, raw, occ):  # pragma: no cover - compiled
 
 
 # ----------------------------------------------------------------------------- driver model
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def desired_speed(r, lane, pa, st, lane_f):  # pragma: no cover - compiled
     return min(pa[MAX_SPEED, r], lane_f[SPEED_LIMIT, lane] * st[FACTOR, r])
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def impatience(r, st):  # pragma: no cover - compiled
     """1 + the share of IMPATIENCE_TIME that vehicle ``r`` has been waiting."""
     return 1.0 + min(st[WAIT, r] / IMPATIENCE_TIME, 1.0)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _other_accel(row, v, gap, v_lead, lane, mine, pa, st, lane_f):  # pragma: no cover - compiled
     """IDM acceleration of road user ``row`` (own: its parameters; others: typical ones)."""
     if mine[row]:
@@ -590,7 +590,7 @@ def _other_accel(row, v, gap, v_lead, lane, mine, pa, st, lane_f):  # pragma: no
     return idm(v, max(v, lane_f[SPEED_LIMIT, lane]), gap, v_lead, 2.6, 4.5, 1.0, 2.5)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _judge_foe(mover, zone, user, a_min, guard):  # pragma: no cover - compiled
     """Right of way between own vehicle ``r`` (``mover``: at ``p_v`` along its connection) and
     road user ``w`` (``user``: at ``p_w`` along the foe connection of conflict zone ``zone``).
@@ -642,7 +642,7 @@ def _judge_foe(mover, zone, user, a_min, guard):  # pragma: no cover - compiled
 
 
 # The rules of ``_judge_foe``, inlined into it by numba.
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _stops_at_own_light(colour_f, p_w, h_w, v_w, w_decel):  # pragma: no cover - compiled
     """Whether a road user ``p_w`` along its connection (not yet in it) will stop at its own red
     (or yellow) light."""
@@ -653,7 +653,7 @@ def _stops_at_own_light(colour_f, p_w, h_w, v_w, w_decel):  # pragma: no cover -
     return colour_f <= YELLOW and v_w * v_w <= 2.0 * limit * room + 0.01
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _merge_rule(mover, zone, user, v_in, w_in, a_min, guard):  # pragma: no cover - compiled
     """Right of way where two connections merge: (decided, acceleration bound, gap bound); when not
     decided the crossing rule applies."""
@@ -688,7 +688,7 @@ def _merge_rule(mover, zone, user, v_in, w_in, a_min, guard):  # pragma: no cove
     return False, a_min, guard
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@njit(nogil=True, inline="always")
 def _foe_goes_first(mover, zone, user, v_in, w_in, wa, t_vin, t_win):  # pragma: no cover - compiled
     """Who goes first: whoever is already in the junction; else the connection with right of way;
     else whoever reaches its stop line first (a measure that does not depend on the pair, so the
@@ -706,7 +706,7 @@ def _foe_goes_first(mover, zone, user, v_in, w_in, wa, t_vin, t_win):  # pragma:
     return t_win < t_vin or (t_win == t_vin and w < me.r)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _junction(jv, me, c, p_v, a_min, guard):  # pragma: no cover - compiled
     """Apply right of way on connection ``c`` (own vehicle ``me``, a ``Driver``, at ``p_v`` along
     it) against every road user on or approaching a foe (``jv``: ``JunctionView``).
@@ -810,7 +810,7 @@ def _junction(jv, me, c, p_v, a_min, guard):  # pragma: no cover - compiled
     return a_min, guard
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _try_change(cv, me, slot, nslot, d, s, a_now, lead, mode, look):  # pragma: no cover - compiled
     """Check a lane change to ``nslot`` (side ``d``: +1 left, -1 right). mode 0: discretionary
     (MOBIL), 1: towards the route's preferred lane, 2: the lane ends. Returns (safe, incentive,
@@ -877,7 +877,7 @@ def _try_change(cv, me, slot, nslot, d, s, a_now, lead, mode, look):  # pragma: 
     return True, incentive, a_after, gap_nl
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _neighbour_turns(slot, s, r, d, slot_int, lane_off, e_s, e_row, turn):  # pragma: no cover
     """Whether the road user just ahead or just behind on the lane has already decided this step
     to change lanes to the same side (decisions share one start-of-step state, so two of them
@@ -899,7 +899,7 @@ class Lead(NamedTuple):
 
 
 # ----------------------------------------------------------------------------- the step
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def step_vehicles(own, data, state, out, occ, lanes, routes, via_colour, dt, step):  # pragma: no cover - compiled
     """Advance every own vehicle (rows ``own`` of ``data``, their ``RowState`` ``state``) one step
     through the road users of ``occ`` (see the module docstring); ``out`` (``Decisions``) flags
@@ -1175,7 +1175,7 @@ def step_vehicles(own, data, state, out, occ, lanes, routes, via_colour, dt, ste
         data[_LATA, r] = v_new * dh / dt
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def place_vehicle(frozen_lanes, frozen_routes, frozen_state, data, r):  # pragma: no cover - compiled
     """Write the pose of own vehicle ``r`` into ``data`` from its slot, arc length and lateral
     offset (frozen ``LaneGraph``, ``Routes`` and ``RowState``)."""
@@ -1188,7 +1188,7 @@ def place_vehicle(frozen_lanes, frozen_routes, frozen_state, data, r):  # pragma
     data[_H, r] = math.atan2(math.sin(hd), math.cos(hd))
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def clearance(
     frozen_lanes,
     frozen_routes,

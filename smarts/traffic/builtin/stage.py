@@ -19,13 +19,12 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
-import smarts.traffic.builtin.junctions as _junctions
 import smarts.traffic.builtin.kernels as K
+from smarts.compiled import njit
 from smarts.core.simulation import Simulation
-from smarts.records import cache_depends_on, declare, freeze_fields, view
+from smarts.records import declare, freeze_fields, view
 
 
 class StageState(NamedTuple):
@@ -64,7 +63,7 @@ class StageState(NamedTuple):
 declare(StageState)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _freeze(fields):  # pragma: no cover - compiled
     """The frozen record of this module's records (see ``smarts.records``)."""
     return freeze_fields(fields)
@@ -196,8 +195,7 @@ class _RouteSets:
                 return
 
 
-@numba.njit(cache=True, nogil=True)
-@cache_depends_on(K, _junctions)
+@njit(nogil=True)
 def _step_episodes(
     frozen_state,
     frozen_lanes,
