@@ -40,6 +40,7 @@ import contextlib
 import functools
 import threading
 import time
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -840,7 +841,9 @@ class RayCollection(Collection):
         pass
 
     def take(self) -> Batch:
-        return batch_from_tensordict(next(self.iterator), self.layout, self.device)
+        with warnings.catch_warnings():  # torchrl warns that its own weight sync never ran: ours did
+            warnings.filterwarnings("ignore", "RayCollector iteration started before weight synchronization")
+            return batch_from_tensordict(next(self.iterator), self.layout, self.device)
 
     def sync(self, parts: PolicyParts) -> None:
         import ray
