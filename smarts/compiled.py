@@ -7,8 +7,9 @@ values of the constants it reads (``COLUMN["x"]`` of ``smarts.core.vehicle_table
 map code). Edit one of those (a column reordered, a stage fixed) and every kernel of another
 file would go on running the old code from the cache, giving wrong numbers that no test
 notices. Here a kernel's cache stamp also covers the contents of every module of its own
-top-level package that its module imports, directly or through those modules (found by reading
-their import lines: about 2 ms for the simulator's modules, where parsing them would take 0.2 s).
+top-level package that its module imports, directly or through those modules, found by reading
+their import lines once per process: 10-15 ms for the simulator's modules (parsing them would
+take 0.2 s), 2% of importing them.
 
 Every cached kernel of ``smarts`` is declared with :func:`njit` (``tests/test_compiled.py``).
 """
@@ -19,8 +20,6 @@ import functools
 import hashlib
 import os
 import pickle
-import re
-from pathlib import Path
 
 import numba
 from numba.core import caching
@@ -43,70 +42,103 @@ def njit(*args, **options):
     return decorate
 
 
-# An import statement at the start of a line (indented too: imports inside functions count).
-_IMPORT = re.compile(
-    rb"^[ \t]*(?:from[ \t]+([\w.]+)[ \t]+import[ \t]+(\([^)]*\)|[^\n#;]*)|import[ \t]+([^\n#;]*))", re.M
-)
+def _import_statements(text: bytes) -> list[str]:
+    """The import statements of a module's source, a ``from m import (...)`` whole, comments
+    dropped: every line that starts with ``from`` or ``import`` (indented too, so imports inside
+    functions count). Found with ``bytes.find``: a regular expression over the whole text takes
+    ten times as long."""
+    found = []
+    at = text.find(b"import")
+    while at >= 0:
+        start = text.rfind(b"\n", 0, at) + 1
+        end = text.find(b"\n", at)
+        end = len(text) if end < 0 else end
+        line = text[start:end].lstrip()
+        if line.startswith((b"from ", b"import ")):
+            if b"(" in line and b")" not in line:
+                close = text.find(b")", at)
+                end = len(text) if close < 0 else close + 1
+            statement = text[start:end].decode(errors="replace")
+            found.append(" ".join(part.partition("#")[0] for part in statement.split("\n")).strip())
+        at = text.find(b"import", end)
+    return found
 
 
 @functools.cache
-def _module_file(base: Path, name: str) -> Path | None:
+def _source_files(base: str, package: str) -> frozenset[str]:
+    """Every ``.py`` file of the package (one walk, instead of a look-up per imported name)."""
+    found = set()
+    for folder, folders, names in os.walk(os.path.join(base, package)):
+        folders[:] = [f for f in folders if f != "__pycache__"]
+        found.update(os.path.join(folder, name) for name in names if name.endswith(".py"))
+    return frozenset(found)
+
+
+def _module_file(base: str, name: str) -> str | None:
+    files = _source_files(base, name.split(".")[0])
     stem = os.path.join(base, *name.split("."))
     for path in (stem + ".py", os.path.join(stem, "__init__.py")):
-        if os.path.isfile(path):
-            return Path(path)
+        if path in files:
+            return path
     return None
 
 
 @functools.cache
-def _imports(path: Path, package: str, base: Path) -> list[Path]:
-    """The files of ``package``'s modules that ``path`` imports (a ``from m import x`` counts
-    ``m`` and, where ``x`` is a module, ``m.x``; an import of ``a.b`` runs ``a`` too)."""
-    own = ".".join(path.relative_to(base).with_suffix("").parts)
-    own_package = own.rpartition(".")[0] if path.name != "__init__.py" else own.removesuffix(".__init__")
+def _imports(path: str, module: str, base: str) -> tuple[tuple[str, str], ...]:
+    """(file, module name) of the modules of ``module``'s top-level package that ``path`` (the
+    module ``module``) imports: a ``from m import x`` counts ``m`` and, where ``x`` is a module, ``m.x``;
+    an import of ``a.b`` runs ``a`` too. (Plain strings: path objects would take ten times as long.)"""
+    package = module.split(".")[0]
+    own_package = module if path.endswith("__init__.py") else module.rpartition(".")[0]
+    with open(path, "rb") as f:
+        statements = _import_statements(f.read())
     names: list[str] = []
-    for module, imported, plain in _IMPORT.findall(path.read_bytes()):
-        if plain:
-            names += [n.split()[0] for n in plain.decode().split(",") if n.strip()]
+    for statement in statements:
+        if statement.startswith("import "):
+            names += [n.split()[0] for n in statement[7:].split(",") if n.strip()]
             continue
-        module = module.decode()
-        if module.startswith("."):  # relative: resolved against this module's package
-            level = len(module) - len(module.lstrip("."))
+        name, _, imported = statement[5:].partition(" import ")
+        name = name.strip()
+        if name.startswith("."):  # relative: resolved against this module's package
+            level = len(name) - len(name.lstrip("."))
             anchor = own_package.split(".")[: len(own_package.split(".")) - level + 1]
-            module = ".".join([*anchor, module.lstrip(".")]).strip(".")
-        names.append(module)
-        names += [f"{module}.{n.split()[0]}" for n in imported.decode().strip("()").split(",") if n.strip()]
+            name = ".".join([*anchor, name.lstrip(".")]).strip(".")
+        names.append(name)
+        names += [f"{name}.{n.split()[0]}" for n in imported.strip().strip("()").split(",") if n.strip()]
     parts = [n.split(".") for n in names if n.split(".")[0] == package]
     modules = {".".join(p[:k]) for p in parts for k in range(1, len(p) + 1)}  # with the packages it runs
-    return [f for f in (_module_file(base, m) for m in sorted(modules)) if f is not None]
+    found = ((_module_file(base, m), m) for m in sorted(modules))
+    return tuple((f, m) for f, m in found if f is not None)
 
 
 @functools.cache
-def imported_files(path: str, module: str) -> tuple[Path, ...]:
+def imported_files(path: str, module: str) -> tuple[str, ...]:
     """The source files of the modules of ``module``'s top-level package that the module at
     ``path`` imports, directly or through them (itself included), sorted."""
-    own = Path(path).resolve()
-    depth = module.count(".") + (own.name == "__init__.py")
-    base, package = own.parents[depth], module.split(".")[0]
-    seen, todo = {own}, [own]
+    own = os.path.abspath(path)
+    base = own
+    for _ in range(module.count(".") + 1 + (os.path.basename(own) == "__init__.py")):
+        base = os.path.dirname(base)
+    seen, todo = {own: module}, [(own, module)]
     while todo:
-        for found in _imports(todo.pop(), package, base):
-            if found not in seen:
-                seen.add(found)
-                todo.append(found)
+        for file, name in _imports(*todo.pop(), base):
+            if file not in seen:
+                seen[file] = name
+                todo.append((file, name))
     return tuple(sorted(seen))
 
 
 @functools.cache
-def _file_digest(path: Path) -> bytes:
-    return hashlib.blake2b(path.read_bytes(), digest_size=16).digest()
+def _file_digest(path: str) -> bytes:
+    with open(path, "rb") as f:
+        return hashlib.blake2b(f.read(), digest_size=16).digest()
 
 
 @functools.cache
 def _imports_stamp(path: str, module: str) -> str:
     digest = hashlib.blake2b(digest_size=16)
     for file in imported_files(path, module):
-        digest.update(str(file).encode() + b"\0" + _file_digest(file))
+        digest.update(file.encode() + b"\0" + _file_digest(file))
     return digest.hexdigest()
 
 

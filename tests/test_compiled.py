@@ -72,10 +72,12 @@ def test_the_imports_followed_are_the_packages_own_directly_or_through_others(tm
         "import numpy\nfrom . import near\nfrom ..table import (\n    COLUMN,\n)\n\n\ndef f():\n    import pkg.dep\n"
     )
     (tmp_path / "pkg" / "sub" / "near.py").write_text("")
-    names = {p.relative_to(tmp_path).as_posix() for p in imported_files(str(tmp_path / "pkg/kern.py"), "pkg.kern")}
+    names = {
+        Path(p).relative_to(tmp_path).as_posix() for p in imported_files(str(tmp_path / "pkg/kern.py"), "pkg.kern")
+    }
     assert names == {"pkg/kern.py", "pkg/__init__.py", "pkg/dep.py", "pkg/columns.py", "pkg/table.py"}
     deep = imported_files(str(tmp_path / "pkg/sub/deep.py"), "pkg.sub.deep")
-    assert {p.relative_to(tmp_path).as_posix() for p in deep} == {
+    assert {Path(p).relative_to(tmp_path).as_posix() for p in deep} == {
         "pkg/sub/deep.py", "pkg/sub/__init__.py", "pkg/sub/near.py", "pkg/table.py", "pkg/__init__.py", "pkg/dep.py"
     }  # fmt: skip
 
