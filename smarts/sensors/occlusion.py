@@ -98,7 +98,6 @@ def _cast_one(data, alive, base, r, sensor_range, depth, owner, visible):  # pra
     bin_width = 2.0 * math.pi / n_bins
     turn_c, turn_s = math.cos(bin_width), math.sin(bin_width)
     cand = np.empty(alive.shape[0], dtype=np.int64)
-    first_bin = np.empty(alive.shape[0], dtype=np.int64)
     bin_count = np.empty(alive.shape[0], dtype=np.int64)
     px, py, h = data[_X, r], data[_Y, r], data[_H, r]
     depth[:] = math.inf
@@ -118,7 +117,7 @@ def _cast_one(data, alive, base, r, sensor_range, depth, owner, visible):  # pra
             continue
         b0 = int(math.floor((lo + math.pi) / bin_width))
         b1 = int(math.floor((hi + math.pi) / bin_width))
-        cand[m], first_bin[m], bin_count[m] = j, b0, b1 - b0 + 1
+        cand[m], bin_count[m] = j, b1 - b0 + 1
         m += 1
         # Rays in the box's frame; inner bins turn the previous direction by one bin width.
         bc, bs = math.cos(bh), math.sin(bh)
@@ -131,18 +130,17 @@ def _cast_one(data, alive, base, r, sensor_range, depth, owner, visible):  # pra
             else:
                 ldx, ldy = ldx * turn_c - ldy * turn_s, ldx * turn_s + ldy * turn_c
             t = slab(lx, ly, ldx, ldy, hl, hw)
-            k = b % n_bins
+            k = b + n_bins if b < 0 else (b - n_bins if b >= n_bins else b)  # (b is within one turn)
             if t < depth[k]:
                 depth[k] = t
                 owner[k] = j
+    # A box owns bins of its own extent only: one pass over the buffer counts each box's.
+    seen = np.zeros(visible.shape[0], dtype=np.int64)
+    for k in range(n_bins):
+        if owner[k] >= 0 and depth[k] <= sensor_range:
+            seen[owner[k] - base] += 1
     for q in range(m):
-        j = cand[q]
-        seen = 0
-        for b in range(first_bin[q], first_bin[q] + bin_count[q]):
-            k = b % n_bins
-            if owner[k] == j and depth[k] <= sensor_range:
-                seen += 1
-        visible[j - base] = seen / bin_count[q]
+        visible[cand[q] - base] = seen[cand[q] - base] / bin_count[q]
 
 
 _X, _Y, _H = COLUMN["x"], COLUMN["y"], COLUMN["heading"]
