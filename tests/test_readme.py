@@ -68,7 +68,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "pip install -e .": (NOT_RUN, "installs the package; these tests run in the installed checkout"),
     'pip install -e ".[test]"': (NOT_RUN, "installs the package with its test extra, as .ci/run does"),
     "python -m pytest -q -n auto": (CI, "the whole suite, this file included; .ci/run runs exactly this"),
-    "python -m train ppo --task platoon": (PARSE, "300k training steps, about 7 minutes"),
+    "python -m train ppo --task platoon": (PARSE, "300k training steps, 2-7 minutes"),
+    "python -m train ppo --config platoon-two-cores --total-steps 6000000": (
+        PARSE,
+        "the main job: 6M training steps, 2-5 minutes",
+    ),
     "python -m train ppo --task drive": (PARSE, "a full PPO training run"),
     "python -m train ppo --config configs/train/platoon-batched.yaml": (PARSE, "9.6M training steps, about 13 minutes"),
     "python -m train ppo --config configs/train/platoon-two-cores.yaml": (

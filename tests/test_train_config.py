@@ -161,3 +161,22 @@ def test_an_eval_video_scenario_the_suite_lacks_is_refused_before_the_run():
     assert load_config("platoon", overrides={"eval_video_scenario": "a09_lead_turns_right_at_signal_medium"})
     with pytest.raises(ConfigError, match="eval_video_scenario: suite 'adaptive' has no scenario 'a99'; it has a01_"):
         load_config("platoon", overrides={"eval_video_scenario": "a99"})
+
+
+def test_config_takes_a_shipped_recipe_by_name_from_anywhere(tmp_path, monkeypatch, capsys):
+    """``--config platoon-two-cores`` (the main job's) is the shipped YAML, in a checkout or from a
+    wheel; a file of that name in the working folder comes first; an unknown name lists the shipped."""
+    from train.config import CONFIG_DIR, ConfigError
+
+    monkeypatch.chdir(tmp_path)
+    by_name = load_config(None, "platoon-two-cores")
+    assert by_name == load_config(None, CONFIG_DIR / "platoon-two-cores.yaml")
+    assert by_name.backend == "batched" and by_name.workers == 2
+    shipped = (CONFIG_DIR / "platoon-two-cores.yaml").read_text()
+    (tmp_path / "platoon-two-cores").write_text(shipped.replace("total_steps: 18000000", "total_steps: 512"))
+    assert load_config(None, "platoon-two-cores").total_steps == 512
+    with pytest.raises(ConfigError, match=r"--config platoon-nope: no such file.*platoon-batched, platoon-two-cores"):
+        load_config(None, "platoon-nope")
+    assert main(["ppo", "--config", "platoon-nope", "--out-dir", str(tmp_path / "out")]) == 2
+    assert "no shipped training config of that name" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

@@ -491,6 +491,19 @@ def from_command_line(name: str, text: str) -> Any:
 
 
 # ----------------------------------------------------------------------------- loading
+def config_file(path: str | Path) -> Path:
+    """``--config``'s file: ``path`` itself, or for a bare name that is no file here (``platoon-two-cores``)
+    the shipped ``configs/train/<name>.yaml``, so a shipped recipe is named the same way in a
+    checkout and from a wheel."""
+    path = Path(path)
+    if path.exists() or path.name != str(path) or path.suffix:
+        return path
+    if (CONFIG_DIR / f"{path}.yaml").is_file():
+        return CONFIG_DIR / f"{path}.yaml"
+    shipped = ", ".join(sorted(p.stem for p in CONFIG_DIR.glob("*.yaml")))
+    raise ConfigError(f"--config {path}: no such file, and no shipped training config of that name ({shipped})")
+
+
 def load_config(task: str | None = None, path: str | Path | None = None, overrides: dict | None = None) -> TrainConfig:
     """Defaults of ``task`` (or the file ``path``: a config YAML or a run's config.json), then
     ``overrides`` (field -> value; strings are parsed as on the command line), validated together.
@@ -499,6 +512,7 @@ def load_config(task: str | None = None, path: str | Path | None = None, overrid
         if task not in TASKS:
             raise ConfigError(f"unknown task {task!r}; expected one of {', '.join(TASKS)}")
         path = CONFIG_DIR / f"{task}.yaml"
+    path = config_file(path)
     source = str(path)
     data = load_yaml(path, "training config", ConfigError)
     if data is None:
@@ -531,6 +545,7 @@ def task_defaults(task: str | None, path: str | Path | None = None) -> tuple[dic
             return {}, ""
         path = CONFIG_DIR / f"{task}.yaml"
     try:
+        path = config_file(path)
         data = load_yaml(path, "training config", ConfigError)
     except ConfigError:
         return {}, ""
