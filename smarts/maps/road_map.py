@@ -27,6 +27,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
+from numba.experimental.structref import StructRefProxy
 
 from smarts.cache import atomic_write_bytes
 from smarts.maps.errors import MapError
@@ -168,6 +169,11 @@ class RoadMap:
             return self.road_index_of[road_id]
         except KeyError:
             raise KeyError(f"map {self.source!r} has no road {road_id!r}") from None
+
+    def __getstate__(self) -> dict:
+        # Kernel records cached on the map (``smarts.core.sim_records.lanes_record``) are numba
+        # objects that do not pickle; the process that loads the map makes them at first use.
+        return {k: v for k, v in self.__dict__.items() if not isinstance(v, StructRefProxy)}
 
     def own_lanes(self) -> range:
         """Indices of this map's own lanes: all of them, except in a window of a stack of maps
