@@ -71,7 +71,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "python -m train ppo --task platoon": (PARSE, "300k training steps, 2-7 minutes"),
     "python -m train ppo --config platoon-two-cores --total-steps 6000000": (
         PARSE,
-        "the main job: 6M training steps, 2-5 minutes",
+        "the main job: 6M training steps, 2-6 minutes",
     ),
     "python -m train ppo --task drive": (PARSE, "a full PPO training run"),
     "python -m train ppo --config configs/train/platoon-batched.yaml": (PARSE, "9.6M training steps, about 13 minutes"),
