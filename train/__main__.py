@@ -167,11 +167,14 @@ def _benchmark_options(parser: argparse.ArgumentParser, agent_required: bool = F
 
 def _ppo_parser(ppo: argparse.ArgumentParser, argv: list[str] | None) -> None:
     ppo.epilog = PPO_EPILOG
+    from train.config import CONFIG_DIR
+
+    shipped = ", ".join(sorted(p.stem for p in CONFIG_DIR.glob("*.yaml")))
     ppo.add_argument(
         "--config",
         default=None,
-        help="a training config YAML (or a run's config.json) instead of the task's; a bare name is a shipped one "
-        "(platoon-batched, platoon-two-cores: configs/train/<name>.yaml)",
+        help=f"a training config YAML (or a run's config.json) instead of the task's; a bare name is a shipped one "
+        f"({shipped}: configs/train/<name>.yaml)",
     )
     ppo.add_argument("--quiet", action="store_true", help="no progress bar")
     ppo.add_argument("--resume", default=None,
