@@ -89,6 +89,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         PARSE,
         "a full training run on the batched backend; tests/batched/test_batched_training.py runs a short one",
     ),
+    "python -m smarts.diagnostic --batched --batches none --sensor-batch 64 --sensor-breakdown": (
+        NOT_RUN,
+        "about 15 s of timing; tests/batched/test_batched_diagnostic.py runs it on a tiny budget",
+    ),
     "python -m smarts.diagnostic --batched --ppo-steps 98304": (
         NOT_RUN,
         "minutes of timing up to B = 1,024 and two PPO runs; tests/batched/test_batched_diagnostic.py runs it on a tiny budget",

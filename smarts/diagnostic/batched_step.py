@@ -21,6 +21,8 @@ chunks with 95% confidence intervals. Cases:
 all-sensors case (10 agents with occlusion, 64x64 rasters of every layer with RGB, 64-ray lidar,
 extended neighbours, and V2V messaging among 50 built-in traffic vehicles) against the same batch
 with the sensors and V2V off, and their ratio; ``SMARTS_SENSOR_THREADS`` sets the sensors' threads.
+``--sensor-breakdown`` adds a row per sensor alone (and the rasters with and without RGB): the
+thread CPU per agent-step of each and what it adds to the sensors-off step.
 
 ``--ppo-steps N`` adds end-to-end rows: ``python -m train ppo --task platoon`` run as users run
 it, one row per PPO setting, each the env-steps/s the run records over its whole length, the
@@ -219,7 +221,7 @@ def sensor_rows(batch: int, steps: int, warmup: int, seed: int = 0) -> list[dict
     from smarts.sensors.rays import sensor_threads
 
     spec = sensor_scenario(SENSOR_AGENTS, SENSOR_VEHICLES, steps + warmup + 10)
-    plain = replace(spec, comms=None, agents=[replace(a, interface=None) for a in spec.agents])
+    plain = sensor_scenario(SENSOR_AGENTS, SENSOR_VEHICLES, steps + warmup + 10, interface=None, comms=None)
     rows = []
     for case, scenario in (("sensors_v2v", spec), ("sensors_off", plain)):
         env = BatchedDriving([scenario] * batch)
@@ -236,6 +238,59 @@ def sensor_rows(batch: int, steps: int, warmup: int, seed: int = 0) -> list[dict
 
 
 SENSOR_AGENTS, SENSOR_VEHICLES = 10, 50
+
+
+def sensor_parts() -> dict[str, tuple[dict | None, dict | None]]:
+    """The all-sensors case taken apart: (interface, comms) of each sensor alone, of the rasters
+    with and without their RGB image, of everything, and of nothing."""
+    from smarts.diagnostic.scenarios import SENSOR_COMMS, SENSOR_INTERFACE
+
+    rasters = SENSOR_INTERFACE["rasters"]
+    return {
+        "off": (None, None),
+        "v2v": (None, SENSOR_COMMS),
+        "extended neighbours": ({"neighbours": SENSOR_INTERFACE["neighbours"]}, None),
+        "occlusion": ({"occlusion": SENSOR_INTERFACE["occlusion"]}, None),
+        "lidar": ({"lidar": SENSOR_INTERFACE["lidar"]}, None),
+        "rasters": ({"rasters": {**rasters, "rgb": False}}, None),
+        "rasters + rgb": ({"rasters": rasters}, None),
+        "all + v2v": (SENSOR_INTERFACE, SENSOR_COMMS),
+    }
+
+
+def sensor_breakdown_rows(batch: int, steps: int, warmup: int, seed: int = 0) -> list[dict]:
+    """Each of ``sensor_parts`` on ``batch`` copies of the all-sensors case: agent-steps/s, thread
+    CPU per agent-step (a sensor's cost is its row's less the ``off`` row's: rasters need the
+    occlusion buffer for their occlusion layer, so they include it)."""
+    from smarts.diagnostic.scenarios import sensor_scenario
+    from smarts.env.batched import BatchedDriving
+
+    rows = []
+    for case, (interface, comms) in sensor_parts().items():
+        env = BatchedDriving([sensor_scenario(SENSOR_AGENTS, SENSOR_VEHICLES, steps + warmup + 10, interface, comms)]
+                             * batch)  # fmt: skip
+        env.set_seed(seed)
+        env.reset()
+        actions = np.zeros((env.num_slots, env.action_width))
+        actions[:, 0] = 0.8  # cruise straight at 8 m/s with the traffic
+        for _ in range(warmup):  # (compiles what is not cached yet: outside the CPU count)
+            env.step(actions)
+        cpu, acted = [0.0], [0]
+
+        def step(env=env, actions=actions, cpu=cpu, acted=acted) -> int:
+            began = time.thread_time()
+            n = int(env.step(actions).acted.sum())
+            cpu[0] += time.thread_time() - began
+            acted[0] += n
+            return n
+
+        mean, ci = _timed(step, steps, 0)
+        env.close()
+        rows.append({"case": case, "batch": int(batch), "agent_steps_per_s": mean, "agent_steps_per_s_ci95": ci,
+                     "us_per_agent_step": 1e6 * cpu[0] / max(acted[0], 1)})  # fmt: skip
+    for r in rows:
+        r["extra_us_per_agent_step"] = r["us_per_agent_step"] - rows[0]["us_per_agent_step"]
+    return rows
 
 
 class PPOSetting(NamedTuple):
@@ -362,6 +417,11 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--warmup", type=int, default=10, help="untimed steps first")
     parser.add_argument("--sensor-batch", type=int, default=64, help="copies of the all-sensors rows (0: none)")
     parser.add_argument(
+        "--sensor-breakdown",
+        action="store_true",
+        help="also time each sensor alone at --sensor-batch copies (thread CPU per agent-step against sensors off)",
+    )
+    parser.add_argument(
         "--ppo-steps", type=int, default=0, help="env steps of each end-to-end PPO run (0: no PPO rows)"
     )
     parser.add_argument("--ppo-envs", default="256", help="scenario copies of the PPO runs (a list: one per setting)")
@@ -452,6 +512,22 @@ def _sensors(args: argparse.Namespace, console) -> list[dict]:
     return sensors
 
 
+def _breakdown(args: argparse.Namespace, console) -> list[dict]:
+    """The per-sensor rows at ``--sensor-batch`` copies, printed."""
+    from rich.table import Table
+
+    rows = sensor_breakdown_rows(args.sensor_batch, max(args.steps // 5, CHUNKS), args.warmup)
+    table = Table(title=f"Each sensor alone, batched ({SENSOR_AGENTS} agents and {SENSOR_VEHICLES} vehicles per "
+                        f"episode, B={args.sensor_batch}; thread CPU per agent-step)")  # fmt: skip
+    for col in ("case", "agent-steps/s", "us per agent-step", "over sensors off"):
+        table.add_column(col, justify="right")
+    for r in rows:
+        table.add_row(r["case"], f"{r['agent_steps_per_s']:,.0f} ± {r['agent_steps_per_s_ci95']:,.0f}",
+                      f"{r['us_per_agent_step']:.1f}", f"{r['extra_us_per_agent_step']:+.1f}")  # fmt: skip
+    console.print(table)
+    return rows
+
+
 def _ppo(args: argparse.Namespace, settings: list[PPOSetting], console) -> list[dict]:
     """The end-to-end PPO rows of ``settings``, printed against the first."""
     from datetime import datetime
@@ -483,6 +559,7 @@ def main(argv: list[str] | None = None) -> int:
     if rows:
         _print_batched(rows, console)
     sensors = _sensors(args, console) if args.sensor_batch else []
+    breakdown = _breakdown(args, console) if args.sensor_batch and args.sensor_breakdown else []
     ppo = _ppo(args, settings, console) if args.ppo_steps else []
     args.out.parent.mkdir(parents=True, exist_ok=True)
     report = {
@@ -493,6 +570,7 @@ def main(argv: list[str] | None = None) -> int:
         },
         "rows": rows,
         "sensors": sensors,
+        "sensor_breakdown": breakdown,
         "ppo": ppo,
     }
     args.out.write_text(json.dumps(report, indent=2))

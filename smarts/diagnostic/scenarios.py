@@ -37,18 +37,20 @@ SENSOR_COMMS = {
 TRAFFIC_SPACING = 14.0  # metres between traffic rows: room for every trip to depart at once
 
 
-def sensor_scenario(n_agents: int, n_vehicles: int, steps: int) -> ScenarioSpec:
+def sensor_scenario(n_agents: int, n_vehicles: int, steps: int, interface: dict | None = SENSOR_INTERFACE,
+                    comms: dict | None = SENSOR_COMMS) -> ScenarioSpec:  # fmt: skip
     """``n_vehicles`` built-in traffic vehicles in rows of six, the agents in rows just ahead of
-    them; everyone cruises at 8 m/s, so the traffic follows the agents and nobody collides."""
+    them; everyone cruises at 8 m/s, so the traffic follows the agents and nobody collides. Every
+    agent has ``interface`` (all sensors by default; None: the default observation) and the
+    scenario ``comms`` (V2V by default; None: none)."""
     rows = -(-n_vehicles // LANES)
     first_agent = 5.0 + TRAFFIC_SPACING * rows
     agents = []
     for i in range(n_agents):
         offset = first_agent + TRAFFIC_SPACING * (i // LANES)
         start = {"road": PERF_ROAD, "lane": i % LANES, "offset": offset, "speed": CRUISE_SPEED}
-        agents.append(
-            {"id": f"agent_{i}", "interface": SENSOR_INTERFACE, "mission": {"start": start, "goal": {"endless": True}}}
-        )
+        agent = {"id": f"agent_{i}", "mission": {"start": start, "goal": {"endless": True}}}
+        agents.append(agent if interface is None else {**agent, "interface": interface})
     trips = [
         {
             "id": f"car_{k}",
@@ -71,7 +73,7 @@ def sensor_scenario(n_agents: int, n_vehicles: int, steps: int) -> ScenarioSpec:
             "vehicle_capacity": n_agents + n_vehicles + 16,
             "agents": agents,
             "traffic": {"engine": "builtin", "vehicle_types": {"cruise": cruise}, "trips": trips},
-            "comms": SENSOR_COMMS,
+            **({"comms": comms} if comms is not None else {}),
             "events": {"terminate_on": ["collision", "off_road", "max_steps"]},
         },
         source="smarts.diagnostic",

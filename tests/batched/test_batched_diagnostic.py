@@ -12,7 +12,8 @@ def test_batched_rows_are_written_as_json(tmp_path):
     out = tmp_path / "batched.json"
     done = subprocess.run(
         [sys.executable, "-m", "smarts.diagnostic", "--batched", "--batches", "1,4", "--cases", "free_direct,lead_lane,mix_lane",
-         "--steps", "10", "--warmup", "2", "--per-env-agent-steps", "20", "--sensor-batch", "2", "--out", str(out)],
+         "--steps", "10", "--warmup", "2", "--per-env-agent-steps", "20", "--sensor-batch", "2", "--sensor-breakdown",
+         "--out", str(out)],
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
@@ -31,6 +32,39 @@ def test_batched_rows_are_written_as_json(tmp_path):
     ]
     assert sensors[0]["ratio_to_off"] == sensors[0]["agent_steps_per_s"] / sensors[1]["agent_steps_per_s"]
     assert "All sensors and V2V" in done.stdout
+    breakdown = json.loads(out.read_text())["sensor_breakdown"]
+    assert [r["case"] for r in breakdown] == [
+        "off", "v2v", "extended neighbours", "occlusion", "lidar", "rasters", "rasters + rgb", "all + v2v",
+    ]  # fmt: skip
+    for r in breakdown:
+        assert r["batch"] == 2 and r["agent_steps_per_s"] > 0 and r["us_per_agent_step"] > 0
+        assert r["extra_us_per_agent_step"] == r["us_per_agent_step"] - breakdown[0]["us_per_agent_step"]
+    assert "Each sensor alone" in done.stdout
+
+
+def test_each_row_of_the_sensor_breakdown_turns_on_what_it_names():
+    """A row's cost is its sensor's only if the row's scenario has that sensor and no other."""
+    from smarts.diagnostic.batched_step import sensor_parts
+    from smarts.diagnostic.scenarios import sensor_scenario
+    from smarts.env.batched import BatchedDriving
+
+    added = {
+        "off": set(), "v2v": {"messages", "message_mask"}, "extended neighbours": set(), "occlusion": set(),
+        "lidar": {"lidar", "lidar_hit"}, "rasters": {"rasters"}, "rasters + rgb": {"rasters", "rgb"},
+        "all + v2v": {"messages", "message_mask", "lidar", "lidar_hit", "rasters", "rgb"},
+    }  # fmt: skip
+    widths = {}
+    for case, (interface, comms) in sensor_parts().items():
+        env = BatchedDriving([sensor_scenario(2, 6, 20, interface, comms)])
+        try:
+            keys = set(env.observation_space.spaces)
+            widths[case] = env.observation_space["neighbours"].shape[1]
+        finally:
+            env.close()
+        base = {"ego", "events", "goal", "neighbour_mask", "neighbours", "signal", "waypoint_mask", "waypoints"}
+        assert keys - base == added[case], case
+    # extended features widen each neighbour's row, occlusion adds its visibility column
+    assert widths["off"] < widths["occlusion"] < widths["extended neighbours"] < widths["all + v2v"]
 
 
 def test_bad_flags_name_the_flag():
