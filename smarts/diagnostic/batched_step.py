@@ -216,23 +216,15 @@ def batched_rows(batches=DEFAULT_BATCHES, cases=tuple(CASES), steps: int = 300, 
 
 def sensor_rows(batch: int, steps: int, warmup: int, seed: int = 0) -> list[dict]:
     """Agent-steps/s of ``batch`` copies of the all-sensors case with sensors and V2V on, and off."""
-    from smarts.diagnostic.scenarios import sensor_scenario
-    from smarts.env.batched import BatchedDriving
     from smarts.sensors.rays import sensor_threads
 
-    spec = sensor_scenario(SENSOR_AGENTS, SENSOR_VEHICLES, steps + warmup + 10)
-    plain = sensor_scenario(SENSOR_AGENTS, SENSOR_VEHICLES, steps + warmup + 10, interface=None, comms=None)
+    parts = sensor_parts()
     rows = []
-    for case, scenario in (("sensors_v2v", spec), ("sensors_off", plain)):
-        env = BatchedDriving([scenario] * batch)
-        env.set_seed(seed)
-        env.reset()
-        actions = np.zeros((env.num_slots, env.action_width))
-        actions[:, 0] = 0.8  # cruise straight at 8 m/s with the traffic
-        mean, ci = _timed(lambda: int(env.step(actions).acted.sum()), steps, warmup)
-        env.close()
+    for case, part in (("sensors_v2v", parts["all + v2v"]), ("sensors_off", parts["off"])):
+        rate = _sensor_rate(*part, batch, steps, warmup, seed)
         rows.append({"case": case, "batch": int(batch), "agents": SENSOR_AGENTS, "vehicles": SENSOR_VEHICLES,
-                     "sensor_threads": sensor_threads(), "agent_steps_per_s": mean, "agent_steps_per_s_ci95": ci})  # fmt: skip
+                     "sensor_threads": sensor_threads(), "agent_steps_per_s": rate["agent_steps_per_s"],
+                     "agent_steps_per_s_ci95": rate["agent_steps_per_s_ci95"]})  # fmt: skip
     rows[0]["ratio_to_off"] = rows[0]["agent_steps_per_s"] / rows[1]["agent_steps_per_s"]
     return rows
 
@@ -258,36 +250,43 @@ def sensor_parts() -> dict[str, tuple[dict | None, dict | None]]:
     }
 
 
+def _sensor_rate(interface: dict | None, comms: dict | None, batch: int, steps: int, warmup: int,
+                 seed: int) -> dict[str, float]:  # fmt: skip
+    """``batch`` copies of the all-sensors case with ``interface`` and ``comms``, everyone cruising:
+    agent-steps/s (mean, 95% CI) and thread CPU per agent-step, after ``warmup`` untimed steps
+    (which compile what is not cached yet)."""
+    from smarts.diagnostic.scenarios import sensor_scenario
+    from smarts.env.batched import BatchedDriving
+
+    spec = sensor_scenario(SENSOR_AGENTS, SENSOR_VEHICLES, steps + warmup + 10, interface, comms)
+    env = BatchedDriving([spec] * batch)
+    env.set_seed(seed)
+    env.reset()
+    actions = np.zeros((env.num_slots, env.action_width))
+    actions[:, 0] = 0.8  # cruise straight at 8 m/s with the traffic
+    for _ in range(warmup):
+        env.step(actions)
+    cpu, acted = 0.0, 0
+
+    def step() -> int:
+        nonlocal cpu, acted
+        began = time.thread_time()
+        n = int(env.step(actions).acted.sum())
+        cpu += time.thread_time() - began
+        acted += n
+        return n
+
+    mean, ci = _timed(step, steps, 0)
+    env.close()
+    return {"agent_steps_per_s": mean, "agent_steps_per_s_ci95": ci, "us_per_agent_step": 1e6 * cpu / max(acted, 1)}
+
+
 def sensor_breakdown_rows(batch: int, steps: int, warmup: int, seed: int = 0) -> list[dict]:
     """Each of ``sensor_parts`` on ``batch`` copies of the all-sensors case: agent-steps/s, thread
     CPU per agent-step (a sensor's cost is its row's less the ``off`` row's: rasters need the
     occlusion buffer for their occlusion layer, so they include it)."""
-    from smarts.diagnostic.scenarios import sensor_scenario
-    from smarts.env.batched import BatchedDriving
-
-    rows = []
-    for case, (interface, comms) in sensor_parts().items():
-        env = BatchedDriving([sensor_scenario(SENSOR_AGENTS, SENSOR_VEHICLES, steps + warmup + 10, interface, comms)]
-                             * batch)  # fmt: skip
-        env.set_seed(seed)
-        env.reset()
-        actions = np.zeros((env.num_slots, env.action_width))
-        actions[:, 0] = 0.8  # cruise straight at 8 m/s with the traffic
-        for _ in range(warmup):  # (compiles what is not cached yet: outside the CPU count)
-            env.step(actions)
-        cpu, acted = [0.0], [0]
-
-        def step(env=env, actions=actions, cpu=cpu, acted=acted) -> int:
-            began = time.thread_time()
-            n = int(env.step(actions).acted.sum())
-            cpu[0] += time.thread_time() - began
-            acted[0] += n
-            return n
-
-        mean, ci = _timed(step, steps, 0)
-        env.close()
-        rows.append({"case": case, "batch": int(batch), "agent_steps_per_s": mean, "agent_steps_per_s_ci95": ci,
-                     "us_per_agent_step": 1e6 * cpu[0] / max(acted[0], 1)})  # fmt: skip
+    rows = [{"case": case, "batch": int(batch), **_sensor_rate(*part, batch, steps, warmup, seed)}
+            for case, part in sensor_parts().items()]  # fmt: skip
     for r in rows:
         r["extra_us_per_agent_step"] = r["us_per_agent_step"] - rows[0]["us_per_agent_step"]
     return rows
