@@ -52,7 +52,7 @@ from numba.core import types
 from numba.core.extending import overload
 from numba.experimental import structref
 
-__all__ = ["declare", "freeze_fields", "view"]
+__all__ = ["declare", "freeze_fields", "picklable_state", "view"]
 
 
 class _RecordType(types.StructRef):
@@ -136,3 +136,12 @@ def _view(record):
         raise numba.core.errors.TypingError(f"view: expected a frozen record, got {record}")
     names = [name for name, _ in record.field_dict.items()]
     return _impl("record", f"    return cls({', '.join(f'{n}=record.{n}' for n in names)})\n", cls=cls)
+
+
+def picklable_state(state: dict) -> dict:
+    """An object's ``__dict__`` without the frozen records kept in it (numba objects, which do not
+    pickle): for ``__getstate__`` of objects that travel to worker processes and make their
+    records again there."""
+    from numba.experimental.structref import StructRefProxy
+
+    return {k: v for k, v in state.items() if not isinstance(v, StructRefProxy)}

@@ -14,7 +14,7 @@ import numpy as np
 
 from smarts.compiled import njit
 from smarts.maps.road_map import RoadMap
-from smarts.records import declare, freeze_fields, view
+from smarts.records import declare, freeze_fields, picklable_state, view
 
 ALIGNMENT_DISTANCE_WEIGHT = 0.02
 """Among lanes a point is on, each metre from the centre line costs as much as 1 - cos(11 deg) of
@@ -91,7 +91,7 @@ class _Index:
 
     def __getstate__(self) -> dict:
         # A frozen record does not pickle; a map that was projected still does (it is made again).
-        return {k: v for k, v in self.__dict__.items() if k != "frozen"}
+        return picklable_state(self.__dict__)
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)

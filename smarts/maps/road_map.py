@@ -27,10 +27,10 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
-from numba.experimental.structref import StructRefProxy
 
 from smarts.cache import atomic_write_bytes
 from smarts.maps.errors import MapError
+from smarts.records import picklable_state
 
 MARK_CROSSWALK, MARK_BIKE_LANE, MARK_SPEED_BUMP = 1, 2, 3
 """Kinds of :attr:`RoadMap.mark_kind`: a pedestrian crossing, a bike lane (not driven by cars), a
@@ -173,7 +173,7 @@ class RoadMap:
     def __getstate__(self) -> dict:
         # Kernel records cached on the map (``smarts.core.sim_records.lanes_record``) are numba
         # objects that do not pickle; the process that loads the map makes them at first use.
-        return {k: v for k, v in self.__dict__.items() if not isinstance(v, StructRefProxy)}
+        return picklable_state(self.__dict__)
 
     def own_lanes(self) -> range:
         """Indices of this map's own lanes: all of them, except in a window of a stack of maps
